@@ -1,0 +1,645 @@
+"""Spastic stretch reflex of the knee muscles (paper Table I and eqs. 1-4, SPEC section 2).
+
+The reflex adds a spasticity coefficient ``SC_total`` (a fraction of maximum isometric force)
+to the excitation of the 11 spastic knee muscles. It is the sum of an angle term and a
+velocity term, each a "soft window" built from two sigmoids::
+
+    phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))                                  (eq. 1)
+    sc_a(theta)   = s_theta [1 - (phi(k, theta, theta_flex) - phi(k, theta, theta_ext))]
+    sc_v(v)       = s_v     [1 - (phi(k, v, v_upper) - phi(k, v, v_lower))]
+    SC_total      = sc_a(theta) + sc_v(v)
+
+with the knee angle ``theta`` in degrees (MyoSuite ``knee_angle_r``, flexion positive) and
+the knee velocity ``v`` in rad/s (flexion positive). Inside a level's range each bracket is
+~0, at a limit it is 1/2 and far outside it tends to 1. The paper's eq. 4 prints the two
+velocity sigmoids in the other order, which read literally gives ``2 s_v`` inside the range;
+we follow the text and eq. 3 (zero inside, ``s_v`` outside), see SPEC section 2. One slope
+``k`` per level acts on both terms, so with ``k = 0.1`` (level 3) the velocity window is far
+wider than its range and the velocity term stays near ``s_v / 2`` at rest: the "maintained"
+tone the paper describes for levels 2 and 3.
+
+Contents:
+
+* :class:`SpasticityParams` and :data:`LEVELS` (Table I), :func:`sample_subject` (individual
+  subjects: 10 % Gaussian noise on every parameter);
+* numpy functions :func:`phi`, :func:`sc_angle`, :func:`sc_velocity`, :func:`sc_total`
+  (vectorized) and their torch twins (autograd through the inputs and every parameter);
+* :class:`SpasticityStage`, the reflex as a stage of MyoSuite's muscle-command pipeline
+  (:mod:`myosuite.envs.muscle_stages`), and :class:`SpasticityWrapper`, a gymnasium wrapper
+  that installs it on any MyoSuite env whose model has the 11 muscles and ``knee_angle_r``.
+
+Example::
+
+    from myosuite.utils import gym
+    from myoexo.spasticity import SpasticityWrapper
+
+    env = SpasticityWrapper(gym.make("myoLegWalk-v0"), level=2)
+    env.reset(seed=0)
+    env.spasticity.subject        # SpasticityParams of the drawn subject
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import RecordConstructorArgs
+
+if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
+    import torch
+
+__all__ = [
+    "KNEE_JOINT",
+    "LEVELS",
+    "SPASTIC_EXTENSORS",
+    "SPASTIC_FLEXORS",
+    "SPASTIC_MUSCLES",
+    "STAGE_NAME",
+    "SUBJECT_REL_STD",
+    "SpasticityParams",
+    "SpasticityStage",
+    "SpasticityWrapper",
+    "phi",
+    "phi_torch",
+    "sample_subject",
+    "sc_angle",
+    "sc_angle_torch",
+    "sc_total",
+    "sc_total_torch",
+    "sc_velocity",
+    "sc_velocity_torch",
+]
+
+#: Spastic knee flexors (SPEC section 2).
+SPASTIC_FLEXORS: tuple[str, ...] = (
+    "gaslat_r",
+    "gasmed_r",
+    "semimem_r",
+    "semiten_r",
+    "bflh_r",
+    "bfsh_r",
+)
+#: Spastic knee extensors; the paper groups gracilis with them.
+SPASTIC_EXTENSORS: tuple[str, ...] = ("grac_r", "vasmed_r", "vaslat_r", "vasint_r", "recfem_r")
+#: The 11 muscles that receive ``SC_total``: flexors then extensors.
+SPASTIC_MUSCLES: tuple[str, ...] = SPASTIC_FLEXORS + SPASTIC_EXTENSORS
+#: Joint whose angle (rad in MuJoCo, deg in the model) and velocity (rad/s) drive the reflex.
+KNEE_JOINT = "knee_angle_r"
+#: Name of the stage in MyoSuite's muscle-command pipeline.
+STAGE_NAME = "spasticity"
+#: Standard deviation of a subject's parameters, relative to the level's nominal |value|.
+SUBJECT_REL_STD = 0.10
+
+_RAD_TO_DEG = 180.0 / math.pi
+_MAX_SUBJECT_DRAWS = 100
+
+
+@dataclasses.dataclass(frozen=True)
+class SpasticityParams:
+    """Parameters of the spastic reflex of one level or one subject (paper Table I).
+
+    Attributes:
+        theta_ext_deg: Lower (extension-side) limit of the reflex-free angle range, deg.
+        theta_flex_deg: Upper (flexion-side) limit of the reflex-free angle range, deg.
+        v_lower_rad_s: Lower limit of the reflex-free velocity range, rad/s.
+        v_upper_rad_s: Upper limit of the reflex-free velocity range, rad/s.
+        s_theta: Gain of the angle term, fraction of maximum isometric force (>= 0).
+        s_v: Gain of the velocity term, fraction of maximum isometric force (>= 0).
+        k: Sigmoid slope (>= 0), in 1/deg for the angle term and s/rad for the velocity term.
+
+    Raises:
+        ValueError: If a value is not finite, a gain or ``k`` is negative, or a range is
+            empty (lower limit not below the upper one).
+    """
+
+    theta_ext_deg: float
+    theta_flex_deg: float
+    v_lower_rad_s: float
+    v_upper_rad_s: float
+    s_theta: float
+    s_v: float
+    k: float
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(
+                value, bool
+            ):
+                raise ValueError(
+                    f"SpasticityParams.{field.name} must be a real number, got {value!r}."
+                )
+            if not math.isfinite(value):
+                raise ValueError(f"SpasticityParams.{field.name} must be finite, got {value!r}.")
+            object.__setattr__(self, field.name, float(value))
+        for name in ("s_theta", "s_v", "k"):
+            if getattr(self, name) < 0.0:
+                raise ValueError(
+                    f"SpasticityParams.{name} must be >= 0, got {getattr(self, name)!r}."
+                )
+        if not self.theta_ext_deg < self.theta_flex_deg:
+            raise ValueError(
+                "SpasticityParams needs theta_ext_deg < theta_flex_deg, got "
+                f"theta_ext_deg={self.theta_ext_deg!r}, theta_flex_deg={self.theta_flex_deg!r}."
+            )
+        if not self.v_lower_rad_s < self.v_upper_rad_s:
+            raise ValueError(
+                "SpasticityParams needs v_lower_rad_s < v_upper_rad_s, got "
+                f"v_lower_rad_s={self.v_lower_rad_s!r}, v_upper_rad_s={self.v_upper_rad_s!r}."
+            )
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of the parameters, in the order of :meth:`as_array`."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def as_array(self) -> np.ndarray:
+        """The parameters as a float64 array of shape ``(7,)`` (order of the fields)."""
+        return np.array(dataclasses.astuple(self), dtype=np.float64)
+
+    @classmethod
+    def from_array(cls, values: Sequence[float] | np.ndarray) -> SpasticityParams:
+        """Inverse of :meth:`as_array` (validated)."""
+        values = np.asarray(values, dtype=np.float64)
+        names = cls.field_names()
+        if values.shape != (len(names),):
+            raise ValueError(f"Expected {len(names)} values {names}, got shape {values.shape}.")
+        return cls(**{n: float(v) for n, v in zip(names, values, strict=True)})
+
+
+#: Table I of the paper: spasticity levels (Modified Ashworth Scale) 0..3. Level 4 is not
+#: modelled (excluded by the paper as unsafe).
+LEVELS: Mapping[int, SpasticityParams] = MappingProxyType(
+    {
+        0: SpasticityParams(-45.0, 95.0, -10.0, 10.0, s_theta=0.0, s_v=0.0, k=0.0),
+        1: SpasticityParams(-35.0, 80.0, -1.0, 1.0, s_theta=0.2, s_v=0.2, k=0.5),
+        2: SpasticityParams(-30.0, 75.0, -0.5, 0.5, s_theta=0.3, s_v=0.3, k=0.2),
+        3: SpasticityParams(-15.0, 60.0, -0.25, 0.25, s_theta=0.3, s_v=0.5, k=0.1),
+    }
+)
+
+
+def _check_level(level: Any) -> int:
+    """The level as an ``int`` key of :data:`LEVELS`, or a ``ValueError``."""
+    if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer)):
+        raise ValueError(f"Unknown spasticity level {level!r}; expected one of {sorted(LEVELS)}.")
+    if int(level) not in LEVELS:
+        raise ValueError(f"Unknown spasticity level {level!r}; expected one of {sorted(LEVELS)}.")
+    return int(level)
+
+
+def sample_subject(
+    level: int, rng: np.random.Generator, rel_std: float = SUBJECT_REL_STD
+) -> SpasticityParams:
+    """Draw an individual subject of a level.
+
+    Every parameter ``p`` of the level becomes ``p + rel_std * |p| * z`` with independent
+    standard normals ``z`` (7 draws from *rng*). A draw that would be invalid (a negative
+    gain or an empty range: more than 7 standard deviations away with the default
+    ``rel_std``) is redrawn.
+
+    Args:
+        level: Spasticity level, a key of :data:`LEVELS`.
+        rng: Source of randomness (for an env: ``env.np_random``); same state, same subject.
+        rel_std: Standard deviation relative to each parameter's nominal absolute value.
+
+    Returns:
+        The subject's parameters.
+
+    Raises:
+        ValueError: If *level* is unknown or *rel_std* is negative or not finite.
+    """
+    nominal = LEVELS[_check_level(level)].as_array()
+    if not (math.isfinite(rel_std) and rel_std >= 0.0):
+        raise ValueError(f"rel_std must be a finite value >= 0, got {rel_std!r}.")
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}.")
+    std = rel_std * np.abs(nominal)
+    for _ in range(_MAX_SUBJECT_DRAWS):
+        try:
+            return SpasticityParams.from_array(nominal + std * rng.standard_normal(nominal.size))
+        except ValueError:
+            continue
+    raise RuntimeError(  # pragma: no cover - needs rel_std far beyond any sensible value
+        f"No valid subject of level {level} in {_MAX_SUBJECT_DRAWS} draws with rel_std={rel_std}."
+    )
+
+
+# ----------------------------------------------------------------------------- numpy model
+
+
+def _finite_array(name: str, value: Any) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {value!r}.")
+    return arr
+
+
+def phi(k: float, b: Any, b0: float) -> np.ndarray:
+    """Sigmoid of eq. 1, ``1 / (1 + exp(k (b - b0)))``, vectorized over *b*.
+
+    Evaluated as ``(1 - tanh(k (b - b0) / 2)) / 2``, which is the same function without
+    overflow for large ``k |b - b0|``.
+    """
+    return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(b, dtype=np.float64) - b0)))
+
+
+def sc_angle(theta_deg: Any, params: SpasticityParams) -> np.ndarray | float:
+    """Angle term ``sc_a`` of the spasticity coefficient.
+
+    Args:
+        theta_deg: Knee angle(s) in degrees, flexion positive (any array shape).
+        params: Level or subject parameters.
+
+    Returns:
+        ``sc_a`` with the shape of *theta_deg* (a float for a scalar input).
+
+    Raises:
+        ValueError: If an angle is NaN or infinite.
+    """
+    theta = _finite_array("theta_deg", theta_deg)
+    window = phi(params.k, theta, params.theta_flex_deg) - phi(
+        params.k, theta, params.theta_ext_deg
+    )
+    out = params.s_theta * (1.0 - window)
+    return float(out) if out.ndim == 0 else out
+
+
+def sc_velocity(vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
+    """Velocity term ``sc_v`` of the spasticity coefficient.
+
+    Args:
+        vel_rad_s: Knee velocity(ies) in rad/s, flexion positive (any array shape).
+        params: Level or subject parameters.
+
+    Returns:
+        ``sc_v`` with the shape of *vel_rad_s* (a float for a scalar input).
+
+    Raises:
+        ValueError: If a velocity is NaN or infinite.
+    """
+    vel = _finite_array("vel_rad_s", vel_rad_s)
+    window = phi(params.k, vel, params.v_upper_rad_s) - phi(params.k, vel, params.v_lower_rad_s)
+    out = params.s_v * (1.0 - window)
+    return float(out) if out.ndim == 0 else out
+
+
+def sc_total(theta_deg: Any, vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
+    """Spasticity coefficient ``SC_total = sc_a(theta) + sc_v(v)`` (broadcast over inputs).
+
+    Args:
+        theta_deg: Knee angle(s) in degrees, flexion positive.
+        vel_rad_s: Knee velocity(ies) in rad/s, flexion positive.
+        params: Level or subject parameters.
+
+    Returns:
+        ``SC_total``, a fraction of maximum isometric force in ``[0, s_theta + s_v]``.
+
+    Raises:
+        ValueError: If an input is NaN or infinite.
+    """
+    return sc_angle(theta_deg, params) + sc_velocity(vel_rad_s, params)
+
+
+# ----------------------------------------------------------------------------- torch twin
+
+_TorchParams = SpasticityParams | Mapping[str, Any]
+
+
+def _torch_param(params: _TorchParams, name: str, like: torch.Tensor) -> torch.Tensor:
+    import torch
+
+    value = getattr(params, name) if isinstance(params, SpasticityParams) else params[name]
+    if isinstance(value, torch.Tensor):
+        return value
+    return torch.as_tensor(value, dtype=like.dtype, device=like.device)
+
+
+def _finite_tensor(name: str, value: Any) -> torch.Tensor:
+    import torch
+
+    tensor = (
+        value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
+    )
+    if not bool(torch.isfinite(tensor).all()):
+        raise ValueError(f"{name} must be finite, got {value!r}.")
+    return tensor
+
+
+def phi_torch(k: torch.Tensor, b: torch.Tensor, b0: torch.Tensor) -> torch.Tensor:
+    """Torch twin of :func:`phi` (differentiable in ``k``, ``b`` and ``b0``)."""
+    import torch
+
+    return 0.5 * (1.0 - torch.tanh(0.5 * k * (b - b0)))
+
+
+def sc_angle_torch(theta_deg: Any, params: _TorchParams) -> torch.Tensor:
+    """Torch twin of :func:`sc_angle`.
+
+    Args:
+        theta_deg: Knee angle(s) in degrees (tensor, or anything ``torch.as_tensor`` takes:
+            float64 then).
+        params: A :class:`SpasticityParams` (constants) or a mapping from its field names to
+            tensors (or floats); gradients flow to every tensor given.
+
+    Raises:
+        ValueError: If an angle is NaN or infinite.
+    """
+    theta = _finite_tensor("theta_deg", theta_deg)
+    k = _torch_param(params, "k", theta)
+    window = phi_torch(k, theta, _torch_param(params, "theta_flex_deg", theta)) - phi_torch(
+        k, theta, _torch_param(params, "theta_ext_deg", theta)
+    )
+    return _torch_param(params, "s_theta", theta) * (1.0 - window)
+
+
+def sc_velocity_torch(vel_rad_s: Any, params: _TorchParams) -> torch.Tensor:
+    """Torch twin of :func:`sc_velocity` (see :func:`sc_angle_torch` for *params*).
+
+    Raises:
+        ValueError: If a velocity is NaN or infinite.
+    """
+    vel = _finite_tensor("vel_rad_s", vel_rad_s)
+    k = _torch_param(params, "k", vel)
+    window = phi_torch(k, vel, _torch_param(params, "v_upper_rad_s", vel)) - phi_torch(
+        k, vel, _torch_param(params, "v_lower_rad_s", vel)
+    )
+    return _torch_param(params, "s_v", vel) * (1.0 - window)
+
+
+def sc_total_torch(theta_deg: Any, vel_rad_s: Any, params: _TorchParams) -> torch.Tensor:
+    """Torch twin of :func:`sc_total`, differentiable in the inputs and every parameter.
+
+    Example::
+
+        p = {n: torch.tensor(v, dtype=torch.float64, requires_grad=True)
+             for n, v in zip(SpasticityParams.field_names(), LEVELS[2].as_array())}
+        sc_total_torch(torch.tensor(80.0, dtype=torch.float64), 0.3, p).backward()
+
+    Raises:
+        ValueError: If an input is NaN or infinite.
+    """
+    return sc_angle_torch(theta_deg, params) + sc_velocity_torch(vel_rad_s, params)
+
+
+# ----------------------------------------------------------------------------- MyoSuite stage
+
+
+class SpasticityStage:
+    """The spastic reflex as a stage of MyoSuite's muscle-command pipeline.
+
+    Install it on a MyoSuite env (a :class:`~myosuite.envs.muscle_stages.CtrlStageHost`)::
+
+        stage = SpasticityStage(level=2)
+        env.unwrapped.add_ctrl_stage(STAGE_NAME, stage.apply, stage.reset)
+
+    or use :class:`SpasticityWrapper`. Each control step :meth:`apply` reads the angle (deg)
+    and velocity (rad/s) of ``knee_angle_r`` from ``env.data``, computes ``SC_total`` of the
+    current subject and adds it to the excitation of the 11 spastic muscles, clipped to
+    ``[0, 1]``; every other entry of ``ctrl`` is left as it is. MyoSuite's (MuJoCo's)
+    activation dynamics then act on the excitation. :meth:`reset` draws the next subject
+    (and, with ``level="random"``, the next level, uniformly) from ``env.np_random``.
+
+    The joint and actuator addresses are resolved once per model, so a step costs a few
+    scalar operations and one fancy-indexed update of 11 entries.
+
+    Args:
+        level: Spasticity level (a key of :data:`LEVELS`) or ``"random"``.
+        subject_noise: Draw individual subjects (10 % noise, :func:`sample_subject`) at
+            reset; ``False`` keeps the level's nominal Table I parameters.
+        rel_std: Relative standard deviation of the subject parameters.
+        muscles: Actuators that receive ``SC_total`` (default: the paper's 11).
+        joint: Hinge joint whose angle and velocity drive the reflex.
+
+    Attributes:
+        level: Level of the current subject. Until the first :meth:`reset` the stage uses the
+            nominal parameters of its level (level 0 for ``"random"``).
+        subject: :class:`SpasticityParams` of the current subject.
+        last_sc_total: ``SC_total`` applied at the last step (0 before any step).
+
+    Raises:
+        ValueError: If *level* is unknown, *rel_std* invalid or *muscles* empty.
+    """
+
+    name = STAGE_NAME
+
+    def __init__(
+        self,
+        level: int | str = 2,
+        *,
+        subject_noise: bool = True,
+        rel_std: float = SUBJECT_REL_STD,
+        muscles: Sequence[str] = SPASTIC_MUSCLES,
+        joint: str = KNEE_JOINT,
+    ) -> None:
+        if isinstance(level, str) and level == "random":
+            self.random_level = True
+            initial = min(LEVELS)
+        else:
+            self.random_level = False
+            initial = _check_level(level)
+        if not (math.isfinite(rel_std) and rel_std >= 0.0):
+            raise ValueError(f"rel_std must be a finite value >= 0, got {rel_std!r}.")
+        if len(muscles) == 0:
+            raise ValueError("muscles must name at least one actuator.")
+        self.level_mode: int | str = "random" if self.random_level else initial
+        self.subject_noise = bool(subject_noise)
+        self.rel_std = float(rel_std)
+        self.muscles = tuple(muscles)
+        self.joint = joint
+        self.last_sc_total = 0.0
+        self._model: Any = None
+        self._set_subject(initial, LEVELS[initial])
+
+    # -- subject --------------------------------------------------------------------------
+    def _set_subject(self, level: int, subject: SpasticityParams) -> None:
+        self.level = level
+        self.subject = subject
+        p = subject
+        # constants of the per-step formula (python floats: scalar math is fastest)
+        self._coef = (
+            0.5 * p.k,
+            p.theta_ext_deg,
+            p.theta_flex_deg,
+            p.v_lower_rad_s,
+            p.v_upper_rad_s,
+            0.5 * p.s_theta,
+            0.5 * p.s_v,
+        )
+
+    def set_subject(self, subject: SpasticityParams, level: int | None = None) -> None:
+        """Use *subject* from now until the next :meth:`reset` (e.g. a stretch test).
+
+        Args:
+            subject: Reflex parameters.
+            level: Level to report in :attr:`level` (default: unchanged).
+        """
+        if not isinstance(subject, SpasticityParams):
+            raise ValueError(f"subject must be SpasticityParams, got {type(subject).__name__}.")
+        self._set_subject(self.level if level is None else _check_level(level), subject)
+
+    def set_level(self, level: int | str) -> None:
+        """Change the level (or ``"random"``) used from the next :meth:`reset` on."""
+        if isinstance(level, str) and level == "random":
+            self.random_level, self.level_mode = True, "random"
+        else:
+            self.random_level, self.level_mode = False, _check_level(level)
+
+    def reset(self, env: Any) -> None:
+        """Draw the next level (``"random"`` only) and subject from ``env.np_random``."""
+        rng = env.np_random
+        keys = sorted(LEVELS)
+        level = keys[int(rng.integers(len(keys)))] if self.random_level else int(self.level_mode)
+        subject = sample_subject(level, rng, self.rel_std) if self.subject_noise else LEVELS[level]
+        self._set_subject(level, subject)
+        self.last_sc_total = 0.0
+
+    # -- model binding ----------------------------------------------------------------------
+    def bind(self, model: Any) -> None:
+        """Resolve the joint address and muscle actuator ids of *model* (done once per model).
+
+        Raises:
+            ValueError: If the joint is missing or not a hinge, or a muscle is missing.
+        """
+        import mujoco
+
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, self.joint)
+        if jid < 0:
+            raise ValueError(f"The model has no joint {self.joint!r}; the reflex needs it.")
+        if model.jnt_type[jid] != mujoco.mjtJoint.mjJNT_HINGE:
+            raise ValueError(f"Joint {self.joint!r} must be a hinge joint.")
+        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in self.muscles]
+        missing = [n for n, i in zip(self.muscles, ids, strict=True) if i < 0]
+        if missing:
+            raise ValueError(
+                f"The model has no actuators {missing}; the reflex drives {self.muscles}."
+            )
+        self._qpos_adr = int(model.jnt_qposadr[jid])
+        self._dof_adr = int(model.jnt_dofadr[jid])
+        self._act_ids = np.asarray(ids, dtype=np.intp)
+        self._nu = int(model.nu)
+        self._model = model
+
+    @property
+    def actuator_ids(self) -> np.ndarray:
+        """Actuator ids of the driven muscles in the bound model (after the first step)."""
+        if self._model is None:
+            raise RuntimeError("The stage is not bound to a model yet (call bind or apply).")
+        return self._act_ids
+
+    # -- the stage ----------------------------------------------------------------------------
+    def sc_now(self, theta_deg: float, vel_rad_s: float) -> float:
+        """``SC_total`` of the current subject at one state (scalar fast path of :func:`sc_total`).
+
+        Raises:
+            ValueError: If the angle or the velocity is NaN or infinite.
+        """
+        if not (math.isfinite(theta_deg) and math.isfinite(vel_rad_s)):
+            raise ValueError(
+                f"Knee state must be finite, got theta_deg={theta_deg!r}, vel_rad_s={vel_rad_s!r}."
+            )
+        half_k, t_ext, t_flex, v_lo, v_hi, half_st, half_sv = self._coef
+        tanh = math.tanh
+        # 1 - (phi(b, hi) - phi(b, lo)) = 1 - (tanh(k(b-lo)/2) - tanh(k(b-hi)/2)) / 2
+        sc_a = half_st * (
+            2.0 - tanh(half_k * (theta_deg - t_ext)) + tanh(half_k * (theta_deg - t_flex))
+        )
+        sc_v = half_sv * (
+            2.0 - tanh(half_k * (vel_rad_s - v_lo)) + tanh(half_k * (vel_rad_s - v_hi))
+        )
+        return sc_a + sc_v
+
+    def apply(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
+        """Add ``SC_total`` to the spastic muscles' excitation in *ctrl* (in place; returned).
+
+        Args:
+            env: Host with ``model`` and ``data`` (a MyoSuite env, or any such object).
+            ctrl: The full control vector (``model.nu`` entries), excitations in ``[0, 1]``.
+
+        Raises:
+            ValueError: If *ctrl* has the wrong length or the knee state is not finite.
+        """
+        model = env.model
+        if model is not self._model:
+            self.bind(model)
+        if ctrl.shape[0] != self._nu:
+            raise ValueError(f"ctrl has {ctrl.shape[0]} entries, the model {self._nu} actuators.")
+        data = env.data
+        sc = self.sc_now(
+            float(data.qpos[self._qpos_adr]) * _RAD_TO_DEG, float(data.qvel[self._dof_adr])
+        )
+        ids = self._act_ids
+        ctrl[ids] = np.clip(ctrl[ids] + sc, 0.0, 1.0)
+        self.last_sc_total = sc
+        return ctrl
+
+    def __call__(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
+        """Same as :meth:`apply`."""
+        return self.apply(env, ctrl)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_model"] = None  # re-bound on the first step after unpickling
+        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu"):
+            state.pop(key, None)
+        return state
+
+    def __repr__(self) -> str:
+        return (
+            f"SpasticityStage(level_mode={self.level_mode!r}, level={self.level}, "
+            f"subject_noise={self.subject_noise}, subject={self.subject})"
+        )
+
+
+class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
+    """Install a :class:`SpasticityStage` on a MyoSuite env (CPU; like ``CtrlStageWrapper``).
+
+    The stage runs after MyoSuite's built-in stages (noise, fatigue, reroute), right before
+    ``ctrl`` is written, unless an explicit *order* puts it earlier. The stage is
+    ``env.spasticity`` (also reachable through outer wrappers with
+    ``env.get_wrapper_attr("spasticity")``). The wrapper pickles as its constructor
+    arguments and re-installs the stage on the rebuilt env.
+
+    Args:
+        env: A MyoSuite env whose pipeline runs muscle stages and whose model has the 11
+            spastic muscles and ``knee_angle_r`` (e.g. ``myoLegWalk-v0``).
+        level: Spasticity level 0..3 or ``"random"``.
+        subject_noise: Draw individual subjects at reset (see :class:`SpasticityStage`).
+        order: MyoSuite stage order (``None``: after the built-in stages).
+
+    Raises:
+        TypeError: If the env does not run muscle stages.
+        ValueError: If *level* is unknown or the model lacks a muscle or the knee joint.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        level: int | str = 2,
+        subject_noise: bool = True,
+        order: float | None = None,
+    ) -> None:
+        RecordConstructorArgs.__init__(self, level=level, subject_noise=subject_noise, order=order)
+        gym.Wrapper.__init__(self, env)
+        host = env.unwrapped
+        if not getattr(host, "supports_ctrl_stages", False):
+            raise TypeError(
+                f"SpasticityWrapper needs an env whose action pipeline runs muscle stages; "
+                f"{type(host).__name__} does not."
+            )
+        self._level, self._subject_noise, self._order = level, subject_noise, order
+        self.spasticity = SpasticityStage(level, subject_noise=subject_noise)
+        self.spasticity.bind(host.model)  # fail now, not at the first step
+        host.add_ctrl_stage(STAGE_NAME, self.spasticity.apply, self.spasticity.reset, order=order)
+
+    def __getstate__(self) -> dict[str, Any]:
+        kwargs = {"level": self._level, "subject_noise": self._subject_noise, "order": self._order}
+        return {"env": self.env, "kwargs": kwargs}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["env"], **state["kwargs"])
