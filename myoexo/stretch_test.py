@@ -1,0 +1,433 @@
+"""Simulated clinical stretch test (Tardieu / Modified Ashworth manoeuvre) on the twin.
+
+The exo moves the relaxed, spastic knee through its range at a constant angular velocity, as a
+clinician does in the Tardieu test, once slowly and once fast. A stiff PD position controller on
+the exo motor tracks a trapezoidal-velocity ramp of the exo knee angle; the spastic reflex
+(:class:`~myoexo.spasticity.SpasticityStage`) runs in the muscle-command pipeline at every
+control step (10 ms, like the envs) and MuJoCo's activation dynamics turn the excitation into
+muscle force. The torque the exo has to produce to keep the prescribed motion is the
+*resisting torque*: it must grow with the stretch velocity and with the spasticity level.
+
+Sign conventions: angles are flexion positive (deg), the exo torque is flexion positive (Nm),
+and the resisting torque is the exo torque along the direction of motion (positive: the limb
+resists and the exo pushes). The default manoeuvre is a knee extension from 90 to 5 deg,
+which stretches the spastic hamstrings and gastrocnemii.
+
+CLI::
+
+    myoexo stretch-test [--levels 0 1 2 3] [--velocities 0.2 3.0] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from myoexo.spasticity import KNEE_JOINT, LEVELS, SpasticityParams, SpasticityStage
+
+if TYPE_CHECKING:
+    import mujoco
+    import pandas as pd
+
+__all__ = [
+    "StretchTestParams",
+    "StretchTestResult",
+    "add_arguments",
+    "reference_profile",
+    "run",
+    "run_stretch_test",
+    "simulate_stretch",
+]
+
+PoseFn = Callable[..., Any]
+"""``pose(model, data, knee_angle_deg=...)``: put the twin at a knee angle (``pose_twin``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class StretchTestParams:
+    """Parameters of the simulated stretch test.
+
+    Attributes:
+        start_deg: Exo knee angle at the start of the stretch, deg (flexion positive).
+        end_deg: Exo knee angle at the end of the stretch, deg.
+        velocities_rad_s: Stretch speeds (magnitudes), rad/s: slow and fast Tardieu velocities.
+        levels: Spasticity levels to test.
+        kp_nm_per_rad: Proportional gain of the exo position controller, Nm/rad.
+        kd_nm_s_per_rad: Derivative gain of the exo position controller, Nm s/rad.
+        accel_time_s: Time to reach (and to leave) the stretch speed, s.
+        hold_s: Time held at the start angle before the stretch (the reflex tone and the
+            activations settle), s.
+        end_hold_s: Time held at the end angle after the stretch, s.
+        control_period_s: Control period (the stage and the PD run once per period), s.
+        exo_joint: Exo knee hinge that the PD controls.
+        exo_actuator: Exo motor (a torque actuator).
+        human_joint: Human knee joint, read by the reflex.
+    """
+
+    start_deg: float = 90.0
+    end_deg: float = 5.0
+    velocities_rad_s: tuple[float, ...] = (0.2, 3.0)
+    levels: tuple[int, ...] = (0, 1, 2, 3)
+    kp_nm_per_rad: float = 1000.0
+    kd_nm_s_per_rad: float = 20.0
+    accel_time_s: float = 0.05
+    hold_s: float = 0.5
+    end_hold_s: float = 0.2
+    control_period_s: float = 0.01
+    exo_joint: str = "exo_knee"
+    exo_actuator: str = "exo_motor"
+    human_joint: str = KNEE_JOINT
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "velocities_rad_s", tuple(float(v) for v in self.velocities_rad_s))
+        object.__setattr__(self, "levels", tuple(int(lv) for lv in self.levels))
+        for name in ("start_deg", "end_deg"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(
+                    f"StretchTestParams.{name} must be finite, got {getattr(self, name)!r}."
+                )
+        if self.start_deg == self.end_deg:
+            raise ValueError("StretchTestParams.start_deg and end_deg must differ.")
+        if not self.velocities_rad_s or not all(
+            math.isfinite(v) and v > 0 for v in self.velocities_rad_s
+        ):
+            raise ValueError(
+                "StretchTestParams.velocities_rad_s must be positive finite speeds, got "
+                f"{self.velocities_rad_s!r}."
+            )
+        unknown = [lv for lv in self.levels if lv not in LEVELS]
+        if not self.levels or unknown:
+            raise ValueError(
+                f"StretchTestParams.levels must be among {sorted(LEVELS)}, got {self.levels!r}."
+            )
+        for name in ("kp_nm_per_rad", "kd_nm_s_per_rad", "accel_time_s", "hold_s", "end_hold_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"StretchTestParams.{name} must be >= 0, got {value!r}.")
+        if not (math.isfinite(self.control_period_s) and self.control_period_s > 0):
+            raise ValueError(
+                f"StretchTestParams.control_period_s must be > 0, got {self.control_period_s!r}."
+            )
+
+    @property
+    def direction(self) -> float:
+        """+1 for a flexion stretch, -1 for an extension stretch."""
+        return 1.0 if self.end_deg > self.start_deg else -1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class StretchTestResult:
+    """Outcome of :func:`run_stretch_test`.
+
+    Attributes:
+        traces: One row per control step and condition: ``level, vel_rad_s, time_s, phase,
+            ref_deg, exo_deg, knee_deg, knee_vel_rad_s, sc_total, exo_torque_nm,
+            resisting_torque_nm, muscle_torque_nm, saturated``.
+        summary: One row per (level, speed): ``peak_resisting_torque_nm`` (over the
+            constant-speed phase), ``mean_resisting_torque_nm`` (same phase),
+            ``peak_resisting_torque_all_nm`` (whole motion, acceleration included),
+            ``peak_sc_total``, ``max_tracking_error_deg``, ``mean_knee_vel_rad_s`` (constant
+            phase, along the motion), ``saturated_fraction``.
+        params: The parameters of the test.
+    """
+
+    traces: pd.DataFrame
+    summary: pd.DataFrame
+    params: StretchTestParams
+
+    def peak_table(self) -> pd.DataFrame:
+        """Peak resisting torque (Nm), levels as rows and speeds (rad/s) as columns."""
+        return self.summary.pivot(
+            index="level", columns="vel_rad_s", values="peak_resisting_torque_nm"
+        )
+
+
+def reference_profile(
+    time_s: np.ndarray | float, vel_rad_s: float, params: StretchTestParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Trapezoidal-velocity reference of the exo knee.
+
+    The knee is held at ``start_deg`` for ``hold_s``, accelerates to *vel_rad_s* in
+    ``accel_time_s``, moves at constant speed, decelerates and stops at ``end_deg``.
+
+    Args:
+        time_s: Time(s) since the start of the test, s.
+        vel_rad_s: Stretch speed (magnitude), rad/s.
+        params: Test parameters.
+
+    Returns:
+        ``(angle_deg, vel_rad_s, phase)`` with the phase code 0 hold, 1 accelerate,
+        2 constant speed, 3 decelerate, 4 end hold.
+    """
+    t = np.asarray(time_s, dtype=np.float64) - params.hold_s
+    span = math.radians(abs(params.end_deg - params.start_deg))
+    ta = min(params.accel_time_s, span / vel_rad_s)  # short moves never reach the speed
+    v = min(vel_rad_s, span / ta) if ta > 0 else vel_rad_s
+    t_move = span / v + ta  # total motion time of the trapezoid
+    t_const_end = t_move - ta
+    acc = v / ta if ta > 0 else 0.0
+    s = np.where(
+        t <= 0,
+        0.0,
+        np.where(
+            t < ta,
+            0.5 * acc * t**2,
+            np.where(
+                t < t_const_end,
+                0.5 * acc * ta**2 + v * (t - ta),
+                np.where(t < t_move, span - 0.5 * acc * (t_move - t) ** 2, span),
+            ),
+        ),
+    )
+    sdot = np.where(
+        t <= 0,
+        0.0,
+        np.where(
+            t < ta,
+            acc * t,
+            np.where(t < t_const_end, v, np.where(t < t_move, acc * (t_move - t), 0.0)),
+        ),
+    )
+    phase = np.select([t <= 0, t < ta, t < t_const_end, t < t_move], [0, 1, 2, 3], default=4)
+    angle = params.start_deg + params.direction * np.degrees(s)
+    return angle, params.direction * sdot, phase
+
+
+def _motion_duration_s(vel_rad_s: float, params: StretchTestParams) -> float:
+    span = math.radians(abs(params.end_deg - params.start_deg))
+    ta = min(params.accel_time_s, span / vel_rad_s)
+    return params.hold_s + span / vel_rad_s + ta + params.end_hold_s
+
+
+class _Host:
+    """What :meth:`SpasticityStage.apply` needs of an env: model, data and an RNG."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, seed: int = 0) -> None:
+        self.model, self.data = model, data
+        self.np_random = np.random.default_rng(seed)
+
+
+def _default_twin() -> tuple[mujoco.MjModel, PoseFn]:
+    from myoexo.model import TwinParams, build_model, pose_twin
+
+    model, _ = build_model(TwinParams())
+    return model, pose_twin
+
+
+def _motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
+    import mujoco
+
+    if model.actuator_gaintype[actuator_id] != mujoco.mjtGain.mjGAIN_FIXED or (
+        model.actuator_biastype[actuator_id] != mujoco.mjtBias.mjBIAS_NONE
+    ):
+        raise ValueError("The exo actuator must be a torque motor (fixed gain, no bias).")
+    return float(model.actuator_gainprm[actuator_id, 0] * model.actuator_gear[actuator_id, 0])
+
+
+def simulate_stretch(
+    model: mujoco.MjModel,
+    level: int,
+    vel_rad_s: float,
+    params: StretchTestParams = StretchTestParams(),
+    *,
+    pose: PoseFn,
+    subject: SpasticityParams | None = None,
+) -> pd.DataFrame:
+    """Simulate one stretch of the twin at one level and one speed.
+
+    Args:
+        model: The twin (human + exo); a fresh ``MjData`` is made for the run.
+        level: Spasticity level; the reflex uses its nominal Table I parameters unless
+            *subject* is given.
+        vel_rad_s: Stretch speed (magnitude), rad/s.
+        params: Test parameters.
+        pose: ``pose(model, data, knee_angle_deg=...)`` that puts the twin at the start angle.
+        subject: Individual reflex parameters (e.g. from
+            :func:`~myoexo.spasticity.sample_subject`).
+
+    Returns:
+        One row per control step (see :class:`StretchTestResult`); the state columns are at
+        the start of the step, the torques are those applied during it.
+
+    Raises:
+        ValueError: If the level, speed or model names are invalid.
+    """
+    import mujoco
+    import pandas as pd
+
+    if level not in LEVELS:
+        raise ValueError(f"Unknown spasticity level {level!r}; expected one of {sorted(LEVELS)}.")
+    if not (math.isfinite(vel_rad_s) and vel_rad_s > 0):
+        raise ValueError(f"vel_rad_s must be a positive speed, got {vel_rad_s!r}.")
+    exo_j = model.joint(params.exo_joint)
+    knee_j = model.joint(params.human_joint)
+    exo_a = model.actuator(params.exo_actuator).id
+    exo_q, exo_d = int(exo_j.qposadr[0]), int(exo_j.dofadr[0])
+    knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
+    nm_per_ctrl = _motor_nm_per_ctrl(model, exo_a)
+    ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
+    n_sub = max(1, round(params.control_period_s / model.opt.timestep))
+    dt = n_sub * model.opt.timestep
+
+    data = mujoco.MjData(model)
+    pose(model, data, knee_angle_deg=params.start_deg)
+    host = _Host(model, data)
+    stage = SpasticityStage(level, subject_noise=False)
+    if subject is not None:
+        stage.set_subject(subject)
+
+    n_steps = math.ceil(_motion_duration_s(vel_rad_s, params) / dt)
+    times = np.arange(n_steps) * dt
+    ref_deg, ref_vel, phase = reference_profile(times, vel_rad_s, params)
+    ref_rad = np.radians(ref_deg)
+    rec = np.empty((n_steps, 8))
+    ctrl = np.zeros(model.nu)
+    for i in range(n_steps):
+        q, qd = data.qpos[exo_q], data.qvel[exo_d]
+        torque = params.kp_nm_per_rad * (ref_rad[i] - q) + params.kd_nm_s_per_rad * (
+            ref_vel[i] - qd
+        )
+        u = min(max(torque / nm_per_ctrl, ctrl_lo), ctrl_hi)
+        ctrl[:] = 0.0  # relaxed limb: the muscles get the reflex only
+        ctrl[exo_a] = u
+        data.ctrl[:] = stage.apply(host, ctrl)
+        rec[i] = (
+            math.degrees(q),
+            math.degrees(data.qpos[knee_q]),
+            data.qvel[knee_d],
+            stage.last_sc_total,
+            u * nm_per_ctrl,
+            data.qfrc_actuator[knee_d],
+            torque,
+            u,
+        )
+        mujoco.mj_step(model, data, nstep=n_sub)
+    exo_torque = rec[:, 4]
+    return pd.DataFrame(
+        {
+            "time_s": times,
+            "phase": pd.Categorical.from_codes(
+                phase, categories=["hold", "accelerate", "constant", "decelerate", "end_hold"]
+            ),
+            "ref_deg": ref_deg,
+            "exo_deg": rec[:, 0],
+            "knee_deg": rec[:, 1],
+            "knee_vel_rad_s": rec[:, 2],
+            "sc_total": rec[:, 3],
+            "exo_torque_nm": exo_torque,
+            "resisting_torque_nm": params.direction * exo_torque,
+            "muscle_torque_nm": rec[:, 5],
+            "saturated": np.abs(rec[:, 6] - exo_torque) > 1e-9,
+        }
+    )
+
+
+def _summarize(trace: pd.DataFrame, params: StretchTestParams) -> dict[str, float]:
+    moving = trace["phase"].isin(["accelerate", "constant", "decelerate"])
+    constant = trace["phase"] == "constant"
+    if not constant.any():  # a move too short to reach its speed
+        constant = moving
+    res = trace["resisting_torque_nm"]
+    return {
+        "peak_resisting_torque_nm": float(res[constant].max()),
+        "mean_resisting_torque_nm": float(res[constant].mean()),
+        "peak_resisting_torque_all_nm": float(res[moving].max()),
+        "peak_sc_total": float(trace["sc_total"][moving].max()),
+        "max_tracking_error_deg": float((trace["ref_deg"] - trace["exo_deg"])[moving].abs().max()),
+        "mean_knee_vel_rad_s": float(params.direction * trace["knee_vel_rad_s"][constant].mean()),
+        "saturated_fraction": float(trace["saturated"][moving].mean()),
+    }
+
+
+def run_stretch_test(
+    params: StretchTestParams = StretchTestParams(),
+    *,
+    model: mujoco.MjModel | None = None,
+    pose: PoseFn | None = None,
+    subjects: dict[int, SpasticityParams] | None = None,
+    progress: bool = False,
+) -> StretchTestResult:
+    """Run the stretch test for every level and speed of *params*.
+
+    Args:
+        params: Test parameters.
+        model: The twin; default: ``myoexo.model.build_model(TwinParams())``.
+        pose: Posing function of the twin; default ``myoexo.model.pose_twin``.
+        subjects: Optional individual reflex parameters per level (default: Table I).
+        progress: Show a tqdm progress bar.
+
+    Returns:
+        Traces and summary (see :class:`StretchTestResult`).
+    """
+    import pandas as pd
+
+    if model is None or pose is None:
+        default_model, default_pose = _default_twin()
+        model = default_model if model is None else model
+        pose = default_pose if pose is None else pose
+    conditions = [(lv, v) for lv in params.levels for v in params.velocities_rad_s]
+    if progress:
+        from tqdm.auto import tqdm
+
+        conditions = tqdm(conditions, desc="stretch test")
+    traces, rows = [], []
+    for level, vel in conditions:
+        subject = None if subjects is None else subjects.get(level)
+        trace = simulate_stretch(model, level, vel, params, pose=pose, subject=subject)
+        rows.append({"level": level, "vel_rad_s": vel, **_summarize(trace, params)})
+        traces.append(trace.assign(level=level, vel_rad_s=vel))
+    traces_df = pd.concat(traces, ignore_index=True)
+    front = ["level", "vel_rad_s"]
+    traces_df = traces_df[front + [c for c in traces_df.columns if c not in front]]
+    return StretchTestResult(traces_df, pd.DataFrame(rows), params)
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo stretch-test``."""
+    d = StretchTestParams()
+    parser.add_argument("--levels", type=int, nargs="+", default=list(d.levels), help="levels")
+    parser.add_argument(
+        "--velocities", type=float, nargs="+", default=list(d.velocities_rad_s),
+        help="stretch speeds in rad/s (default: %(default)s)",
+    )  # fmt: skip
+    parser.add_argument("--start-deg", type=float, default=d.start_deg, help="start knee angle")
+    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="end knee angle")
+    parser.add_argument(
+        "--out", type=Path, default=None,
+        help="folder for stretch_summary.csv and stretch_traces.csv (default: print only)",
+    )  # fmt: skip
+
+
+def params_from_args(args: argparse.Namespace) -> StretchTestParams:
+    """:class:`StretchTestParams` from the parsed CLI options."""
+    return StretchTestParams(
+        start_deg=args.start_deg,
+        end_deg=args.end_deg,
+        velocities_rad_s=tuple(args.velocities),
+        levels=tuple(args.levels),
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the stretch test, print the peak resisting torques, optionally write CSVs."""
+    result = run_stretch_test(params_from_args(args), progress=True)
+    cols = [
+        "level", "vel_rad_s", "peak_resisting_torque_nm", "mean_resisting_torque_nm",
+        "peak_sc_total", "max_tracking_error_deg", "saturated_fraction",
+    ]  # fmt: skip
+    print(result.summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        result.summary.to_csv(args.out / "stretch_summary.csv", index=False)
+        result.traces.to_csv(args.out / "stretch_traces.csv", index=False)
+        print(f"wrote {args.out / 'stretch_summary.csv'} and {args.out / 'stretch_traces.csv'}")
+    return 0
