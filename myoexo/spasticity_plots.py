@@ -1,0 +1,182 @@
+"""Figures of the spastic reflex: the paper's Fig. 2b and the stretch-test torque curves.
+
+CLI::
+
+    myoexo plot-spasticity --out DIR [--subjects 200] [--seed 0] [--no-stretch]
+
+writes ``DIR/fig2b_spasticity.png`` (the angle term ``sc_a`` vs knee angle and the velocity
+term ``sc_v`` vs knee velocity per level: Table I curve and the 5-95 % band of sampled
+subjects) and ``DIR/stretch_test.png`` (resisting torque of the simulated Tardieu test vs
+knee angle per level and speed, and the peak torques).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from myoexo.spasticity import LEVELS, sample_subject, sc_angle, sc_velocity
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from myoexo.stretch_test import StretchTestResult
+
+__all__ = ["add_arguments", "plot_sc_curves", "plot_stretch_test", "run", "subject_band"]
+
+#: One colour per level, from mild to severe.
+LEVEL_COLORS = {0: "#4d4d4d", 1: "#2b83ba", 2: "#fdae61", 3: "#d7191c"}
+
+
+def subject_band(
+    x: np.ndarray,
+    level: int,
+    term: str,
+    n_subjects: int,
+    rng: np.random.Generator,
+    quantiles: tuple[float, float] = (0.05, 0.95),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Quantile band of one term of the coefficient over sampled subjects of a level.
+
+    Args:
+        x: Knee angles in deg (``term="angle"``) or velocities in rad/s (``"velocity"``).
+        level: Spasticity level.
+        term: ``"angle"`` (``sc_a``) or ``"velocity"`` (``sc_v``).
+        n_subjects: Number of subjects drawn with :func:`~myoexo.spasticity.sample_subject`.
+        rng: Random generator.
+        quantiles: Lower and upper quantile of the band.
+
+    Returns:
+        ``(lower, upper)`` arrays with the shape of *x*.
+    """
+    if term not in ("angle", "velocity"):
+        raise ValueError(f"term must be 'angle' or 'velocity', got {term!r}.")
+    if n_subjects < 2:
+        raise ValueError(f"n_subjects must be >= 2, got {n_subjects}.")
+    fn = sc_angle if term == "angle" else sc_velocity
+    curves = np.stack([fn(x, sample_subject(level, rng)) for _ in range(n_subjects)])
+    lower, upper = np.quantile(curves, quantiles, axis=0)
+    return lower, upper
+
+
+def plot_sc_curves(n_subjects: int = 200, seed: int = 0) -> Figure:
+    """The paper's Fig. 2b: ``sc_a`` vs knee angle and ``sc_v`` vs knee velocity per level.
+
+    Args:
+        n_subjects: Subjects per level drawn for the band (5-95 %).
+        seed: Seed of the subject draws.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rng = np.random.default_rng(seed)
+    theta_deg = np.linspace(-60.0, 130.0, 381)
+    vel_rad_s = np.linspace(-4.0, 4.0, 401)
+    fig, (ax_a, ax_v) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for level, params in LEVELS.items():
+        color = LEVEL_COLORS[level]
+        for ax, x, term, fn in (
+            (ax_a, theta_deg, "angle", sc_angle),
+            (ax_v, vel_rad_s, "velocity", sc_velocity),
+        ):
+            lower, upper = subject_band(x, level, term, n_subjects, rng)
+            ax.fill_between(x, lower, upper, color=color, alpha=0.2, linewidth=0)
+            ax.plot(x, fn(x, params), color=color, label=f"level {level}")
+    ax_a.set(xlabel="knee angle θ (deg, flexion +)", ylabel="sc_a (fraction of F_max)")
+    ax_a.set_title("angle term")
+    ax_v.set(xlabel="knee velocity v (rad/s, flexion +)", ylabel="sc_v (fraction of F_max)")
+    ax_v.set_title("velocity term")
+    for ax in (ax_a, ax_v):
+        ax.grid(alpha=0.3)
+        ax.set_ylim(-0.02, 0.65)
+    ax_a.legend(title=f"Table I; band: 5-95 % of {n_subjects} subjects", fontsize=8)
+    fig.suptitle("Spasticity coefficient per level (paper Fig. 2b)")
+    return fig
+
+
+def plot_stretch_test(result: StretchTestResult) -> Figure:
+    """Resisting torque vs knee angle per level, one panel per speed, and the peak torques."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    speeds = list(result.params.velocities_rad_s)
+    fig, axes = plt.subplots(
+        1, len(speeds) + 1, figsize=(4.2 * (len(speeds) + 1), 4), constrained_layout=True
+    )
+    traces = result.traces
+    moving = traces["phase"].isin(["accelerate", "constant", "decelerate"])
+    for ax, speed in zip(axes[:-1], speeds, strict=True):
+        for level in result.params.levels:
+            sel = moving & (traces["level"] == level) & (traces["vel_rad_s"] == speed)
+            ax.plot(
+                traces.loc[sel, "knee_deg"],
+                traces.loc[sel, "resisting_torque_nm"],
+                color=LEVEL_COLORS[level],
+                label=f"level {level}",
+            )
+        ax.set(xlabel="knee angle (deg)", ylabel="resisting torque (Nm)")
+        ax.set_title(f"stretch at {speed:g} rad/s")
+        ax.grid(alpha=0.3)
+        if result.params.direction < 0:
+            ax.invert_xaxis()  # time runs left to right during an extension stretch
+    axes[0].legend(fontsize=8)
+    peaks = result.peak_table()
+    width = 0.8 / len(peaks.columns)
+    for j, speed in enumerate(peaks.columns):
+        axes[-1].bar(
+            peaks.index + (j - (len(peaks.columns) - 1) / 2) * width,
+            peaks[speed],
+            width=width,
+            color=[LEVEL_COLORS[lv] for lv in peaks.index],
+            alpha=0.45 + 0.55 * j / max(1, len(peaks.columns) - 1),
+            edgecolor="black",
+            label=f"{speed:g} rad/s",
+        )
+    axes[-1].set(xlabel="spasticity level", ylabel="peak resisting torque (Nm)")
+    axes[-1].set_xticks(list(peaks.index))
+    axes[-1].set_title("peak, constant-speed phase")
+    axes[-1].grid(alpha=0.3, axis="y")
+    p = result.params
+    fig.suptitle(f"Simulated Tardieu stretch, knee {p.start_deg:g} → {p.end_deg:g} deg")
+    return fig
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo plot-spasticity``."""
+    parser.add_argument("--out", type=Path, required=True, help="output folder for the PNGs")
+    parser.add_argument("--subjects", type=int, default=200, help="subjects per level in the band")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the subject draws")
+    parser.add_argument(
+        "--no-stretch", action="store_true", help="skip the stretch-test simulation and figure"
+    )
+    parser.add_argument("--dpi", type=int, default=150, help="resolution of the PNGs")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the figures to ``args.out``."""
+    import matplotlib.pyplot as plt
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    fig = plot_sc_curves(n_subjects=args.subjects, seed=args.seed)
+    path = args.out / "fig2b_spasticity.png"
+    fig.savefig(path, dpi=args.dpi)
+    plt.close(fig)
+    print(f"wrote {path}")
+    if not args.no_stretch:
+        from myoexo.stretch_test import run_stretch_test
+
+        result = run_stretch_test(progress=True)
+        fig = plot_stretch_test(result)
+        path = args.out / "stretch_test.png"
+        fig.savefig(path, dpi=args.dpi)
+        plt.close(fig)
+        result.summary.to_csv(args.out / "stretch_summary.csv", index=False)
+        print(f"wrote {path} and {args.out / 'stretch_summary.csv'}")
+    return 0
