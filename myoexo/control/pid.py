@@ -1,0 +1,222 @@
+"""PID position controller of the paper's baseline (SPEC section 4).
+
+The controller acts on the knee position error in **radians** and outputs the normalized exo
+command in [-1, 1] (``u * 100 Nm``, positive = flexion torque). With the paper's gains
+(Kp = 7, Ki = 40, Kd = 0.05, Ziegler-Nichols tuned at level 1) an error of 1 rad asks for
+7 x 100 Nm, so the motor saturates for errors above ~8 deg: the 83 deg extension starts
+saturated and the PID only leaves saturation near the target.
+
+Sign convention. The control error is the textbook ``e = r - y`` (setpoint minus
+measurement), i.e. ``e = target - knee``: negative while the knee is still flexed above the
+target, which is the *opposite* sign of the env's ``info["error_deg"]`` (``knee - target``,
+positive while flexed). A positive gain on ``e`` therefore commands extension (a negative,
+extending torque) while the knee is flexed, as it must.
+
+Two standard refinements are on by default and can be switched off to get the textbook
+parallel PID ``u = Kp e + Ki int(e) dt + Kd de/dt``
+(:meth:`PIDConfig.textbook`):
+
+* **Derivative on measurement** (Astrom & Hagglund, *Advanced PID Control*, ISA 2006,
+  sec. 3.4): the derivative term is ``-Kd dy/dt`` instead of ``Kd de/dt``. Both are equal
+  while the setpoint is constant; the former has no "derivative kick" when it changes.
+* **Anti-windup** at the +-1 saturation (ibid., sec. 3.5): ``"clamping"`` (conditional
+  integration: the integrator is frozen while the output is saturated and the error would
+  drive it deeper into saturation) or ``"back_calculation"`` (the integrator is driven back
+  by ``(u_sat - u) / Tt`` with tracking time ``Tt``; default ``Tt = sqrt(Ti Td)``, Astrom &
+  Hagglund's rule, with ``Ti = Kp / Ki`` and ``Td = Kd / Kp``).
+
+Discretization at the env's control period ``dt``: backward-Euler integral and backward
+difference derivative, no derivative filter (Kd is small); the derivative is zero on the
+first step of an episode (no previous sample).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+#: Accepted anti-windup schemes.
+ANTI_WINDUP_SCHEMES: tuple[str, ...] = ("clamping", "back_calculation", "none")
+
+#: Accepted feedback signals: ``info`` key of the measured angle (deg).
+FEEDBACK_KEYS: dict[str, str] = {"knee": "knee_angle_deg", "exo": "exo_angle_deg"}
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """Parallel-form PID gains on the knee error in radians, output in the normalized command.
+
+    Attributes:
+        kp: Proportional gain (1/rad). Paper: 7.
+        ki: Integral gain (1/(rad s)). Paper: 40.
+        kd: Derivative gain (s/rad). Paper: 0.05.
+    """
+
+    kp: float = 7.0
+    ki: float = 40.0
+    kd: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("kp", "ki", "kd"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"PIDGains.{name} = {value!r} must be finite and >= 0")
+
+
+@dataclass(frozen=True)
+class PIDConfig:
+    """Structure of the PID (defaults: the paper's gains, the two refinements on).
+
+    Attributes:
+        gains: The three gains.
+        derivative_on_measurement: ``-Kd dy/dt`` (True) or ``Kd de/dt`` (False).
+        anti_windup: One of :data:`ANTI_WINDUP_SCHEMES`.
+        tracking_time_s: Back-calculation tracking time ``Tt`` (s); ``None`` = ``sqrt(Ti Td)``
+            (``Ti`` alone when Kd = 0). Ignored by the other schemes.
+        output_limit: Saturation of the command (the env's action bound, 1 = 100 Nm).
+        feedback: ``"knee"`` (human knee angle, what the simulation knows; the paper's
+            reading) or ``"exo"`` (the exo joint encoder, what a real device measures; it
+            differs from the human knee by the strap misalignment).
+    """
+
+    gains: PIDGains = field(default_factory=PIDGains)
+    derivative_on_measurement: bool = True
+    anti_windup: str = "clamping"
+    tracking_time_s: float | None = None
+    output_limit: float = 1.0
+    feedback: str = "knee"
+
+    def __post_init__(self) -> None:
+        if self.anti_windup not in ANTI_WINDUP_SCHEMES:
+            raise ValueError(
+                f"PIDConfig.anti_windup = {self.anti_windup!r}; accepted: {ANTI_WINDUP_SCHEMES}"
+            )
+        if self.feedback not in FEEDBACK_KEYS:
+            raise ValueError(
+                f"PIDConfig.feedback = {self.feedback!r}; accepted: {tuple(FEEDBACK_KEYS)}"
+            )
+        if not (math.isfinite(self.output_limit) and self.output_limit > 0.0):
+            raise ValueError(f"PIDConfig.output_limit = {self.output_limit!r} must be > 0")
+        if self.tracking_time_s is not None and not (
+            math.isfinite(self.tracking_time_s) and self.tracking_time_s > 0.0
+        ):
+            raise ValueError(
+                f"PIDConfig.tracking_time_s = {self.tracking_time_s!r} must be > 0 or None"
+            )
+
+    @classmethod
+    def textbook(cls, gains: PIDGains | None = None, **overrides: Any) -> PIDConfig:
+        """Plain parallel PID: derivative on error, no anti-windup (output still clipped)."""
+        return cls(
+            gains=gains or PIDGains(),
+            derivative_on_measurement=False,
+            anti_windup="none",
+            **overrides,
+        )
+
+    def with_gains(self, kp: float, ki: float, kd: float) -> PIDConfig:
+        """Copy with other gains."""
+        return replace(self, gains=PIDGains(kp=kp, ki=ki, kd=kd))
+
+    @property
+    def effective_tracking_time_s(self) -> float:
+        """The back-calculation tracking time actually used (s)."""
+        if self.tracking_time_s is not None:
+            return self.tracking_time_s
+        g = self.gains
+        if g.ki == 0.0 or g.kp == 0.0:
+            return math.inf  # no integrator (or no scale for it): nothing to track
+        ti = g.kp / g.ki
+        td = g.kd / g.kp
+        return math.sqrt(ti * td) if td > 0.0 else ti
+
+
+class PID:
+    """Discrete PID on the knee angle; fits :class:`~myoexo.control.protocol.Controller`.
+
+    Args:
+        config: Gains and structure (:class:`PIDConfig`).
+        dt_s: Sample time (s): the env's control period ``env.unwrapped.dt``.
+
+    Example:
+        >>> pid = PID.from_env(env)
+        >>> pid.reset()
+        >>> obs, info = env.reset(seed=0)
+        >>> obs, *_, info = env.step(pid.act(obs, info))
+    """
+
+    def __init__(self, config: PIDConfig | None = None, dt_s: float = 0.01) -> None:
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise ValueError(f"dt_s = {dt_s!r} must be a positive sample time in seconds")
+        self.config = config if config is not None else PIDConfig()
+        self.dt_s = float(dt_s)
+        self._feedback_key = FEEDBACK_KEYS[self.config.feedback]
+        self.reset()
+
+    @classmethod
+    def from_env(cls, env: Any, config: PIDConfig | None = None) -> PID:
+        """PID sampled at the env's control period (``env.unwrapped.dt``)."""
+        return cls(config=config, dt_s=float(env.unwrapped.dt))
+
+    def reset(self, seed: int | None = None) -> None:
+        """Zero the integrator and forget the previous sample (``seed`` is unused)."""
+        del seed
+        self._integral = 0.0  # integral term, already multiplied by Ki (command units)
+        self._prev_error_rad: float | None = None
+        self._prev_measurement_rad: float | None = None
+        #: The last output's terms (command units): ``p``, ``i``, ``d``, ``unsaturated``.
+        self.last_terms: dict[str, float] = {}
+
+    def update(self, setpoint_rad: float, measurement_rad: float) -> float:
+        """One sample: error ``e = setpoint - measurement`` (rad) -> saturated command."""
+        cfg, g, dt = self.config, self.config.gains, self.dt_s
+        error = setpoint_rad - measurement_rad
+        p = g.kp * error
+        if self._prev_measurement_rad is None:
+            d = 0.0
+        elif cfg.derivative_on_measurement:
+            d = -g.kd * (measurement_rad - self._prev_measurement_rad) / dt
+        else:
+            d = g.kd * (error - self._prev_error_rad) / dt
+        integral = self._integral + g.ki * error * dt
+        unsaturated = p + integral + d
+        lim = cfg.output_limit
+        u = min(lim, max(-lim, unsaturated))
+
+        if cfg.anti_windup == "clamping" and u != unsaturated and error * unsaturated > 0.0:
+            integral = self._integral  # saturated and pushing further in: freeze
+        elif cfg.anti_windup == "back_calculation":
+            tt = cfg.effective_tracking_time_s
+            if math.isfinite(tt):
+                integral += dt / tt * (u - unsaturated)
+        self._integral = integral
+        self._prev_error_rad = error
+        self._prev_measurement_rad = measurement_rad
+        self.last_terms = {"p": p, "i": integral, "d": d, "unsaturated": unsaturated}
+        return u
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        """Command from ``info["target_angle_deg"]`` and the feedback angle (deg) of ``info``."""
+        del obs
+        try:
+            target_deg = float(info["target_angle_deg"])
+            measured_deg = float(info[self._feedback_key])
+        except KeyError as exc:
+            raise ValueError(
+                f"PID.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict); got keys "
+                f"{sorted(info)}"
+            ) from None
+        u = self.update(math.radians(target_deg), math.radians(measured_deg))
+        return np.array([u], dtype=np.float32)
+
+    def __repr__(self) -> str:
+        g = self.config.gains
+        return (
+            f"PID(kp={g.kp}, ki={g.ki}, kd={g.kd}, dt_s={self.dt_s}, "
+            f"feedback={self.config.feedback!r}, anti_windup={self.config.anti_windup!r}, "
+            f"derivative_on_measurement={self.config.derivative_on_measurement})"
+        )

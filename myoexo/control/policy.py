@@ -1,0 +1,101 @@
+"""Adapters that turn learned policies into :class:`~myoexo.control.protocol.Controller`.
+
+* :class:`SB3Controller`: any stable-baselines3 model (or anything with SB3's
+  ``predict(obs, deterministic=...) -> (action, state)``), e.g. ``SAC.load("model.zip")``.
+* :class:`CallableController`: any ``callable(obs) -> action`` (a torch module wrapper, an
+  ONNX session wrapper, a hand-written law).
+* :func:`as_controller`: picks the right one.
+
+All of them return a float32 array of shape ``(1,)`` clipped to the action bounds [-1, 1];
+a NaN / non-finite action raises ``ValueError`` naming the controller.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from myoexo.control.protocol import Controller
+
+#: Bounds of the normalized exo command.
+ACTION_LOW, ACTION_HIGH = -1.0, 1.0
+
+
+def _to_action(raw: Any, who: str) -> np.ndarray:
+    a = np.asarray(raw, dtype=np.float32).reshape(-1)
+    if a.size != 1:
+        raise ValueError(f"{who} returned an action of shape {np.shape(raw)}; expected (1,)")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{who} returned a non-finite action {a.tolist()}")
+    return np.clip(a, ACTION_LOW, ACTION_HIGH)
+
+
+class CallableController:
+    """Wrap ``fn(obs) -> action`` (stateless) as a controller.
+
+    Args:
+        fn: Maps the observation vector to an action (any array-like of size 1).
+        name: Label used in error messages and tables.
+    """
+
+    def __init__(self, fn: Callable[[np.ndarray], Any], name: str | None = None) -> None:
+        if not callable(fn):
+            raise ValueError(f"CallableController needs a callable, got {type(fn).__name__}")
+        self.fn = fn
+        self.name = name or getattr(fn, "__name__", type(fn).__name__)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Stateless: nothing to clear."""
+        del seed
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        """``fn(obs)``, clipped to [-1, 1]."""
+        del info
+        return _to_action(self.fn(obs), self.name)
+
+
+class SB3Controller:
+    """Wrap a stable-baselines3 model (``SAC``, ``PPO``, ``TD3`` ... or its ``.policy``).
+
+    Args:
+        model: Object with ``predict(obs, deterministic=...) -> (action, state)``.
+        deterministic: Use the mean action (evaluation) rather than a sample.
+        name: Label used in error messages and tables.
+    """
+
+    def __init__(self, model: Any, deterministic: bool = True, name: str | None = None) -> None:
+        if not callable(getattr(model, "predict", None)):
+            raise ValueError(f"{type(model).__name__} has no predict(obs, deterministic=...)")
+        self.model = model
+        self.deterministic = deterministic
+        self.name = name or type(model).__name__
+
+    def reset(self, seed: int | None = None) -> None:
+        """Seed the model's RNG for stochastic evaluation (no effect when deterministic)."""
+        if seed is not None and not self.deterministic:
+            set_seed = getattr(self.model, "set_random_seed", None)
+            if callable(set_seed):
+                set_seed(int(seed))
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        """``model.predict(obs)``, clipped to [-1, 1]."""
+        del info
+        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        return _to_action(action, self.name)
+
+
+def as_controller(obj: Any, name: str | None = None) -> Controller:
+    """Return ``obj`` as a controller: itself if it already is one, an SB3-style model
+    through :class:`SB3Controller`, a plain callable through :class:`CallableController`."""
+    if isinstance(obj, Controller):
+        return obj
+    if callable(getattr(obj, "predict", None)):
+        return SB3Controller(obj, name=name)
+    if callable(obj):
+        return CallableController(obj, name=name)
+    raise ValueError(
+        f"cannot use {type(obj).__name__} as a controller: expected an object with "
+        "reset(seed) and act(obs, info), an SB3 model with predict(), or a callable(obs)"
+    )

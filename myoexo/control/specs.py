@@ -1,0 +1,174 @@
+"""Controllers named on the command line (``myoexo evaluate --controllers ...``).
+
+A *spec* is a short string that a worker process can turn into a controller on its own (so
+nothing unpicklable crosses process boundaries):
+
+=================================  ==========================================================
+spec                               controller
+=================================  ==========================================================
+``pid``                            :class:`~myoexo.control.pid.PID`, the paper's gains
+``pid:kp=10,ki=30,kd=0.1``         PID with other gains (any of ``kp ki kd``)
+``pid:feedback=exo``               PID on the exo encoder instead of the human knee
+``pid:anti_windup=none``           ``clamping`` (default), ``back_calculation`` or ``none``
+``pid:derivative=error``           derivative on the error instead of the measurement
+``pid:textbook``                   plain parallel PID (derivative on error, no anti-windup)
+``sac``                            the policy shipped with the package
+                                   (:func:`myoexo.load_policy`)
+``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
+                                   ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:`` for other algorithms
+=================================  ==========================================================
+
+Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
+``controller``) is the spec itself for ``pid``/``sac``, the file stem for a model file.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from myoexo.control.pid import PID, PIDConfig, PIDGains
+from myoexo.control.policy import as_controller
+from myoexo.control.protocol import Controller
+
+#: SB3 algorithm prefixes accepted before a model path.
+SB3_ALGORITHMS: dict[str, str] = {
+    "sac": "SAC",
+    "td3": "TD3",
+    "ddpg": "DDPG",
+    "ppo": "PPO",
+    "a2c": "A2C",
+}
+
+_PID_KEYS = ("kp", "ki", "kd", "feedback", "anti_windup", "derivative", "textbook")
+
+
+class PolicyUnavailableError(RuntimeError):
+    """The shipped policy (spec ``sac``) is not available in this installation."""
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A parsed controller spec.
+
+    Attributes:
+        kind: ``"pid"``, ``"shipped"`` (``sac``) or ``"sb3"`` (a model file).
+        label: Name in tables and figures.
+        text: The spec as given.
+        path: Model file (``sb3`` only).
+        algorithm: SB3 class name (``sb3`` only).
+        options: PID options (``pid`` only), as :class:`PIDConfig` keyword arguments.
+    """
+
+    kind: str
+    label: str
+    text: str
+    path: str | None = None
+    algorithm: str | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def slug(self) -> str:
+        """File-system-safe form of the label."""
+        return re.sub(r"[^A-Za-z0-9_.+-]+", "_", self.label).strip("_") or "controller"
+
+
+def parse_controller_spec(text: str) -> ControllerSpec:
+    """Parse one spec (see the module docstring); ``ValueError`` on anything else."""
+    text = text.strip()
+    head, _, tail = text.partition(":")
+    if head.lower() == "pid":
+        return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
+    if text.lower() == "sac":
+        return ControllerSpec(kind="shipped", label="sac", text=text)
+    algorithm = "SAC"
+    path_text = text
+    if head.lower() in SB3_ALGORITHMS and tail:
+        algorithm, path_text = SB3_ALGORITHMS[head.lower()], tail
+    path = Path(path_text).expanduser()
+    if path.suffix != ".zip":
+        raise ValueError(
+            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', or the path of a "
+            "stable-baselines3 model file (.zip)"
+        )
+    if not path.is_file():
+        raise ValueError(f"controller {text!r}: policy file {str(path)!r} does not exist")
+    return ControllerSpec(
+        kind="sb3", label=path.stem, text=text, path=str(path.resolve()), algorithm=algorithm
+    )
+
+
+def _pid_options(tail: str) -> dict[str, Any]:
+    options: dict[str, Any] = {}
+    for item in filter(None, (s.strip() for s in tail.split(","))):
+        key, eq, value = item.partition("=")
+        key = key.strip().lower()
+        if key not in _PID_KEYS:
+            raise ValueError(f"unknown PID option {key!r} in 'pid:{tail}'; accepted: {_PID_KEYS}")
+        if key == "textbook":
+            options["derivative_on_measurement"] = False
+            options.setdefault("anti_windup", "none")
+        elif key in ("kp", "ki", "kd"):
+            try:
+                options[key] = float(value)
+            except ValueError:
+                raise ValueError(f"PID option {key}={value!r} is not a number") from None
+        elif key == "derivative":
+            if value not in ("measurement", "error"):
+                raise ValueError(f"PID option derivative={value!r}; accepted: measurement, error")
+            options["derivative_on_measurement"] = value == "measurement"
+        elif not eq:
+            raise ValueError(f"PID option {key!r} needs a value ({key}=...)")
+        else:
+            options[key] = value
+    pid_config(options)  # validate now, not in a worker
+    return options
+
+
+def pid_config(options: dict[str, Any]) -> PIDConfig:
+    """:class:`PIDConfig` from parsed PID options."""
+    opts = dict(options)
+    base = PIDGains()
+    gains = PIDGains(
+        kp=opts.pop("kp", base.kp), ki=opts.pop("ki", base.ki), kd=opts.pop("kd", base.kd)
+    )
+    return PIDConfig(gains=gains, **opts)
+
+
+def load_shipped_policy() -> Any:
+    """``myoexo.load_policy()``, or :class:`PolicyUnavailableError` saying why not."""
+    try:
+        import myoexo
+
+        return myoexo.load_policy()
+    except (ImportError, FileNotFoundError, OSError, AttributeError) as exc:
+        raise PolicyUnavailableError(
+            f"the shipped SAC policy is not available ({type(exc).__name__}: {exc})"
+        ) from exc
+
+
+def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
+    """Load a stable-baselines3 model file on the CPU; ``ValueError`` if it is unreadable."""
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, algorithm)
+    try:
+        return cls.load(path, device="cpu")
+    except Exception as exc:  # zip, pickle and torch errors all mean "not a usable model"
+        raise ValueError(
+            f"cannot load {path!r} as a stable-baselines3 {algorithm} model "
+            f"({type(exc).__name__}: {exc})"
+        ) from exc
+
+
+def build_controller(spec: ControllerSpec, env: Any) -> Controller:
+    """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
+    if spec.kind == "pid":
+        return PID.from_env(env, pid_config(spec.options))
+    if spec.kind == "shipped":
+        return as_controller(load_shipped_policy(), name="sac")
+    if spec.kind == "sb3":
+        return as_controller(load_sb3_model(spec.path, spec.algorithm), name=spec.label)
+    raise ValueError(f"unknown controller kind {spec.kind!r}")

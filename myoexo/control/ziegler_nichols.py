@@ -1,0 +1,360 @@
+"""Ziegler-Nichols tuning of the knee PID on the digital twin (``myoexo tune-pid``).
+
+The paper tuned its PID "to a spasticity level of 1 following the Ziegler-Nichols method"
+and reports Kp = 7, Ki = 40, Kd = 0.05 (SPEC section 4). This module runs the closed-loop
+("ultimate sensitivity") procedure of Ziegler & Nichols, "Optimum settings for automatic
+controllers", Trans. ASME 64 (1942), on the twin:
+
+1. P-only control (Ki = Kd = 0) of the knee extension task at level 1, on the level's
+   nominal Table I subject (or a seeded individual subject);
+2. raise Kp until the knee oscillates with a sustained amplitude: bracket by doubling, then
+   geometric bisection down to a relative tolerance; the smallest sustained gain is the
+   ultimate gain ``Ku`` and the oscillation period there the ultimate period ``Tu``;
+3. apply the classic PID table: ``Kp = 0.6 Ku``, ``Ti = Tu / 2``, ``Td = Tu / 8``, i.e.
+   ``Ki = 1.2 Ku / Tu`` and ``Kd = 0.075 Ku Tu`` in parallel form.
+
+"Sustained" is judged on the error after ``analysis_start_s`` (the transient of the 83 deg
+extension excluded), mean removed: at least ``min_half_cycles`` zero crossings, a last
+half-cycle amplitude of at least ``min_amplitude_deg``, and a ratio of the last to the first
+half-cycle amplitudes of at least ``sustain_ratio`` (no more decay than that over the
+window). The motor saturates at +-1 (100 Nm), so beyond ``Ku`` the loop settles into a
+bounded limit cycle rather than diverging, which is what the test detects.
+
+The paper's gains invert to ``Ku = Kp / 0.6 = 11.7`` and ``Tu = 1.2 Ku / Ki = 0.35 s``
+(:func:`implied_ultimate`), for which the classic table would give ``Kd = 0.31``, six times
+the paper's 0.05: the paper's Kd was evidently not taken from the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.control.pid import PID, PIDConfig, PIDGains
+
+#: Classic Ziegler-Nichols closed-loop PID table: Kp = a Ku, Ti = Tu / b, Td = Tu / c.
+ZN_KP_FACTOR = 0.6
+ZN_TI_FRACTION = 0.5
+ZN_TD_FRACTION = 0.125
+
+
+@dataclass(frozen=True)
+class ZieglerNicholsSettings:
+    """Settings of the ultimate-gain search.
+
+    Attributes:
+        level: Spasticity level of the tuning (paper: 1).
+        nominal_subject: Use the level's nominal Table I parameters (no subject noise);
+            ``False`` draws an individual subject from ``seed``.
+        seed: Episode seed (start-angle perturbation; the subject if not nominal).
+        feedback: Feedback signal of the P controller (``"knee"`` or ``"exo"``).
+        kp_start: First gain tried (1/rad).
+        kp_max: Give up above this gain (1/rad).
+        rel_tol: Stop the bisection when ``hi / lo - 1 < rel_tol``.
+        analysis_start_s: Start of the analysis window (s), after the extension transient.
+        episode_duration_s: Episode length (s); ``None``: the env's default (8 s).
+        min_half_cycles: Minimum zero crossings in the window for an oscillation.
+        min_amplitude_deg: Minimum amplitude of the last half cycle (deg).
+        sustain_ratio: Minimum ratio of last to first half-cycle amplitude.
+    """
+
+    level: int = 1
+    nominal_subject: bool = True
+    seed: int = 0
+    feedback: str = "knee"
+    kp_start: float = 1.0
+    kp_max: float = 2000.0
+    rel_tol: float = 0.03
+    analysis_start_s: float = 3.0
+    episode_duration_s: float | None = None
+    min_half_cycles: int = 6
+    min_amplitude_deg: float = 0.05
+    sustain_ratio: float = 0.9
+
+    def __post_init__(self) -> None:
+        if self.level not in (0, 1, 2, 3):
+            raise ValueError(f"level = {self.level!r}; accepted: 0, 1, 2, 3")
+        if not 0.0 < self.kp_start < self.kp_max:
+            raise ValueError(f"need 0 < kp_start ({self.kp_start}) < kp_max ({self.kp_max})")
+        if not 0.0 < self.rel_tol < 1.0:
+            raise ValueError(f"rel_tol = {self.rel_tol} must be in (0, 1)")
+        if not 0.0 < self.sustain_ratio <= 1.5:
+            raise ValueError(f"sustain_ratio = {self.sustain_ratio} must be in (0, 1.5]")
+        if self.min_half_cycles < 2:
+            raise ValueError(f"min_half_cycles = {self.min_half_cycles} must be >= 2")
+        if self.analysis_start_s < 0.0:
+            raise ValueError(f"analysis_start_s = {self.analysis_start_s} must be >= 0")
+
+
+@dataclass(frozen=True)
+class Oscillation:
+    """Oscillation of a signal about its mean over an analysis window.
+
+    Attributes:
+        half_cycles: Complete half cycles (between successive zero crossings).
+        period_s: Mean period (twice the mean crossing interval), NaN if < 2 half cycles.
+        first_amplitude: Peak |deviation| of the first half cycle.
+        last_amplitude: Peak |deviation| of the last half cycle.
+        amplitude_ratio: ``last_amplitude / first_amplitude`` (0 without half cycles).
+    """
+
+    half_cycles: int
+    period_s: float
+    first_amplitude: float
+    last_amplitude: float
+    amplitude_ratio: float
+
+
+def analyze_oscillation(t_s: np.ndarray, y: np.ndarray, start_s: float = 0.0) -> Oscillation:
+    """Zero crossings of ``y - mean(y)`` for ``t >= start_s``: period and amplitude decay."""
+    t = np.asarray(t_s, dtype=float)
+    y = np.asarray(y, dtype=float)
+    sel = (t >= start_s) & np.isfinite(y)
+    t, y = t[sel], y[sel]
+    if y.size < 3:
+        return Oscillation(0, math.nan, 0.0, 0.0, 0.0)
+    yc = y - y.mean()
+    neg = yc < 0.0
+    idx = np.flatnonzero(neg[1:] != neg[:-1])  # sign change between idx and idx + 1
+    # crossing times by linear interpolation
+    frac = yc[idx] / (yc[idx] - yc[idx + 1])
+    tc = t[idx] + frac * (t[idx + 1] - t[idx])
+    amps = np.array([np.abs(yc[a + 1 : b + 1]).max() for a, b in itertools.pairwise(idx)])
+    if amps.size == 0:
+        return Oscillation(0, math.nan, 0.0, 0.0, 0.0)
+    period = 2.0 * float(np.mean(np.diff(tc))) if tc.size >= 3 else math.nan
+    return Oscillation(
+        half_cycles=int(amps.size),
+        period_s=period,
+        first_amplitude=float(amps[0]),
+        last_amplitude=float(amps[-1]),
+        amplitude_ratio=float(amps[-1] / amps[0]) if amps[0] > 0 else 0.0,
+    )
+
+
+def classic_zn_gains(ku: float, tu_s: float) -> PIDGains:
+    """Classic Ziegler-Nichols PID table in parallel form: ``Kp = 0.6 Ku``,
+    ``Ki = Kp / (Tu / 2) = 1.2 Ku / Tu``, ``Kd = Kp Tu / 8 = 0.075 Ku Tu``."""
+    if not (ku > 0 and tu_s > 0):
+        raise ValueError(f"need Ku > 0 and Tu > 0, got Ku = {ku}, Tu = {tu_s}")
+    kp = ZN_KP_FACTOR * ku
+    return PIDGains(kp=kp, ki=kp / (ZN_TI_FRACTION * tu_s), kd=kp * ZN_TD_FRACTION * tu_s)
+
+
+def implied_ultimate(gains: PIDGains) -> tuple[float, float]:
+    """``(Ku, Tu)`` that the classic table maps to ``gains``' Kp and Ki (Kd not used)."""
+    ku = gains.kp / ZN_KP_FACTOR
+    return ku, gains.kp / (gains.ki * ZN_TI_FRACTION)
+
+
+@dataclass(frozen=True)
+class GainTrial:
+    """One P-only episode of the search."""
+
+    kp: float
+    sustained: bool
+    oscillation: Oscillation
+
+
+@dataclass(frozen=True)
+class ZieglerNicholsResult:
+    """Outcome of :func:`tune`.
+
+    Attributes:
+        ultimate_gain: ``Ku`` (1/rad), the smallest sustained gain found.
+        ultimate_period_s: ``Tu`` (s), the oscillation period at ``Ku``.
+        gains: Classic-table PID gains from ``Ku, Tu``.
+        settings: The search settings.
+        trials: Every P-only episode run, in order.
+    """
+
+    ultimate_gain: float
+    ultimate_period_s: float
+    gains: PIDGains
+    settings: ZieglerNicholsSettings
+    trials: tuple[GainTrial, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary, with the paper's gains and their implied ``Ku, Tu``."""
+        paper = PIDGains()
+        ku_p, tu_p = implied_ultimate(paper)
+        return {
+            "ultimate_gain_per_rad": self.ultimate_gain,
+            "ultimate_period_s": self.ultimate_period_s,
+            "zn_gains": asdict(self.gains),
+            "paper_gains": asdict(paper),
+            "paper_implied_ultimate_gain_per_rad": ku_p,
+            "paper_implied_ultimate_period_s": tu_p,
+            "settings": asdict(self.settings),
+            "trials": [
+                {"kp": tr.kp, "sustained": tr.sustained, **asdict(tr.oscillation)}
+                for tr in self.trials
+            ],
+        }
+
+
+def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
+    """The level's env; with ``nominal_subject`` its reflex stage keeps Table I values."""
+    from myoexo.evaluation.runner import make_eval_env
+
+    env = make_eval_env(settings.level, settings.episode_duration_s)
+    if settings.nominal_subject:
+        env.unwrapped.spasticity.subject_noise = False
+    return env
+
+
+def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainTrial:
+    """One episode under P-only control (no anti-windup needed: no integrator)."""
+    config = PIDConfig(
+        gains=PIDGains(kp=kp, ki=0.0, kd=0.0), anti_windup="none", feedback=settings.feedback
+    )
+    pid = PID.from_env(env, config)
+    obs, info = env.reset(seed=settings.seed)
+    pid.reset(settings.seed)
+    t, err = [info["time_s"]], [info["error_deg"]]
+    while True:
+        obs, _, terminated, truncated, info = env.step(pid.act(obs, info))
+        t.append(info["time_s"])
+        err.append(info["error_deg"])
+        if terminated or truncated:
+            break
+    osc = analyze_oscillation(np.array(t), np.array(err), settings.analysis_start_s)
+    sustained = (
+        osc.half_cycles >= settings.min_half_cycles
+        and osc.last_amplitude >= settings.min_amplitude_deg
+        and osc.amplitude_ratio >= settings.sustain_ratio
+        and not info.get("unstable", False)
+    )
+    return GainTrial(kp=float(kp), sustained=bool(sustained), oscillation=osc)
+
+
+def tune(
+    settings: ZieglerNicholsSettings | None = None,
+    env: Any = None,
+    log: Callable[[str], None] | None = None,
+) -> ZieglerNicholsResult:
+    """Run the Ziegler-Nichols ultimate-gain procedure on the twin.
+
+    Args:
+        settings: Search settings (defaults: level 1, nominal subject).
+        env: Env to use (default: :func:`make_tuning_env`); closed only if created here.
+        log: Called with one line per trial.
+
+    Raises:
+        RuntimeError: No sustained oscillation up to ``kp_max``.
+    """
+    s = settings or ZieglerNicholsSettings()
+    own_env = env is None
+    env = make_tuning_env(s) if own_env else env
+    trials: list[GainTrial] = []
+
+    def trial(kp: float) -> GainTrial:
+        tr = p_only_trial(env, kp, s)
+        trials.append(tr)
+        if log:
+            o = tr.oscillation
+            log(
+                f"Kp = {kp:9.3f}: {'sustained' if tr.sustained else 'decaying '}  "
+                f"half cycles {o.half_cycles:3d}, last amplitude {o.last_amplitude:7.3f} deg, "
+                f"ratio {o.amplitude_ratio:5.2f}, period {o.period_s:6.3f} s"
+            )
+        return tr
+
+    try:
+        lo, hi = 0.0, s.kp_start
+        hi_trial = trial(hi)
+        while not hi_trial.sustained:
+            lo, hi = hi, 2.0 * hi
+            if hi > s.kp_max:
+                raise RuntimeError(
+                    f"no sustained oscillation up to Kp = {s.kp_max} (level {s.level}); "
+                    "the loop may be too damped for the closed-loop Ziegler-Nichols test"
+                )
+            hi_trial = trial(hi)
+        while lo > 0.0 and hi / lo - 1.0 > s.rel_tol:
+            mid = math.sqrt(lo * hi)
+            mid_trial = trial(mid)
+            if mid_trial.sustained:
+                hi, hi_trial = mid, mid_trial
+            else:
+                lo = mid
+    finally:
+        if own_env:
+            env.close()
+    ku, tu = hi_trial.kp, hi_trial.oscillation.period_s
+    return ZieglerNicholsResult(
+        ultimate_gain=ku,
+        ultimate_period_s=tu,
+        gains=classic_zn_gains(ku, tu),
+        settings=s,
+        trials=tuple(trials),
+    )
+
+
+def format_result(result: ZieglerNicholsResult) -> str:
+    """Human-readable comparison of the tuned and the paper's gains."""
+    g, p = result.gains, PIDGains()
+    ku_p, tu_p = implied_ultimate(p)
+    return "\n".join(
+        [
+            f"Ziegler-Nichols on the twin (level {result.settings.level}, "
+            f"{'nominal' if result.settings.nominal_subject else 'seeded'} subject, "
+            f"{result.settings.feedback} feedback, {len(result.trials)} P-only episodes):",
+            f"  ultimate gain Ku = {result.ultimate_gain:.3f} /rad, "
+            f"ultimate period Tu = {result.ultimate_period_s:.3f} s",
+            "                      Kp (1/rad)  Ki (1/(rad s))  Kd (s/rad)",
+            f"  classic ZN table    {g.kp:10.3f}  {g.ki:14.3f}  {g.kd:10.4f}",
+            f"  paper               {p.kp:10.3f}  {p.ki:14.3f}  {p.kd:10.4f}",
+            f"  (the paper's Kp, Ki imply Ku = {ku_p:.2f} /rad, Tu = {tu_p:.3f} s, "
+            f"for which the table gives Kd = {classic_zn_gains(ku_p, tu_p).kd:.3f})",
+        ]
+    )
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo tune-pid``."""
+    d = ZieglerNicholsSettings()
+    parser.add_argument("--level", type=int, default=d.level, help="spasticity level (0-3)")
+    parser.add_argument(
+        "--individual-subject",
+        action="store_true",
+        help="tune on an individual subject drawn from --seed instead of the nominal one",
+    )
+    parser.add_argument("--seed", type=int, default=d.seed, help="episode seed")
+    parser.add_argument("--feedback", choices=("knee", "exo"), default=d.feedback)
+    parser.add_argument("--rel-tol", type=float, default=d.rel_tol, help="bisection tolerance")
+    parser.add_argument("--out", type=Path, default=None, help="write the result as JSON here")
+    parser.add_argument("--quiet", action="store_true", help="no line per trial")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``myoexo tune-pid``: print Ku, Tu, the table's gains and the paper's."""
+    import sys
+
+    try:
+        settings = ZieglerNicholsSettings(
+            level=args.level,
+            nominal_subject=not args.individual_subject,
+            seed=args.seed,
+            feedback=args.feedback,
+            rel_tol=args.rel_tol,
+        )
+        result = tune(settings, log=None if args.quiet else print)
+    except (ValueError, RuntimeError) as exc:
+        print(f"myoexo tune-pid: error: {exc}", file=sys.stderr)
+        return 2
+    print(format_result(result))
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result.to_dict(), indent=2))
+        print(f"written: {args.out}")
+    return 0

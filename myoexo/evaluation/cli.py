@@ -1,0 +1,110 @@
+"""``myoexo evaluate``: run the paper's evaluation protocol from the command line.
+
+    myoexo evaluate --controllers pid sac runs/sac/best_model.zip --levels 0 1 2 3 \\
+        --subjects 1000 --workers 8 --out results/eval
+    myoexo report results/eval
+
+Interrupting and re-running the same command continues where it stopped: finished chunks of
+episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.runner`). Bad
+arguments (an unknown level, ``--subjects 0``, an unreadable policy file) stop the command
+with a one-line error before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from myoexo.evaluation.runner import VALID_LEVELS, EvaluationConfig, available_cores
+
+#: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
+DEFAULT_OUT = Path("results") / "evaluation"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo evaluate``."""
+    d = EvaluationConfig()
+    parser.add_argument(
+        "--controllers",
+        nargs="+",
+        default=["pid", "sac"],
+        metavar="SPEC",
+        help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..]', 'sac' (the "
+        "shipped policy; skipped with a message if absent) or paths of SB3 .zip models "
+        "(default: pid sac)",
+    )
+    parser.add_argument(
+        "--levels",
+        nargs="+",
+        type=int,
+        default=list(d.levels),
+        metavar="L",
+        help=f"spasticity levels, from {VALID_LEVELS} (default: all)",
+    )
+    parser.add_argument(
+        "--subjects", type=int, default=d.subjects, help="subjects per level (default: 1000)"
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help=f"worker processes (default: all cores, here {available_cores()})",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=d.root_seed, help="root seed of the subjects (default: 0)"
+    )
+    parser.add_argument(
+        "--episode-duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated seconds per episode (default: the env's, 8 s)",
+    )
+    parser.add_argument(
+        "--trace-stride",
+        type=int,
+        default=d.trace_stride,
+        help="store every n-th control step of the traces (default: 2, i.e. 50 Hz)",
+    )
+    parser.add_argument(
+        "--chunk-size", type=int, default=d.chunk_size, help="subjects per resumable chunk"
+    )
+    parser.add_argument("--report", action="store_true", help="write the report when done")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments."""
+    from myoexo.evaluation.runner import evaluate
+
+    try:
+        config = EvaluationConfig(
+            controllers=tuple(args.controllers),
+            levels=tuple(args.levels),
+            subjects=args.subjects,
+            root_seed=args.seed,
+            episode_duration_s=args.episode_duration,
+            trace_stride=args.trace_stride,
+            chunk_size=args.chunk_size,
+        )
+        result = evaluate(config, args.out, workers=args.workers, progress=not args.no_progress)
+    except ValueError as exc:
+        print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
+        return 2
+    n = len(result.table)
+    print(
+        f"{n} episodes ({result.computed} computed now) of {', '.join(result.controllers)} "
+        f"in {result.out_dir}/episodes.parquet (and .csv)"
+    )
+    if args.report:
+        from myoexo.evaluation.report import write_report
+
+        path = write_report(result.out_dir)
+        print(f"report: {path}")
+    else:
+        print(f"next: myoexo report {result.out_dir}")
+    return 0
