@@ -574,7 +574,11 @@ class SpasticityStage:
             float(data.qpos[self._qpos_adr]) * _RAD_TO_DEG, float(data.qvel[self._dof_adr])
         )
         ids = self._act_ids
-        ctrl[ids] = np.clip(ctrl[ids] + sc, 0.0, 1.0)
+        u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
+        u += sc
+        np.minimum(u, 1.0, out=u)
+        np.maximum(u, 0.0, out=u)
+        ctrl[ids] = u
         self.last_sc_total = sc
         return ctrl
 
