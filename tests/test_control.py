@@ -1,0 +1,215 @@
+"""Controllers: PID sign, terms, anti-windup, derivative modes; ZN table and oscillation
+analysis; policy adapters and specs; PID and Ziegler-Nichols on the twin."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from myoexo.control import (
+    PID,
+    CallableController,
+    Controller,
+    PIDConfig,
+    PIDGains,
+    SB3Controller,
+    as_controller,
+    parse_controller_spec,
+)
+from myoexo.control import ziegler_nichols as zn
+from myoexo.control.specs import pid_config
+
+DT = 0.01
+
+
+def info(knee_deg: float, target_deg: float = 7.0, exo_deg: float | None = None) -> dict:
+    return {
+        "knee_angle_deg": knee_deg,
+        "exo_angle_deg": knee_deg if exo_deg is None else exo_deg,
+        "target_angle_deg": target_deg,
+    }
+
+
+def test_sign_flexed_knee_gets_an_extending_command():
+    pid = PID(dt_s=DT)
+    u = pid.act(np.zeros(3), info(90.0))  # env error_deg = +83 (still flexed)
+    assert u.shape == (1,) and u.dtype == np.float32
+    assert u[0] == -1.0  # saturated extension torque
+    pid.reset()
+    assert pid.act(np.zeros(3), info(-10.0))[0] == 1.0  # 17 deg past the target: flex back
+    pid.reset()
+    small = pid.act(np.zeros(3), info(7.5))[0]  # 0.5 deg short: small extending command
+    assert -1.0 < small < 0.0
+
+
+def test_proportional_integral_and_derivative_terms_are_exact():
+    e = math.radians(0.2)  # small: no saturation
+    p_only = PID(PIDConfig(gains=PIDGains(kp=7.0, ki=0.0, kd=0.0)), dt_s=DT)
+    assert p_only.update(e, 0.0) == pytest.approx(7.0 * e)
+    i_only = PID(PIDConfig(gains=PIDGains(kp=0.0, ki=40.0, kd=0.0)), dt_s=DT)
+    for _ in range(10):
+        u = i_only.update(e, 0.0)
+    assert u == pytest.approx(40.0 * e * 10 * DT)  # backward Euler over 10 samples
+    d_only = PID(PIDConfig(gains=PIDGains(kp=0.0, ki=0.0, kd=0.05)), dt_s=DT)
+    assert d_only.update(0.0, 0.0) == 0.0  # no derivative on the first sample
+    assert d_only.update(0.0, 0.001) == pytest.approx(-0.05 * 0.001 / DT)  # -Kd dy/dt
+
+
+def test_derivative_on_measurement_has_no_setpoint_kick():
+    gains = PIDGains(kp=0.0, ki=0.0, kd=0.05)
+    on_meas = PID(PIDConfig(gains=gains), dt_s=DT)
+    on_err = PID(PIDConfig.textbook(gains), dt_s=DT)
+    for pid in (on_meas, on_err):
+        pid.update(0.0, 0.0)
+    # constant setpoint: both forms agree
+    assert on_meas.update(0.0, 0.001) == pytest.approx(on_err.update(0.0, 0.001))
+    # setpoint step of 0.01 rad: only the textbook form kicks
+    assert on_meas.update(0.01, 0.001) == pytest.approx(0.0)
+    assert on_err.update(0.01, 0.001) == pytest.approx(0.05 * 0.01 / DT)
+
+
+def _windup_then_reverse(config: PIDConfig) -> tuple[float, int]:
+    """Saturate for 2 s against a large error, then reverse the error: integral at the
+    reversal and samples until the output leaves the extension saturation."""
+    pid = PID(config, dt_s=DT)
+    for _ in range(200):
+        pid.update(0.0, 1.0)  # e = -1 rad: extension saturation
+    integral = pid.last_terms["i"]
+    for k in range(1, 500):
+        if pid.update(0.0, -0.01) > -1.0:  # small opposite error
+            return integral, k
+    return integral, 500
+
+
+def test_anti_windup_clamping_and_back_calculation_vs_none():
+    gains = PIDGains(kp=7.0, ki=40.0, kd=0.0)
+    i_none, k_none = _windup_then_reverse(PIDConfig(gains=gains, anti_windup="none"))
+    i_clamp, k_clamp = _windup_then_reverse(PIDConfig(gains=gains, anti_windup="clamping"))
+    i_back, k_back = _windup_then_reverse(PIDConfig(gains=gains, anti_windup="back_calculation"))
+    assert i_none == pytest.approx(-40.0 * 1.0 * 200 * DT)  # wound up to -80
+    assert i_clamp == 0.0  # frozen from the first saturated sample
+    assert -2.0 < i_back < 0.0  # held near the saturation limit
+    assert k_clamp <= 2 and k_back <= 5
+    assert k_none > 100  # windup: stays saturated long after the error reversed
+
+
+def test_feedback_option_reads_the_exo_encoder():
+    knee = PID(dt_s=DT, config=PIDConfig(gains=PIDGains(kp=1.0, ki=0.0, kd=0.0)))
+    exo = PID(dt_s=DT, config=PIDConfig(gains=PIDGains(kp=1.0, ki=0.0, kd=0.0), feedback="exo"))
+    i = info(10.0, exo_deg=12.0)
+    assert knee.act(None, i)[0] == pytest.approx(math.radians(7 - 10), rel=1e-6)
+    assert exo.act(None, i)[0] == pytest.approx(math.radians(7 - 12), rel=1e-6)
+    with pytest.raises(ValueError, match="knee_angle_deg"):
+        knee.act(None, {"target_angle_deg": 7.0})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"anti_windup": "magic"}, "anti_windup"),
+        ({"feedback": "hip"}, "feedback"),
+        ({"output_limit": 0.0}, "output_limit"),
+        ({"tracking_time_s": -1.0}, "tracking_time_s"),
+    ],
+)
+def test_bad_pid_config_is_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        PIDConfig(**kwargs)
+
+
+def test_bad_gains_and_sample_time_are_refused():
+    with pytest.raises(ValueError, match="kp"):
+        PIDGains(kp=-1.0)
+    with pytest.raises(ValueError, match="dt_s"):
+        PID(dt_s=0.0)
+
+
+def test_defaults_are_the_papers_gains_and_tracking_time_rule():
+    cfg = PIDConfig()
+    assert (cfg.gains.kp, cfg.gains.ki, cfg.gains.kd) == (7.0, 40.0, 0.05)
+    assert cfg.derivative_on_measurement and cfg.anti_windup == "clamping"
+    ti, td = 7.0 / 40.0, 0.05 / 7.0
+    assert cfg.effective_tracking_time_s == pytest.approx(math.sqrt(ti * td))
+
+
+# ----------------------------------------------------------------------------- ZN
+def test_classic_table_and_papers_implied_ultimate_point():
+    g = zn.classic_zn_gains(ku=10.0, tu_s=0.5)
+    assert (g.kp, g.ki, g.kd) == pytest.approx((6.0, 24.0, 0.375))
+    ku, tu = zn.implied_ultimate(PIDGains())
+    assert ku == pytest.approx(7.0 / 0.6) and tu == pytest.approx(0.35)
+    # round trip on Kp and Ki
+    back = zn.classic_zn_gains(ku, tu)
+    assert back.kp == pytest.approx(7.0) and back.ki == pytest.approx(40.0)
+    with pytest.raises(ValueError):
+        zn.classic_zn_gains(0.0, 1.0)
+
+
+def test_oscillation_analysis_on_sustained_and_decaying_sines():
+    t = np.arange(0, 8, 0.01)
+    sustained = zn.analyze_oscillation(t, 3.0 + 2.0 * np.sin(2 * np.pi * t / 0.4), start_s=2.0)
+    assert sustained.period_s == pytest.approx(0.4, rel=1e-3)
+    assert sustained.amplitude_ratio == pytest.approx(1.0, abs=0.02)
+    assert sustained.last_amplitude == pytest.approx(2.0, rel=0.02)
+    decaying = zn.analyze_oscillation(t, np.exp(-t) * np.sin(2 * np.pi * t / 0.4), start_s=2.0)
+    assert decaying.amplitude_ratio < 0.1
+    flat = zn.analyze_oscillation(t, np.ones_like(t))
+    assert flat.half_cycles == 0
+
+
+# ----------------------------------------------------------------------------- adapters
+class _FakeSB3:
+    def __init__(self):
+        self.calls = []
+
+    def predict(self, obs, deterministic=True):
+        self.calls.append(deterministic)
+        return np.array([2.0 * float(obs[0])]), None
+
+
+def test_policy_adapters_clip_validate_and_dispatch():
+    ctrl = as_controller(lambda obs: -3.0)
+    assert isinstance(ctrl, CallableController) and isinstance(ctrl, Controller)
+    assert ctrl.act(np.zeros(2), {})[0] == -1.0  # clipped to the action bound
+    sb3 = _FakeSB3()
+    c = as_controller(sb3)
+    assert isinstance(c, SB3Controller)
+    assert c.act(np.array([0.2], np.float32), {})[0] == pytest.approx(0.4)
+    assert sb3.calls == [True]  # deterministic by default
+    pid = PID(dt_s=DT)
+    assert as_controller(pid) is pid
+    with pytest.raises(ValueError, match="non-finite"):
+        as_controller(lambda obs: np.nan).act(np.zeros(1), {})
+    with pytest.raises(ValueError, match="shape"):
+        as_controller(lambda obs: [0.1, 0.2]).act(np.zeros(1), {})
+    with pytest.raises(ValueError, match="cannot use"):
+        as_controller(42)
+
+
+def test_controller_specs(tmp_path):
+    spec = parse_controller_spec("pid:kp=5,feedback=exo,anti_windup=back_calculation")
+    cfg = pid_config(spec.options)
+    assert cfg.gains.kp == 5.0 and cfg.gains.ki == 40.0 and cfg.feedback == "exo"
+    assert (
+        cfg.anti_windup == "back_calculation"
+        and spec.slug == "pid_kp_5_feedback_exo_anti_windup_back_calculation"
+    )
+    tb = pid_config(parse_controller_spec("pid:textbook").options)
+    assert not tb.derivative_on_measurement and tb.anti_windup == "none"
+    assert parse_controller_spec("sac").kind == "shipped"
+    model = tmp_path / "my_policy.zip"
+    model.write_bytes(b"")
+    spec = parse_controller_spec(str(model))
+    assert spec.kind == "sb3" and spec.label == "my_policy" and spec.algorithm == "SAC"
+    assert parse_controller_spec(f"td3:{model}").algorithm == "TD3"
+    for bad, match in [
+        ("pid:gain=3", "unknown PID option"),
+        ("pid:kp=abc", "not a number"),
+        ("pid:feedback=hip", "feedback"),
+        ("lqr", "unknown controller"),
+        (str(tmp_path / "missing.zip"), "does not exist"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            parse_controller_spec(bad)
