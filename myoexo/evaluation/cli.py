@@ -73,6 +73,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--chunk-size", type=int, default=d.chunk_size, help="subjects per resumable chunk"
     )
+    parser.add_argument(
+        "--env-id",
+        default=d.env_id,
+        help="gymnasium id of a level's env, with '{level}' (default: %(default)s)",
+    )
     parser.add_argument("--report", action="store_true", help="write the report when done")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -90,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
             episode_duration_s=args.episode_duration,
             trace_stride=args.trace_stride,
             chunk_size=args.chunk_size,
+            env_id=args.env_id,
         )
         result = evaluate(config, args.out, workers=args.workers, progress=not args.no_progress)
     except ValueError as exc:

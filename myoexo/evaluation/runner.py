@@ -88,6 +88,9 @@ class EvaluationConfig:
         episode_duration_s: Simulated time per episode; ``None`` = the env's default (8 s).
         trace_stride: Keep every n-th control step in the stored traces.
         chunk_size: Subjects per unit of work (and per resume file).
+        env_id: Gymnasium id of the env of a level, formatted with ``level``; any env
+            registered with the MyoExoKnee API (e.g. a variant with other ``TaskParams`` or
+            wrappers, ``"module:EnvId-v{level}"`` imports its module first).
     """
 
     controllers: tuple[str, ...] = ("pid",)
@@ -97,6 +100,7 @@ class EvaluationConfig:
     episode_duration_s: float | None = None
     trace_stride: int = 2
     chunk_size: int = 20
+    env_id: str = "MyoExoKnee-v{level}"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "controllers", tuple(self.controllers))
@@ -116,6 +120,8 @@ class EvaluationConfig:
                 raise ValueError(f"{name} = {value!r} must be a positive integer")
         if not isinstance(self.root_seed, (int, np.integer)) or self.root_seed < 0:
             raise ValueError(f"root_seed = {self.root_seed!r} must be an integer >= 0")
+        if "{level}" not in self.env_id:
+            raise ValueError(f"env_id = {self.env_id!r} must contain '{{level}}'")
         d = self.episode_duration_s
         if d is not None and not (math.isfinite(d) and 0.0 < d <= 3600.0):
             raise ValueError(f"episode_duration_s = {d!r} must be in (0, 3600] s or None")
@@ -126,6 +132,7 @@ class EvaluationConfig:
             "root_seed": int(self.root_seed),
             "episode_duration_s": self.episode_duration_s,
             "trace_stride": int(self.trace_stride),
+            "env_id": self.env_id,
         }
 
 
@@ -143,7 +150,11 @@ def subject_seed(level: int, index: int, root_seed: int = 0) -> int:
     return int(ss.generate_state(1, dtype=np.uint64)[0])
 
 
-def make_eval_env(level: int, episode_duration_s: float | None = None) -> Any:
+def make_eval_env(
+    level: int,
+    episode_duration_s: float | None = None,
+    env_id: str = EvaluationConfig.env_id,
+) -> Any:
     """``gymnasium.make("MyoExoKnee-v<level>")``, optionally with another episode length."""
     import gymnasium as gym
 
@@ -151,7 +162,7 @@ def make_eval_env(level: int, episode_duration_s: float | None = None) -> Any:
 
     if level not in VALID_LEVELS:
         raise ValueError(f"unknown spasticity level {level!r}; accepted: {VALID_LEVELS}")
-    env_id = f"MyoExoKnee-v{level}"
+    env_id = env_id.format(level=level)
     if episode_duration_s is None:
         return gym.make(env_id)
     from myoexo.envs.config import TaskParams
@@ -319,7 +330,7 @@ def n_trace_samples(config: EvaluationConfig) -> int:
 
 
 #: Per-process caches of the workers: one env per (level, duration), one controller per spec.
-_ENVS: dict[tuple[int, float | None], Any] = {}
+_ENVS: dict[tuple[int, float | None, str], Any] = {}
 _CONTROLLERS: dict[str, Controller] = {}
 
 
@@ -340,10 +351,10 @@ def _close_worker_state() -> None:
 def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chunk, int]:
     """Run one chunk and store it atomically (its rows as JSON + its traces); returns
     ``(chunk, episodes run)``."""
-    key = (chunk.level, config.episode_duration_s)
+    key = (chunk.level, config.episode_duration_s, config.env_id)
     env = _ENVS.get(key)
     if env is None:
-        env = _ENVS[key] = make_eval_env(chunk.level, config.episode_duration_s)
+        env = _ENVS[key] = make_eval_env(chunk.level, config.episode_duration_s, config.env_id)
     controller = _CONTROLLERS.get(chunk.spec.text)
     if controller is None:
         controller = _CONTROLLERS[chunk.spec.text] = build_controller(chunk.spec, env)

@@ -1,0 +1,120 @@
+"""Speed of the evaluation protocol (issue 5's target: the full protocol in <= 20 min here).
+
+Measures, in this one run:
+
+1. PID episodes/s in one process, per level (``evaluate_controller``: env + PID + metrics);
+2. the cost of a SAC decision (``predict`` of the shipped policy if available, else of an
+   untrained SB3 SAC with the paper's 64-64 actor), per step;
+3. episodes/s of ``evaluate`` (PID) on all cores, worker start-up and file writing included;
+
+and extrapolates the full protocol: 1000 subjects x 4 levels x 2 controllers (PID + SAC,
+a SAC episode costing a PID episode plus 800 policy decisions).
+
+    .venv/bin/python benchmarks/bench_evaluation.py [--subjects 6] [--workers N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+
+import numpy as np
+
+from myoexo.control import PID
+from myoexo.control.specs import PolicyUnavailableError, load_shipped_policy
+from myoexo.evaluation.runner import (
+    VALID_LEVELS,
+    EvaluationConfig,
+    available_cores,
+    evaluate,
+    evaluate_controller,
+    make_eval_env,
+)
+
+FULL_SUBJECTS, FULL_CONTROLLERS = 1000, 2
+
+
+def serial_pid(subjects: int) -> dict[int, float]:
+    """Seconds per PID episode, per level, in this process."""
+    out = {}
+    for level in VALID_LEVELS:
+        env = make_eval_env(level)
+        pid = PID.from_env(env)
+        env.close()
+        evaluate_controller(pid, level, 1)  # warm-up (model build, imports)
+        t0 = time.perf_counter()
+        evaluate_controller(pid, level, range(1, subjects + 1))
+        out[level] = (time.perf_counter() - t0) / subjects
+    return out
+
+
+def policy_step_s(steps: int = 2000) -> tuple[float, str]:
+    """Seconds per policy decision and which policy was timed."""
+    from myoexo.control.policy import as_controller
+
+    env = make_eval_env(1)
+    obs, info = env.reset(seed=0)
+    try:
+        policy, name = load_shipped_policy(), "shipped SAC policy"
+    except PolicyUnavailableError:
+        from stable_baselines3 import SAC
+
+        policy = SAC("MlpPolicy", env, buffer_size=1, policy_kwargs={"net_arch": [64, 64]})
+        name = "untrained SB3 SAC, 64-64 actor (no shipped policy yet)"
+    ctrl = as_controller(policy)
+    env.close()
+    ctrl.act(obs, info)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        ctrl.act(obs, info)
+    return (time.perf_counter() - t0) / steps, name
+
+
+def parallel_pid(subjects: int, workers: int) -> float:
+    """Episodes/s of ``evaluate`` (PID, all levels) on ``workers`` processes."""
+    cfg = EvaluationConfig(
+        controllers=("pid",), subjects=subjects, chunk_size=max(1, subjects // 2)
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        run = evaluate(cfg, tmp, workers=workers, progress=False, log=lambda s: None)
+        return len(run.table) / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--subjects", type=int, default=6, help="subjects per level timed")
+    parser.add_argument("--workers", type=int, default=available_cores())
+    args = parser.parse_args()
+
+    per_level = serial_pid(args.subjects)
+    t_pid = float(np.mean(list(per_level.values())))
+    t_step, policy_name = policy_step_s()
+    steps = make_eval_env(0).unwrapped.episode_steps
+    t_sac = t_pid + steps * t_step
+    par = parallel_pid(args.subjects, args.workers)
+    speedup = par * t_pid
+
+    print(f"PID episode, one process ({args.subjects} subjects per level):")
+    for level, t in per_level.items():
+        print(f"  level {level}: {t:.3f} s/episode  ({1 / t:.2f} episodes/s)")
+    print(f"policy decision ({policy_name}): {t_step * 1e6:.0f} us/step")
+    print(f"SAC episode (PID episode + {steps} decisions): {t_sac:.3f} s")
+    print(
+        f"evaluate(), PID, {args.workers} workers: {par:.2f} episodes/s "
+        f"(x{speedup:.2f} the single process, start-up included)"
+    )
+    n = FULL_SUBJECTS * len(VALID_LEVELS)
+    serial_total = n * (t_pid + t_sac)
+    parallel_total = serial_total / max(speedup, 1e-9)
+    print(
+        f"full protocol ({FULL_SUBJECTS} subjects x {len(VALID_LEVELS)} levels x "
+        f"{FULL_CONTROLLERS} controllers = {n * FULL_CONTROLLERS} episodes): "
+        f"{serial_total / 60:.1f} min in one process, ~{parallel_total / 60:.1f} min on "
+        f"{args.workers} workers (target <= 20 min)"
+    )
+
+
+if __name__ == "__main__":
+    main()
