@@ -541,6 +541,8 @@ def evaluate(
         raise ValueError(f"output path {str(out)!r} exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     _write_config(out, config, specs)
+    for stale in (out / TRACES_DIR).glob("*/L*/.tmp-*"):  # writes cut short by a kill
+        stale.unlink(missing_ok=True)
 
     chunks = plan_chunks(specs, config)
     todo = [c for c in chunks if not _chunk_done(c.path(out))]
