@@ -1,0 +1,34 @@
+"""SAC training of the exoskeleton controller (SPEC section 3): presets, resumable runs,
+logging, and the export of a trained actor.
+
+    from myoexo.training import get_preset, train, resume
+
+    train(get_preset("cpu"), "runs/cpu_seed0", seed=0)   # or: myoexo train --preset cpu
+    resume("runs/cpu_seed0")                               # or: myoexo train --resume DIR
+
+Modules: :mod:`~myoexo.training.presets` (``paper`` = Table II, ``cpu``),
+:mod:`~myoexo.training.train` (runs), :mod:`~myoexo.training.callbacks` (reward terms,
+small evaluation vs the PID, checkpoints), :mod:`~myoexo.training.checkpoints` (run
+layout), :mod:`~myoexo.training.export` (numpy actor, ONNX), :mod:`~myoexo.training.cli`.
+Heavy dependencies (torch, SB3) are imported when a run starts, not on import.
+"""
+
+from myoexo.training.presets import (
+    PRESETS,
+    CpuPreset,
+    PaperPreset,
+    SACPreset,
+    get_preset,
+)
+from myoexo.training.train import TrainResult, resume, train
+
+__all__ = [
+    "PRESETS",
+    "CpuPreset",
+    "PaperPreset",
+    "SACPreset",
+    "TrainResult",
+    "get_preset",
+    "resume",
+    "train",
+]

@@ -1,0 +1,355 @@
+"""stable-baselines3 callbacks of a myoexo training run.
+
+* :class:`RewardTermsCallback`: per-episode means of the reward terms (``info["rwd_dict"]``)
+  and the paper's episode quantities per level, to the SB3 logger (tensorboard, CSV).
+* :class:`PaperMetricsEvalCallback`: every ``eval_every_steps``, the deterministic policy on
+  a few fixed subjects per level, next to the PID on the same subjects: final error, peak
+  and RMS interaction torque (SPEC section 5), and a scalar score used to rank checkpoints.
+* :class:`PeriodicCheckpointCallback`: model + replay buffer + normalization statistics +
+  step counter every ``every_s`` seconds (and/or steps), and at the end of training.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from myoexo.training import checkpoints as ck
+
+#: Reward-dict entries that are not reward terms.
+_NOT_TERMS = frozenset({"done", "solved"})
+
+
+class RewardTermsCallback(BaseCallback):
+    """Log each reward term's mean per step over every finished episode.
+
+    Tensorboard keys: ``reward_terms/<term>`` (raw term; ``dense`` is the weighted sum the
+    agent maximizes), ``episode/L<level>/final_error_deg``,
+    ``episode/L<level>/peak_interaction_torque_nm`` and ``episode/L<level>/return``. Envs
+    without ``rwd_dict`` (a stand-in env) log nothing.
+    """
+
+    def __init__(self, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self._sums: list[dict[str, float]] = []
+        self._count: list[int] = []
+        self._peak: list[float] = []
+        self._return: list[float] = []
+
+    def _on_training_start(self) -> None:
+        n = self.training_env.num_envs
+        self._sums = [defaultdict(float) for _ in range(n)]
+        self._count = [0] * n
+        self._peak = [0.0] * n
+        self._return = [0.0] * n
+
+    def _on_step(self) -> bool:
+        infos = self.locals.get("infos", ())
+        dones = self.locals.get("dones", ())
+        rewards = self.locals.get("rewards", ())
+        for i, info in enumerate(infos):
+            rwd = info.get("rwd_dict")
+            if rwd is None:
+                continue
+            sums = self._sums[i]
+            for key, value in rwd.items():
+                if key not in _NOT_TERMS:
+                    sums[key] += float(np.asarray(value).reshape(-1)[0])
+            self._count[i] += 1
+            self._return[i] += float(rewards[i])
+            self._peak[i] = max(self._peak[i], float(info.get("interaction_torque_nm", 0.0)))
+            if dones[i]:
+                self._log_episode(i, info)
+        return True
+
+    def _log_episode(self, i: int, info: dict[str, Any]) -> None:
+        n = max(self._count[i], 1)
+        for key, total in self._sums[i].items():
+            self.logger.record_mean(f"reward_terms/{key}", total / n)
+        level = info.get("level")
+        if level is not None:
+            tag = f"episode/L{int(level)}"
+            self.logger.record_mean(
+                f"{tag}/final_error_deg", float(info.get("error_deg", math.nan))
+            )
+            self.logger.record_mean(f"{tag}/peak_interaction_torque_nm", self._peak[i])
+            self.logger.record_mean(f"{tag}/return", self._return[i])
+            if info.get("unstable"):
+                self.logger.record_mean("episode/unstable", 1.0)
+        self._sums[i] = defaultdict(float)
+        self._count[i] = 0
+        self._peak[i] = 0.0
+        self._return[i] = 0.0
+
+
+@dataclass(frozen=True)
+class SmallEvalSpec:
+    """The periodic small evaluation.
+
+    Attributes:
+        levels: Spasticity levels.
+        subjects: Fixed subjects per level (indices ``0..subjects-1`` of
+            :func:`myoexo.evaluation.subject_seed`, the full protocol's first subjects).
+        root_seed: Root seed of the subjects (a held-out root by default: the training
+            envs draw their subjects from the training seed, not from these).
+        episode_duration_s: Episode length (``None``: the env's 8 s).
+        final_error_tol_deg: Final-error bound per level for the score (the issue's
+            criteria: 1 deg at levels 0-2, the paper's 11.45 deg at level 3).
+    """
+
+    levels: tuple[int, ...] = (0, 1, 2, 3)
+    subjects: int = 2
+    root_seed: int = 0
+    episode_duration_s: float | None = None
+    final_error_tol_deg: tuple[float, ...] = (1.0, 1.0, 1.0, 11.45)
+
+
+def eval_score(
+    sac: dict[int, dict[str, float]], pid: dict[int, dict[str, float]], spec: SmallEvalSpec
+) -> float:
+    """Rank of a policy on the small evaluation (higher is better).
+
+    Mean over levels of the relative peak-interaction-torque reduction vs the PID, minus,
+    per level, how far the mean absolute final error exceeds its bound (in units of the
+    bound). A policy meeting every final-error bound scores its mean torque reduction.
+    """
+    score = 0.0
+    for level in spec.levels:
+        p = pid[level]["peak_interaction_torque_nm"]
+        s = sac[level]["peak_interaction_torque_nm"]
+        tol = spec.final_error_tol_deg[level]
+        excess = max(0.0, sac[level]["abs_final_error_deg"] - tol) / tol
+        score += (p - s) / max(p, 1e-9) - excess
+    return score / len(spec.levels)
+
+
+_EVAL_METRICS = (
+    "abs_final_error_deg",
+    "final_error_deg",
+    "peak_interaction_torque_nm",
+    "rms_interaction_torque_nm",
+    "settling_time_s",
+)
+
+
+def _level_means(controller: Any, level: int, spec: SmallEvalSpec, env: Any) -> dict[str, float]:
+    from myoexo.evaluation import run_episode, subject_seed
+
+    rows = []
+    for i in range(spec.subjects):
+        res = run_episode(env, controller, subject_seed(level, i, spec.root_seed))
+        m = res.metrics.as_dict()
+        rows.append([m[k] for k in _EVAL_METRICS] + [float(res.unstable)])
+    means = np.nanmean(np.array(rows, dtype=np.float64), axis=0)
+    return dict(zip([*_EVAL_METRICS, "unstable"], map(float, means), strict=True))
+
+
+class PaperMetricsEvalCallback(BaseCallback):
+    """Small periodic evaluation of the deterministic policy against the PID.
+
+    Logs ``eval/L<level>/<metric>`` and ``eval/L<level>/peak_vs_pid_pct`` (negative = less
+    peak torque than the PID) and ``eval/score`` (:func:`eval_score`) to the SB3 logger,
+    appends the rows to ``<run>/eval.csv`` and keeps :attr:`last_score` for the
+    checkpoints. The PID's numbers are computed once per run (``eval_pid.json``).
+
+    Args:
+        run_dir: Run folder.
+        every_steps: Transitions between evaluations.
+        spec: Levels, subjects and bounds.
+    """
+
+    def __init__(self, run_dir: Path, every_steps: int, spec: SmallEvalSpec, verbose: int = 0):
+        super().__init__(verbose)
+        if every_steps <= 0:
+            raise ValueError(f"every_steps = {every_steps} must be > 0")
+        self.run_dir = Path(run_dir)
+        self.every_steps = int(every_steps)
+        self.spec = spec
+        self.last_score: float | None = None
+        self.last_eval_step: int | None = None
+        self.last_metrics: dict[int, dict[str, float]] = {}
+        self._envs: dict[int, Any] = {}
+        self._pid: dict[int, dict[str, float]] = {}
+        self._next = 0
+
+    def _env(self, level: int) -> Any:
+        if level not in self._envs:
+            from myoexo.evaluation.runner import make_eval_env
+
+            self._envs[level] = make_eval_env(level, self.spec.episode_duration_s)
+        return self._envs[level]
+
+    def _on_training_start(self) -> None:
+        self._next = (self.num_timesteps // self.every_steps + 1) * self.every_steps
+        path = self.run_dir / ck.EVAL_PID_FILE
+        if path.is_file():
+            self._pid = {int(k): v for k, v in json.loads(path.read_text()).items()}
+        missing = [lv for lv in self.spec.levels if lv not in self._pid]
+        if missing:
+            from myoexo.control import build_controller, parse_controller_spec
+
+            for level in missing:
+                env = self._env(level)
+                pid = build_controller(parse_controller_spec("pid"), env)
+                self._pid[level] = _level_means(pid, level, self.spec, env)
+            ck.write_json_atomic(path, {str(k): v for k, v in sorted(self._pid.items())})
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self._next += self.every_steps
+            self.evaluate()
+        return True
+
+    def evaluate(self) -> float:
+        """Run the small evaluation now; returns the score."""
+        from myoexo.control import CallableController
+        from myoexo.training.export import actor_from_sac
+
+        actor = actor_from_sac(self.model)
+        controller = CallableController(actor, name="sac")
+        t0 = time.perf_counter()
+        sac = {
+            lv: _level_means(controller, lv, self.spec, self._env(lv)) for lv in self.spec.levels
+        }
+        score = eval_score(sac, self._pid, self.spec)
+        rows = []
+        for level, m in sac.items():
+            pid_peak = self._pid[level]["peak_interaction_torque_nm"]
+            rel = 100.0 * (m["peak_interaction_torque_nm"] - pid_peak) / max(pid_peak, 1e-9)
+            for key, value in m.items():
+                self.logger.record(f"eval/L{level}/{key}", value)
+            self.logger.record(f"eval/L{level}/peak_vs_pid_pct", rel)
+            rows.append({"step": self.num_timesteps, "level": level, **m, "peak_vs_pid_pct": rel})
+        self.logger.record("eval/score", score)
+        self.logger.record("eval/wall_time_s", time.perf_counter() - t0)
+        self.logger.dump(self.num_timesteps)
+        self._append_rows(rows, score)
+        self.last_score, self.last_metrics = score, sac
+        self.last_eval_step = self.num_timesteps
+        if self.verbose:
+            errs = " ".join(f"L{lv}:{m['abs_final_error_deg']:.2f}" for lv, m in sac.items())
+            print(f"[eval] step {self.num_timesteps}: score {score:+.3f}, |final err| deg {errs}")
+        return score
+
+    def _append_rows(self, rows: list[dict[str, Any]], score: float) -> None:
+        path = self.run_dir / ck.EVAL_FILE
+        fields = ["step", "level", *_EVAL_METRICS, "unstable", "peak_vs_pid_pct", "score"]
+        new = not path.is_file()
+        with open(path, "a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=fields)
+            if new:
+                writer.writeheader()
+            for row in rows:
+                writer.writerow({**row, "score": score})
+
+    def _on_training_end(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+
+class PeriodicCheckpointCallback(BaseCallback):
+    """Save a resumable checkpoint every ``every_s`` seconds and/or ``every_steps``
+    transitions, and at the end of training (see :mod:`myoexo.training.checkpoints`).
+
+    Args:
+        run_dir: Run folder.
+        every_s: Wall time between checkpoints (0: off).
+        every_steps: Transitions between checkpoints (0: off).
+        wall_time_offset_s: Training wall time of the previous sessions of this run.
+        evaluator: Its :attr:`~PaperMetricsEvalCallback.last_score` goes into each state.
+        keep_replay: Replay buffers kept (newest checkpoints).
+    """
+
+    def __init__(
+        self,
+        run_dir: Path,
+        every_s: float,
+        every_steps: int = 0,
+        wall_time_offset_s: float = 0.0,
+        evaluator: PaperMetricsEvalCallback | None = None,
+        keep_replay: int = 1,
+        verbose: int = 0,
+    ) -> None:
+        super().__init__(verbose)
+        self.run_dir = Path(run_dir)
+        self.every_s = float(every_s)
+        self.every_steps = int(every_steps)
+        self.wall_time_offset_s = float(wall_time_offset_s)
+        self.evaluator = evaluator
+        self.keep_replay = int(keep_replay)
+        self.last_checkpoint: Path | None = None
+        self._t_start = 0.0
+        self._t_last = 0.0
+        self._step_last = 0  # step of the last checkpoint of any kind
+        self._step_last_full = 0  # step of the last resumable checkpoint
+        self._steps_at_start = 0
+
+    def _on_training_start(self) -> None:
+        self._t_start = self._t_last = time.monotonic()
+        self._step_last = self._step_last_full = self._steps_at_start = self.num_timesteps
+
+    def wall_time_s(self) -> float:
+        """Training wall time of the run so far, all sessions."""
+        return self.wall_time_offset_s + time.monotonic() - self._t_start
+
+    def _on_step(self) -> bool:
+        now = time.monotonic()
+        due_time = self.every_s > 0 and now - self._t_last >= self.every_s
+        due_steps = (
+            self.every_steps > 0 and self.num_timesteps - self._step_last_full >= self.every_steps
+        )
+        if due_time or due_steps:
+            self.save(with_replay=True)
+        elif (
+            self.evaluator is not None
+            and self.evaluator.last_eval_step == self.num_timesteps
+            and self._step_last != self.num_timesteps
+        ):
+            self.save(with_replay=False)  # a policy snapshot for every evaluated step
+        return True
+
+    def save(self, with_replay: bool = True) -> Path:
+        """Write a checkpoint now (resumable with the replay buffer, else a snapshot)."""
+        score = self.evaluator.last_score if self.evaluator is not None else None
+        elapsed = time.monotonic() - self._t_start
+        state = {
+            "num_timesteps": int(self.num_timesteps),
+            "n_updates": int(getattr(self.model, "_n_updates", 0)),
+            "episodes": int(getattr(self.model, "_episode_num", 0)),
+            "wall_time_s": round(self.wall_time_s(), 3),
+            "session_env_steps_per_s": round(
+                (self.num_timesteps - self._steps_at_start) / max(elapsed, 1e-9), 2
+            ),
+            "eval_score": score,
+            "resumable": with_replay,
+            "saved_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+        self.last_checkpoint = ck.save_checkpoint(
+            self.model, self.run_dir, state, with_replay, self.keep_replay
+        )
+        self._step_last = self.num_timesteps
+        if with_replay:
+            self._t_last = time.monotonic()
+            self._step_last_full = self.num_timesteps
+        if self.verbose:
+            print(
+                f"[checkpoint] step {state['num_timesteps']} updates {state['n_updates']} "
+                f"wall {state['wall_time_s']:.0f} s -> {self.last_checkpoint.name}",
+                flush=True,
+            )
+        return self.last_checkpoint
+
+    def _on_training_end(self) -> None:
+        last = ck.latest_checkpoint(self.run_dir, with_replay=True)
+        if last is None or ck.read_state(last)["num_timesteps"] != self.num_timesteps:
+            self.save(with_replay=True)

@@ -1,0 +1,73 @@
+"""``myoexo train``: train SAC on MyoExoKneeRandom-v0, or resume an interrupted run.
+
+Examples::
+
+    myoexo train --preset cpu --seed 0 --run-dir runs/cpu_seed0
+    myoexo train --preset cpu --set total_timesteps=500000 --set n_envs=2
+    myoexo train --resume runs/cpu_seed0                 # continues the step counter
+    tensorboard --logdir runs/cpu_seed0/tb
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from myoexo.training.presets import PRESETS, get_preset, parse_override
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo train``."""
+    parser.add_argument(
+        "--preset", choices=sorted(PRESETS), default="cpu", help="hyper-parameters (default: cpu)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of learner and envs (default 0)")
+    parser.add_argument(
+        "--run-dir", help="output folder (default: runs/sac_<preset>_seed<seed>_<timestamp>)"
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override a preset field, e.g. --set n_envs=2 (repeatable)",
+    )
+    parser.add_argument(
+        "--total-timesteps", type=int, help="step budget (new run: a preset override)"
+    )
+    parser.add_argument(
+        "--resume", metavar="DIR", help="continue the run in DIR from its newest checkpoint"
+    )
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bar (for logs / background runs)"
+    )
+    parser.add_argument(
+        "-v", "--verbose", type=int, default=1, help="0 quiet, 1 checkpoints/evals, 2 SB3 tables"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo train``."""
+    from myoexo.training.train import resume, train
+
+    progress = not args.no_progress
+    if args.resume:
+        if args.set or args.run_dir:
+            raise SystemExit("train: --resume takes the run's saved settings; drop --set/--run-dir")
+        result = resume(args.resume, args.total_timesteps, progress, args.verbose)
+    else:
+        overrides = dict(parse_override(s) for s in args.set)
+        if args.total_timesteps is not None:
+            overrides["total_timesteps"] = args.total_timesteps
+        preset = get_preset(args.preset, **overrides)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        run_dir = Path(args.run_dir or f"runs/sac_{preset.name}_seed{args.seed}_{stamp}")
+        print(f"[train] preset {preset.name}, seed {args.seed} -> {run_dir}", flush=True)
+        result = train(preset, run_dir, args.seed, progress, args.verbose)
+    print(
+        f"[train] {result.num_timesteps} steps, {result.wall_time_s / 60:.1f} min in total, "
+        f"{result.session_env_steps_per_s:.0f} steps/s this session; last checkpoint "
+        f"{result.checkpoint}"
+    )
+    return 0

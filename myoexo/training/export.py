@@ -1,0 +1,194 @@
+"""Export a trained SAC policy: the deterministic actor (observation normalization included)
+as a small numpy actor (``.npz`` + ``.json``, what :func:`myoexo.load_policy` reads) or ONNX.
+
+CLI::
+
+    myoexo export-policy RUN --onnx actor.onnx            # newest checkpoint of RUN
+    myoexo export-policy RUN --checkpoint best --out my_actor
+    myoexo export-policy RUN --checkpoint 1200000 --ship   # into myoexo/policies/
+
+``RUN`` is a run folder (``myoexo train``) or one of its ``checkpoints/step_*`` folders.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.policies.actor import MLPActor, save_actor
+from myoexo.training import checkpoints as ck
+
+#: Reference observations stored with an exported actor (seeded standard normal, scaled).
+N_REFERENCE = 8
+REFERENCE_SEED = 20240601
+
+
+def actor_from_sac(
+    model: Any, vec_normalize: Any = None, metadata: dict[str, Any] | None = None
+) -> MLPActor:
+    """The deterministic actor of an SB3 SAC model as an :class:`MLPActor`.
+
+    Args:
+        model: ``stable_baselines3.SAC`` with an MLP actor on a flat Box observation.
+        vec_normalize: The ``VecNormalize`` the model was trained behind (``None``: the
+            model's own, if any); its observation statistics become the actor's.
+        metadata: Provenance stored with the actor.
+    """
+    from torch import nn
+
+    actor = model.policy.actor
+    linears = [m for m in actor.latent_pi if isinstance(m, nn.Linear)]
+    acts = {type(m).__name__.lower() for m in actor.latent_pi if not isinstance(m, nn.Linear)}
+    if len(acts) > 1:
+        raise ValueError(f"mixed hidden activations {sorted(acts)} are not supported")
+    activation = acts.pop() if acts else "gelu"
+    if getattr(actor, "use_sde", False):
+        raise ValueError("gSDE actors are not supported by the export (use_sde=False)")
+    weights = [
+        (lin.weight.detach().cpu().numpy(), lin.bias.detach().cpu().numpy())
+        for lin in [*linears, actor.mu]
+    ]
+    bounds = {"action_low": model.action_space.low, "action_high": model.action_space.high}
+    vn = vec_normalize if vec_normalize is not None else model.get_vec_normalize_env()
+    if vn is not None and vn.norm_obs:
+        rms = vn.obs_rms
+        return MLPActor(
+            weights,
+            activation,
+            obs_mean=rms.mean,
+            obs_var=rms.var,
+            epsilon=vn.epsilon,
+            clip_obs=vn.clip_obs,
+            metadata=metadata,
+            **bounds,
+        )
+    return MLPActor(weights, activation, metadata=metadata, **bounds)
+
+
+def reference_pairs(
+    actor: MLPActor, model: Any = None, vec_normalize: Any = None
+) -> dict[str, list[list[float]]]:
+    """Fixed observations and the actions torch gives for them, for later consistency checks:
+    the SB3 policy itself (behind ``vec_normalize``) when ``model`` is given, else
+    :meth:`MLPActor.to_torch`."""
+    import torch
+
+    rng = np.random.default_rng(REFERENCE_SEED)
+    mean = np.zeros(actor.obs_dim) if actor.obs_mean is None else actor.obs_mean
+    std = np.ones(actor.obs_dim) if actor.obs_var is None else np.sqrt(actor.obs_var)
+    obs = (mean + std * rng.standard_normal((N_REFERENCE, actor.obs_dim))).astype(np.float32)
+    if model is not None:
+        z = vec_normalize.normalize_obs(obs) if vec_normalize is not None else obs
+        action, _ = model.predict(z, deterministic=True)
+    else:
+        with torch.no_grad():
+            action = actor.to_torch()(torch.as_tensor(obs)).numpy()
+    return {
+        "observations": obs.astype(np.float64).tolist(),
+        "actions": np.asarray(action, dtype=np.float64).tolist(),
+    }
+
+
+def load_checkpoint_actor(checkpoint: Path, with_reference: bool = True) -> MLPActor:
+    """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs."""
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    checkpoint = Path(checkpoint)
+    model = SAC.load(checkpoint / ck.MODEL_FILE, device="cpu")
+    vn = None
+    if (checkpoint / ck.VECNORM_FILE).is_file():
+        import pickle
+
+        with open(checkpoint / ck.VECNORM_FILE, "rb") as f:
+            vn = pickle.load(f)
+        if not isinstance(vn, VecNormalize):
+            raise ValueError(f"{checkpoint / ck.VECNORM_FILE} is not a VecNormalize pickle")
+    run_dir = checkpoint.parent.parent
+    config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
+    state = ck.read_state(checkpoint)
+    meta = {
+        "env_id": config.get("env_id"),
+        "obs_keys": config.get("obs_keys"),
+        "preset": config.get("preset", {}).get("name"),
+        "seed": config.get("seed"),
+        "num_timesteps": state.get("num_timesteps"),
+        "train_wall_time_s": state.get("wall_time_s"),
+        "n_updates": state.get("n_updates"),
+        "checkpoint": f"{run_dir.name}/{ck.CHECKPOINTS_DIR}/{checkpoint.name}",
+        "versions": config.get("versions"),
+    }
+    actor = actor_from_sac(model, vn, metadata=meta)
+    if with_reference:
+        actor.metadata["reference"] = reference_pairs(actor, model, vn)
+        actor.check_reference()
+    return actor
+
+
+def export_onnx(actor: MLPActor, path: str | Path, opset: int = 17) -> Path:
+    """Write the actor (normalization, MLP, tanh) as ONNX: input ``obs`` (batch, obs_dim)
+    float32, output ``action`` (batch, action_dim) in [-1, 1]."""
+    import torch
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    module = actor.to_torch().eval()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
+        torch.onnx.export(
+            module,
+            (torch.zeros(1, actor.obs_dim),),
+            str(path),
+            input_names=["obs"],
+            output_names=["action"],
+            dynamic_axes={"obs": {0: "batch"}, "action": {0: "batch"}},
+            opset_version=opset,
+            dynamo=False,
+        )
+    return path
+
+
+# ---------------------------------------------------------------------------- CLI
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo export-policy``."""
+    parser.add_argument("run", help="training run folder, or one of its checkpoints/step_* folders")
+    parser.add_argument(
+        "--checkpoint",
+        default="latest",
+        help="'latest' (default), 'best' (highest small-evaluation score) or a step number",
+    )
+    parser.add_argument("--onnx", metavar="FILE", help="write the actor as ONNX to FILE")
+    parser.add_argument(
+        "--out", metavar="STEM", help="write the numpy actor to STEM.npz + STEM.json"
+    )
+    parser.add_argument(
+        "--ship",
+        action="store_true",
+        help="write the numpy actor into the package (what myoexo.load_policy() returns)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo export-policy``."""
+    if not (args.onnx or args.out or args.ship):
+        raise SystemExit("export-policy: nothing to do; give --onnx FILE, --out STEM or --ship")
+    checkpoint = ck.resolve_checkpoint(args.run, args.checkpoint)
+    actor = load_checkpoint_actor(checkpoint)
+    print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")
+    if args.onnx:
+        print(f"onnx:  {export_onnx(actor, args.onnx)}")
+    stems = [Path(args.out)] if args.out else []
+    if args.ship:
+        from myoexo.policies import shipped_path
+
+        stems.append(shipped_path())
+    for stem in stems:
+        npz, js = save_actor(actor, stem)
+        print(f"actor: {npz} + {js.name}")
+    print(json.dumps({k: actor.metadata.get(k) for k in ("preset", "seed", "num_timesteps")}))
+    return 0
