@@ -213,3 +213,20 @@ def test_controller_specs(tmp_path):
     ]:
         with pytest.raises(ValueError, match=match):
             parse_controller_spec(bad)
+
+
+# ----------------------------------------------------------------------------- on the twin
+@pytest.mark.slow
+def test_ziegler_nichols_finds_an_ultimate_point_on_the_twin():
+    settings = zn.ZieglerNicholsSettings(rel_tol=0.15)
+    result = zn.tune(settings)
+    sustained = [t.kp for t in result.trials if t.sustained]
+    decaying = [t.kp for t in result.trials if not t.sustained]
+    assert decaying and sustained
+    # Ku is the smallest sustained gain and every decaying trial lies below it
+    assert result.ultimate_gain == min(sustained) and max(decaying) < result.ultimate_gain
+    assert 0.02 < result.ultimate_period_s < 2.0
+    g = result.gains
+    assert g.kp == pytest.approx(0.6 * result.ultimate_gain)
+    assert g.ki == pytest.approx(1.2 * result.ultimate_gain / result.ultimate_period_s)
+    print("\n" + zn.format_result(result))

@@ -99,7 +99,7 @@ class EvaluationConfig:
     root_seed: int = 0
     episode_duration_s: float | None = None
     trace_stride: int = 2
-    chunk_size: int = 20
+    chunk_size: int = 10
     env_id: str = "MyoExoKnee-v{level}"
 
     def __post_init__(self) -> None:
