@@ -1,0 +1,194 @@
+"""Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
+harness and check the issue's acceptance criteria.
+
+Criteria (per level, means over the same simulated subjects, SPEC section 5):
+
+* peak interaction torque lower than the PID's at every level;
+* RMS interaction torque up to settling lower than the PID's at levels 0-2;
+* mean absolute final error below 1 deg at levels 0-2, and below the paper's 11.45 deg at
+  level 3.
+
+    python -m myoexo.training.select runs/cpu_main --subjects 10 --last 6
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from myoexo.training import checkpoints as ck
+
+LEVELS: tuple[int, ...] = (0, 1, 2, 3)
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """The acceptance criteria of a shipped policy.
+
+    Attributes:
+        final_error_deg: Bound on the mean absolute final error per level (1 deg at levels
+            0-2; the paper's own SAC result, 11.45 deg, at level 3).
+        rms_levels: Levels where the RMS-to-settling must be lower than the PID's.
+        peak_levels: Levels where the peak interaction torque must be lower than the PID's.
+    """
+
+    final_error_deg: tuple[float, ...] = (1.0, 1.0, 1.0, 11.45)
+    rms_levels: tuple[int, ...] = (0, 1, 2)
+    peak_levels: tuple[int, ...] = (0, 1, 2, 3)
+
+
+_METRICS = (
+    "abs_final_error_deg",
+    "final_error_deg",
+    "settling_time_s",
+    "rms_interaction_torque_nm",
+    "peak_interaction_torque_nm",
+)
+
+
+def level_means(table: Any) -> Any:
+    """Per-level means of the criteria's metrics from an evaluation table."""
+    return table.groupby("level")[list(_METRICS)].mean()
+
+
+def compare(sac: Any, pid: Any, criteria: Criteria = Criteria()) -> Any:
+    """Side-by-side table per level (pandas) with reductions vs the PID and pass flags.
+
+    Args:
+        sac: Per-level means of the policy (:func:`level_means`).
+        pid: Per-level means of the PID on the same subjects.
+        criteria: Bounds.
+    """
+    import pandas as pd
+
+    rows = []
+    for level in sac.index:
+        s, p = sac.loc[level], pid.loc[level]
+        peak_red = 100 * (p.peak_interaction_torque_nm - s.peak_interaction_torque_nm)
+        rms_red = 100 * (p.rms_interaction_torque_nm - s.rms_interaction_torque_nm)
+        row = {
+            "level": int(level),
+            "sac_final_error_deg": s.final_error_deg,
+            "sac_abs_final_error_deg": s.abs_final_error_deg,
+            "pid_final_error_deg": p.final_error_deg,
+            "sac_settling_time_s": s.settling_time_s,
+            "pid_settling_time_s": p.settling_time_s,
+            "sac_rms_nm": s.rms_interaction_torque_nm,
+            "pid_rms_nm": p.rms_interaction_torque_nm,
+            "rms_reduction_pct": rms_red / p.rms_interaction_torque_nm,
+            "sac_peak_nm": s.peak_interaction_torque_nm,
+            "pid_peak_nm": p.peak_interaction_torque_nm,
+            "peak_reduction_pct": peak_red / p.peak_interaction_torque_nm,
+        }
+        ok_err = s.abs_final_error_deg < criteria.final_error_deg[int(level)]
+        ok_peak = level not in criteria.peak_levels or peak_red > 0
+        ok_rms = level not in criteria.rms_levels or rms_red > 0
+        row.update(final_error_ok=ok_err, peak_ok=ok_peak, rms_ok=ok_rms)
+        row["pass"] = bool(ok_err and ok_peak and ok_rms)
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("level")
+
+
+def shortfall(table: Any, criteria: Criteria = Criteria()) -> float:
+    """How far a :func:`compare` table is from passing (0 when it passes; larger is worse):
+    the sum over levels of the relative excess of the final error over its bound and of the
+    relative peak / RMS increase over the PID."""
+    total = 0.0
+    for level, row in table.iterrows():
+        total += max(0.0, row.sac_abs_final_error_deg / criteria.final_error_deg[level] - 1.0)
+        if level in criteria.peak_levels:
+            total += max(0.0, -row.peak_reduction_pct / 100)
+        if level in criteria.rms_levels:
+            total += max(0.0, -row.rms_reduction_pct / 100)
+    return total
+
+
+def evaluate_pid(subjects: int, levels: Sequence[int] = LEVELS, root_seed: int = 0) -> Any:
+    """Per-level means of the paper's PID on subjects ``0..subjects-1``."""
+    import gymnasium as gym
+    import pandas as pd
+
+    from myoexo.control import build_controller, parse_controller_spec
+    from myoexo.evaluation import evaluate_controller
+
+    tables = []
+    for level in levels:
+        env = gym.make(f"MyoExoKnee-v{level}")
+        pid = build_controller(parse_controller_spec("pid"), env)
+        env.close()
+        table, _ = evaluate_controller(pid, level, subjects, root_seed, label="pid")
+        tables.append(table)
+    return level_means(pd.concat(tables))
+
+
+def evaluate_checkpoint(
+    checkpoint: Path, subjects: int, levels: Sequence[int] = LEVELS, root_seed: int = 0
+) -> Any:
+    """Per-level means of a checkpoint's deterministic actor on subjects ``0..subjects-1``."""
+    import pandas as pd
+
+    from myoexo.control import CallableController
+    from myoexo.evaluation import evaluate_controller
+    from myoexo.training.export import load_checkpoint_actor
+
+    actor = load_checkpoint_actor(checkpoint, with_reference=False)
+    controller = CallableController(actor, name=checkpoint.name)
+    tables = [
+        evaluate_controller(controller, lv, subjects, root_seed, label=checkpoint.name)[0]
+        for lv in levels
+    ]
+    return level_means(pd.concat(tables))
+
+
+def select_checkpoint(
+    run_dir: Path, subjects: int = 10, last: int = 6, root_seed: int = 0, verbose: bool = True
+) -> tuple[Path, Any]:
+    """Evaluate the ``last`` checkpoints of a run plus the best by small-evaluation score,
+    and return the one with the smallest :func:`shortfall` (ties: the largest mean peak
+    torque reduction) with its comparison table."""
+    ckpts = ck.list_checkpoints(run_dir)
+    if not ckpts:
+        raise ValueError(f"{str(run_dir)!r} holds no checkpoint")
+    candidates = list(ckpts[-last:])
+    try:
+        best = ck.resolve_checkpoint(run_dir, "best")
+        if best not in candidates:
+            candidates.append(best)
+    except ValueError:
+        pass
+    pid = evaluate_pid(subjects, root_seed=root_seed)
+    results = []
+    for c in candidates:
+        table = compare(evaluate_checkpoint(c, subjects, root_seed=root_seed), pid)
+        key = (shortfall(table), -table.peak_reduction_pct.mean())
+        results.append((key, c, table))
+        if verbose:
+            print(
+                f"{c.name}: shortfall {key[0]:.3f}, mean peak reduction "
+                f"{-key[1]:+.1f} %, |final err| "
+                + " ".join(f"{v:.2f}" for v in table.sac_abs_final_error_deg),
+                flush=True,
+            )
+    _, chosen, table = min(results, key=lambda r: r[0])
+    return chosen, table
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m myoexo.training.select RUN``: print the chosen checkpoint and its table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path)
+    parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
+    parser.add_argument("--last", type=int, default=6, help="newest checkpoints to consider")
+    parser.add_argument("--root-seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    chosen, table = select_checkpoint(args.run, args.subjects, args.last, args.root_seed)
+    print(f"chosen: {chosen}")
+    print(table.round(2).to_string())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

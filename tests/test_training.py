@@ -1,0 +1,252 @@
+"""SAC training pipeline: presets, a short end-to-end run on the real env with a checkpoint,
+a resume that continues the step counter, logging, and the export (numpy / torch / ONNX)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from myoexo.training import PRESETS, CpuPreset, PaperPreset, get_preset, resume, train
+from myoexo.training import checkpoints as ck
+from myoexo.training.presets import parse_override, preset_from_dict
+
+ENV_ID = "MyoExoKneeRandom-v0"
+
+
+# ---------------------------------------------------------------------------- presets
+def test_paper_preset_is_table_ii():
+    p = get_preset("paper")
+    assert isinstance(p, PaperPreset)
+    assert p.net_arch_pi == (64, 64) and p.net_arch_qf == (64, 64)
+    assert p.activation == "gelu"
+    assert p.buffer_size == 5_000_000
+    assert p.total_timesteps == 50_000_000
+    assert p.learning_rate == 1e-4
+    assert p.tau == 0.05
+    assert p.batch_size == 4096
+    assert p.gamma == 0.99
+    assert p.env_id == ENV_ID
+
+
+def test_cpu_preset_budget():
+    p = get_preset("cpu")
+    assert isinstance(p, CpuPreset)
+    assert p.total_timesteps <= 2_000_000
+    assert p.updates_per_transition < 1.0
+    assert p.torch_threads == 1
+    # the paper's networks and discounting are kept
+    assert (p.net_arch_pi, p.activation, p.gamma, p.tau) == ((64, 64), "gelu", 0.99, 0.05)
+    assert set(PRESETS) == {"paper", "cpu"}
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("batch_size", 0),
+        ("learning_rate", -1e-3),
+        ("gamma", 1.0),
+        ("n_envs", 1.5),
+        ("vec_env", "ray"),
+        ("activation", "swish"),
+        ("eval_levels", (0, 4)),
+        ("buffer_size", 10),
+    ],
+)
+def test_preset_rejects_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        get_preset("cpu", **{field: value})
+
+
+def test_preset_lookup_errors_and_overrides():
+    with pytest.raises(ValueError, match="unknown preset"):
+        get_preset("gpu")
+    with pytest.raises(ValueError, match="unknown preset field"):
+        get_preset("cpu", batchsize=3)
+    assert parse_override("n_envs=2") == ("n_envs", 2)
+    assert parse_override("learning_rate=1e-3") == ("learning_rate", 1e-3)
+    assert parse_override("normalize_obs=false") == ("normalize_obs", False)
+    assert parse_override("net_arch_pi=32-32") == ("net_arch_pi", (32, 32))
+    assert parse_override("ent_coef=auto_0.1") == ("ent_coef", "auto_0.1")
+    with pytest.raises(ValueError, match="bad override"):
+        parse_override("nope=1")
+    p = get_preset("cpu", n_envs=2)
+    assert preset_from_dict(json.loads(json.dumps(p.to_dict()))) == p
+
+
+# ---------------------------------------------------------------------------- a short run
+def _tiny_preset(**overrides):
+    """Half-second episodes (50 steps), tiny batch, few updates: seconds, not hours."""
+    base = {
+        "env_id": ENV_ID,
+        "episode_duration_s": 0.5,
+        "total_timesteps": 400,
+        "n_envs": 2,
+        "buffer_size": 2_000,
+        "batch_size": 32,
+        "learning_starts": 100,
+        "checkpoint_every_s": 0.0,
+        "checkpoint_every_steps": 200,
+        "eval_every_steps": 200,
+        "eval_subjects": 1,
+        "eval_levels": (0, 3),
+    }
+    return get_preset("cpu", **{**base, **overrides})
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """A 400-step run, then resumed to 600 steps."""
+    run_dir = tmp_path_factory.mktemp("run") / "tiny"
+    first = train(_tiny_preset(), run_dir, seed=3, verbose=0)
+    first_ckpts = [c.name for c in ck.list_checkpoints(run_dir)]
+    second = resume(run_dir, total_timesteps=600, verbose=0)
+    return run_dir, first, first_ckpts, second
+
+
+@pytest.mark.slow
+def test_short_run_writes_resumable_checkpoints(tiny_run):
+    run_dir, first, first_ckpts, _ = tiny_run
+    assert first.num_timesteps == 400
+    assert first_ckpts == ["step_0000000200", "step_0000000400"]
+    ckpt = run_dir / ck.CHECKPOINTS_DIR / "step_0000000400"
+    for name in (ck.MODEL_FILE, ck.VECNORM_FILE, ck.STATE_FILE):
+        assert (ckpt / name).is_file()
+    state = ck.read_state(ckpt)
+    assert state["num_timesteps"] == 400
+    # (400 - 100 learning starts) / 2 envs vector steps, one update each
+    assert state["n_updates"] == pytest.approx(150, abs=2)
+    config = ck.read_config(run_dir)
+    assert config["seed"] == 3 and config["env_id"] == ENV_ID
+    assert config["preset"]["name"] == "cpu" and config["obs_keys"]
+    assert {"torch", "stable-baselines3", "mujoco", "myosuite"} <= set(config["versions"])
+
+
+@pytest.mark.slow
+def test_resume_continues_the_step_counter(tiny_run):
+    run_dir, first, _, second = tiny_run
+    assert second.num_timesteps == 600
+    assert second.wall_time_s > first.wall_time_s
+    latest = json.loads((run_dir / ck.LATEST_FILE).read_text())
+    assert latest["checkpoint"] == "step_0000000600"
+    state = ck.read_state(run_dir / ck.CHECKPOINTS_DIR / "step_0000000600")
+    assert state["n_updates"] == pytest.approx(250, abs=3)  # updates continued too
+    sessions = [json.loads(s) for s in (run_dir / ck.SESSIONS_FILE).read_text().splitlines()]
+    assert [(s["start_step"], s["end_step"]) for s in sessions] == [(0, 400), (400, 600)]
+    # only the newest resumable checkpoint keeps its (large) replay buffer
+    with_replay = [c.name for c in ck.list_checkpoints(run_dir) if (c / ck.REPLAY_FILE).exists()]
+    assert with_replay == ["step_0000000600"]
+
+
+@pytest.mark.slow
+def test_run_logs_reward_terms_and_small_evaluation(tiny_run):
+    import pandas as pd
+
+    run_dir, *_ = tiny_run
+    progress = pd.read_csv(run_dir / "progress_00.csv")
+    for term in ("pose", "inter", "vel", "act", "dense"):
+        assert f"reward_terms/{term}" in progress.columns
+    assert "eval/score" in progress.columns
+    assert "eval/L0/peak_vs_pid_pct" in progress.columns
+    assert any(p.name.startswith("events.out.tfevents") for p in (run_dir / ck.TB_DIR).iterdir())
+    evals = pd.read_csv(run_dir / ck.EVAL_FILE)
+    assert sorted(evals.step.unique()) == [200, 400, 600]
+    assert set(evals.level) == {0, 3}
+    assert np.isfinite(evals.peak_interaction_torque_nm).all()
+    pid = json.loads((run_dir / ck.EVAL_PID_FILE).read_text())
+    assert set(pid) == {"0", "3"} and pid["0"]["peak_interaction_torque_nm"] > 0
+    # every evaluated step has a policy snapshot carrying its score; 'best' picks among them
+    best = ck.resolve_checkpoint(run_dir, "best")
+    assert ck.read_state(best)["eval_score"] == pytest.approx(evals.score.max())
+
+
+def test_train_refuses_existing_run_and_resume_needs_a_run(tmp_path):
+    (tmp_path / ck.CONFIG_FILE).write_text("{}")
+    with pytest.raises(ValueError, match="already holds a run"):
+        train(_tiny_preset(), tmp_path, seed=0)
+    with pytest.raises(ValueError, match="not a training run"):
+        resume(tmp_path / "nothing")
+    with pytest.raises(ValueError, match="seed"):
+        train(_tiny_preset(), tmp_path / "x", seed=-1)
+
+
+# ---------------------------------------------------------------------------- export
+@pytest.mark.slow
+def test_exported_actor_matches_sb3_torch_and_onnx(tiny_run, tmp_path):
+    import onnxruntime as ort
+    import torch
+    from stable_baselines3 import SAC
+
+    from myoexo.policies import load_actor
+    from myoexo.training.export import export_onnx, load_checkpoint_actor
+
+    run_dir, *_ = tiny_run
+    ckpt = ck.resolve_checkpoint(run_dir, "latest")
+    actor = load_checkpoint_actor(ckpt)
+    rng = np.random.default_rng(0)
+    obs = actor.obs_mean + np.sqrt(actor.obs_var) * rng.standard_normal((16, actor.obs_dim))
+    obs = obs.astype(np.float32)
+
+    # the SB3 policy behind its VecNormalize statistics
+    import pickle
+
+    with open(ckpt / ck.VECNORM_FILE, "rb") as f:
+        vn = pickle.load(f)
+    sb3_action, _ = SAC.load(ckpt / ck.MODEL_FILE, device="cpu").predict(
+        vn.normalize_obs(obs), deterministic=True
+    )
+    np.testing.assert_allclose(actor(obs), sb3_action, atol=1e-5)
+
+    with torch.no_grad():
+        torch_action = actor.to_torch()(torch.as_tensor(obs)).numpy()
+    onnx_path = export_onnx(actor, tmp_path / "actor.onnx")
+    session = ort.InferenceSession(str(onnx_path))
+    onnx_action = session.run(None, {"obs": obs})[0]
+    assert onnx_action.shape == (16, 1)
+    np.testing.assert_allclose(onnx_action, torch_action, atol=1e-5)
+    np.testing.assert_allclose(actor(obs), torch_action, atol=1e-5)
+
+    # the file round trip keeps the function
+    from myoexo.policies import save_actor
+
+    save_actor(actor, tmp_path / "a")
+    np.testing.assert_allclose(load_actor(tmp_path / "a")(obs), actor(obs), atol=1e-6)
+
+
+@pytest.mark.slow
+def test_export_policy_cli(tiny_run, tmp_path):
+    from myoexo.cli import main
+    from myoexo.policies import load_actor
+
+    run_dir, *_ = tiny_run
+    rc = main(
+        [
+            "export-policy",
+            str(run_dir),
+            "--checkpoint",
+            "200",
+            "--onnx",
+            str(tmp_path / "p.onnx"),
+            "--out",
+            str(tmp_path / "p"),
+        ]
+    )
+    assert rc == 0 and (tmp_path / "p.onnx").stat().st_size > 1000
+    actor = load_actor(tmp_path / "p")
+    assert actor.metadata["num_timesteps"] == 200
+    assert actor.check_reference() < 1e-5
+    with pytest.raises(ValueError, match="no checkpoint at step"):
+        ck.resolve_checkpoint(run_dir, "123")
+
+
+def test_train_cli_arguments():
+    from myoexo.training import cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(["--preset", "paper", "--set", "n_envs=2", "--no-progress"])
+    assert args.preset == "paper" and args.set == ["n_envs=2"] and args.no_progress
+    args = parser.parse_args(["--resume", "runs/x"])
+    assert args.resume == "runs/x"
