@@ -28,6 +28,7 @@ the paper's 0.05: the paper's Kd was evidently not taken from the table.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import math
@@ -56,6 +57,9 @@ class ZieglerNicholsSettings:
             ``False`` draws an individual subject from ``seed``.
         seed: Episode seed (start-angle perturbation; the subject if not nominal).
         feedback: Feedback signal of the P controller (``"knee"`` or ``"exo"``).
+        target_angle_deg: Operating point of the test (knee target, deg); ``None``: the
+            task's (7 deg). A target the motor cannot reach (the loop then sits saturated
+            against a limit) gives no oscillation at any gain.
         kp_start: First gain tried (1/rad).
         kp_max: Give up above this gain (1/rad).
         rel_tol: Stop the bisection when ``hi / lo - 1 < rel_tol``.
@@ -70,6 +74,7 @@ class ZieglerNicholsSettings:
     nominal_subject: bool = True
     seed: int = 0
     feedback: str = "knee"
+    target_angle_deg: float | None = None
     kp_start: float = 1.0
     kp_max: float = 2000.0
     rel_tol: float = 0.03
@@ -162,6 +167,8 @@ class GainTrial:
     kp: float
     sustained: bool
     oscillation: Oscillation
+    final_error_deg: float = math.nan
+    saturated_fraction: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -203,9 +210,17 @@ class ZieglerNicholsResult:
 
 def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
     """The level's env; with ``nominal_subject`` its reflex stage keeps Table I values."""
-    from myoexo.evaluation.runner import make_eval_env
+    import gymnasium as gym
 
-    env = make_eval_env(settings.level, settings.episode_duration_s)
+    import myoexo  # noqa: F401  (registers the ids)
+    from myoexo.envs.config import TaskParams
+
+    task = TaskParams()
+    if settings.episode_duration_s is not None:
+        task = dataclasses.replace(task, episode_duration_s=settings.episode_duration_s)
+    if settings.target_angle_deg is not None:
+        task = dataclasses.replace(task, target_angle_deg=settings.target_angle_deg)
+    env = gym.make(f"MyoExoKnee-v{settings.level}", task=task, max_episode_steps=task.episode_steps)
     if settings.nominal_subject:
         env.unwrapped.spasticity.subject_noise = False
     return env
@@ -219,9 +234,11 @@ def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainT
     pid = PID.from_env(env, config)
     obs, info = env.reset(seed=settings.seed)
     pid.reset(settings.seed)
-    t, err = [info["time_s"]], [info["error_deg"]]
+    t, err, saturated = [info["time_s"]], [info["error_deg"]], 0
     while True:
-        obs, _, terminated, truncated, info = env.step(pid.act(obs, info))
+        action = pid.act(obs, info)
+        saturated += abs(float(action[0])) >= config.output_limit
+        obs, _, terminated, truncated, info = env.step(action)
         t.append(info["time_s"])
         err.append(info["error_deg"])
         if terminated or truncated:
@@ -233,7 +250,13 @@ def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainT
         and osc.amplitude_ratio >= settings.sustain_ratio
         and not info.get("unstable", False)
     )
-    return GainTrial(kp=float(kp), sustained=bool(sustained), oscillation=osc)
+    return GainTrial(
+        kp=float(kp),
+        sustained=bool(sustained),
+        oscillation=osc,
+        final_error_deg=float(err[-1]),
+        saturated_fraction=saturated / max(1, len(err) - 1),
+    )
 
 
 def tune(
@@ -264,7 +287,8 @@ def tune(
             log(
                 f"Kp = {kp:9.3f}: {'sustained' if tr.sustained else 'decaying '}  "
                 f"half cycles {o.half_cycles:3d}, last amplitude {o.last_amplitude:7.3f} deg, "
-                f"ratio {o.amplitude_ratio:5.2f}, period {o.period_s:6.3f} s"
+                f"ratio {o.amplitude_ratio:5.2f}, period {o.period_s:6.3f} s, final error "
+                f"{tr.final_error_deg:6.2f} deg, saturated {100 * tr.saturated_fraction:3.0f} %"
             )
         return tr
 
@@ -274,9 +298,18 @@ def tune(
         while not hi_trial.sustained:
             lo, hi = hi, 2.0 * hi
             if hi > s.kp_max:
+                last = trials[-1]
+                why = (
+                    "the knee is held off the target by something the motor cannot "
+                    "overcome, e.g. a joint limit"
+                    if last.saturated_fraction > 0.5
+                    else "the loop is too damped for the closed-loop test"
+                )
                 raise RuntimeError(
-                    f"no sustained oscillation up to Kp = {s.kp_max} (level {s.level}); "
-                    "the loop may be too damped for the closed-loop Ziegler-Nichols test"
+                    f"no sustained oscillation up to Kp = {s.kp_max} (level {s.level}); at "
+                    f"Kp = {last.kp:g} the final error was {last.final_error_deg:.2f} deg with "
+                    f"the command saturated {100 * last.saturated_fraction:.0f} % of the time: "
+                    + why
                 )
             hi_trial = trial(hi)
         while lo > 0.0 and hi / lo - 1.0 > s.rel_tol:
@@ -307,7 +340,9 @@ def format_result(result: ZieglerNicholsResult) -> str:
         [
             f"Ziegler-Nichols on the twin (level {result.settings.level}, "
             f"{'nominal' if result.settings.nominal_subject else 'seeded'} subject, "
-            f"{result.settings.feedback} feedback, {len(result.trials)} P-only episodes):",
+            f"{result.settings.feedback} feedback, target "
+            f"{result.settings.target_angle_deg or 'of the task'} deg, "
+            f"{len(result.trials)} P-only episodes):",
             f"  ultimate gain Ku = {result.ultimate_gain:.3f} /rad, "
             f"ultimate period Tu = {result.ultimate_period_s:.3f} s",
             "                      Kp (1/rad)  Ki (1/(rad s))  Kd (s/rad)",
@@ -331,6 +366,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=d.seed, help="episode seed")
     parser.add_argument("--feedback", choices=("knee", "exo"), default=d.feedback)
+    parser.add_argument(
+        "--target", type=float, default=None, help="target knee angle of the test (deg)"
+    )
     parser.add_argument("--rel-tol", type=float, default=d.rel_tol, help="bisection tolerance")
     parser.add_argument("--out", type=Path, default=None, help="write the result as JSON here")
     parser.add_argument("--quiet", action="store_true", help="no line per trial")
@@ -346,6 +384,7 @@ def run(args: argparse.Namespace) -> int:
             nominal_subject=not args.individual_subject,
             seed=args.seed,
             feedback=args.feedback,
+            target_angle_deg=args.target,
             rel_tol=args.rel_tol,
         )
         result = tune(settings, log=None if args.quiet else print)
