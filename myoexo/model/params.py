@@ -1,0 +1,256 @@
+"""Parameters of the human + knee-exoskeleton digital twin (one frozen dataclass).
+
+Every number that shapes the twin lives in :class:`TwinParams`, with the paper's values as
+defaults where the paper gives them (``paper.tex`` section "Human MS system with Exo
+coupling"; ``SPEC.md`` section 1) and documented, physically plausible choices elsewhere.
+
+Conventions
+-----------
+* Angles are in degrees in this dataclass (``*_deg``) and converted to radians when the
+  MuJoCo model is built; MuJoCo joints are in radians.
+* Knee angles (human ``knee_angle_r`` and exo ``exo_knee``): 0 = full extension, flexion
+  positive.
+* Coupling joints are at 0 in the model's reference configuration (human knee extended),
+  where the exo is assembled without strain.
+
+Slide friction (paper: "linear friction coefficient eta = 0.97")
+----------------------------------------------------------------
+The paper gives the thigh slider an efficiency-like coefficient eta = 0.97 without units.
+myoexo reads it as a transmission efficiency: the slider loses ``1 - eta`` (3 %) of the
+nominal strap load it carries. MuJoCo models dry (Coulomb) joint friction with
+``frictionloss``, so::
+
+    frictionloss_N = (1 - eta) * nominal_strap_force_N
+    nominal_strap_force_N = motor_limit_nm / thigh_cuff_distance_m
+
+i.e. the force at the thigh cuff when the motor delivers its limit torque over the cuff's
+lever arm (100 Nm / 0.2 m = 500 N, hence 15 N of slider friction). A small viscous
+``thigh_slide_damping_n_s_m`` is added on top for numerical smoothness.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+__all__ = ["TwinParams"]
+
+
+def _check_range(name: str, value: tuple[float, float], *, contains_zero: bool) -> None:
+    """Raise ``ValueError`` unless ``value`` is an increasing (lower, upper) pair."""
+    if len(value) != 2 or not all(math.isfinite(float(v)) for v in value):
+        raise ValueError(f"TwinParams.{name} must be a finite (lower, upper) pair, got {value!r}")
+    lo, hi = float(value[0]), float(value[1])
+    if not lo < hi:
+        raise ValueError(
+            f"TwinParams.{name} must satisfy lower < upper (a positive-width range), got {value!r}"
+        )
+    if contains_zero and not lo < 0.0 < hi:
+        raise ValueError(
+            f"TwinParams.{name} must contain 0 (the strain-free assembly pose) strictly "
+            f"inside, got {value!r}"
+        )
+
+
+@dataclass(frozen=True)
+class TwinParams:
+    """All parameters of the seated human + knee-exoskeleton twin.
+
+    Attributes:
+        timestep_s: Physics timestep (s). 2 ms is stable and accurate with the 40 muscles
+            and the soft strap equalities (see ``benchmarks/bench_physics.py``); the
+            envs reach their control rate with a frame skip.
+        hip_flexion_deg: Locked right-hip flexion (deg); 90 = thigh horizontal (paper).
+        hip_adduction_deg: Locked right-hip adduction (deg).
+        hip_rotation_deg: Locked right-hip rotation (deg).
+        hip_lock_solref: ``solref`` (time constant s, damping ratio) of the joint
+            equalities that lock the hip.
+        hip_lock_solimp: ``solimp`` of the hip-lock equalities (stiff: the hip is fixed).
+        hip_height_m: Height of the pelvis origin above the world origin (m); the subject
+            sits facing +x with +z up. Visual only: the twin has no floor.
+        thigh_body: Human body the thigh cuff is strapped to.
+        shank_body: Human body the shank cuff is strapped to.
+        exo_knee_range_deg: Exo knee hinge range (deg), paper [-15, 95].
+        thigh_slide_range_m: Thigh cuff slider range (m), paper +-0.02.
+        thigh_pin_range_deg: Thigh cuff pin ("crank") range (deg), paper +-15.
+        shank_pin_range_deg: Shank cuff pin range (deg), paper +-15.
+        shank_axial_range_deg: Shank cuff axial pin range (deg). Not in the paper: it
+            leaves the tibia's coupled axial rotation (``knee_angle_rotation3_r``,
+            ~15 deg over the flexion range) free; without it the knee is locked near
+            extension (SPEC section 1).
+        shank_abduction_range_deg: Shank cuff ab/adduction pin range (deg). Not in the
+            paper: it follows the tibia's coupled ab/adduction
+            (``knee_angle_rotation2_r``, up to ~2 deg, i.e. ~7 mm sideways at the cuff),
+            which the exo's sagittal joints cannot, so the strap is not preloaded.
+        slide_efficiency: Slider efficiency eta (paper 0.97); see the module docstring for
+            the mapping to MuJoCo ``frictionloss``.
+        thigh_slide_damping_n_s_m: Viscous damping of the slider (N s/m).
+        thigh_slide_stiffness_n_m: Soft-tissue stiffness of the slider (N/m) towards its
+            strain-free position. The paper's coupling DOF "simulate the relative movement
+            of the exoskeleton due to human soft tissue compliance"; cuff shear stiffness
+            of tens of kN/m is typical of strapped thigh cuffs.
+        pin_stiffness_nm_rad: Soft-tissue rotational stiffness of each sagittal cuff pin
+            (Nm/rad) towards its strain-free angle.
+        shank_rotation_stiffness_nm_rad: Rotational stiffness of the shank cuff's axial and
+            ab/adduction pins (Nm/rad); small, so the tibia's coupled axial rotation and
+            ab/adduction stay nearly free.
+        coupling_damping_nm_s_rad: Viscous damping of the cuff pins (Nm s/rad).
+        strap_solref: ``solref`` (time constant s, damping ratio) of the strap equality
+            (weld) that closes the exo loop on the shank: soft tissue under the strap.
+        strap_solimp: ``solimp`` (dmin, dmax, width m, midpoint, power) of the strap weld.
+        thigh_cuff_distance_m: Distance of the thigh cuff centre above the knee axis,
+            along the femur (m).
+        shank_cuff_distance_m: Distance of the shank cuff centre below the knee, along the
+            tibia's axial-rotation axis (m).
+        exo_lateral_offset_m: Lateral distance of the exo bars and hinge from the knee's
+            mid-plane (m).
+        knee_axis_fit_range_deg: Human knee range over which the exo hinge is placed on
+            the knee's mean (least-squares) flexion axis (deg).
+        motor_limit_nm: Exo motor peak torque (Nm), paper 100; ctrl in [-1, 1] maps to
+            [-motor_limit_nm, motor_limit_nm].
+        exo_knee_damping_nm_s_rad: Viscous damping of the exo hinge (Nm s/rad).
+        exo_knee_armature_kg_m2: Reflected rotor inertia of the exo drive (kg m^2).
+        thigh_cuff_mass_kg: Thigh cuff + strap mass (kg).
+        exo_thigh_mass_kg: Upper exo frame (bar, motor and gearbox) mass (kg).
+        exo_shank_mass_kg: Lower exo frame mass (kg).
+        shank_cuff_mass_kg: Shank cuff + strap mass (kg).
+        cuff_radius_m: Inner radius of the cuffs (m), for their inertia and visuals.
+        cuff_height_m: Height of the cuffs along the limb (m).
+    """
+
+    timestep_s: float = 0.002
+
+    hip_flexion_deg: float = 90.0
+    hip_adduction_deg: float = 0.0
+    hip_rotation_deg: float = 0.0
+    hip_lock_solref: tuple[float, float] = (0.005, 1.0)
+    hip_lock_solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 0.001, 0.5, 2.0)
+    hip_height_m: float = 0.55
+
+    thigh_body: str = "femur_r"
+    shank_body: str = "tibia_r"
+
+    exo_knee_range_deg: tuple[float, float] = (-15.0, 95.0)
+    thigh_slide_range_m: tuple[float, float] = (-0.02, 0.02)
+    thigh_pin_range_deg: tuple[float, float] = (-15.0, 15.0)
+    shank_pin_range_deg: tuple[float, float] = (-15.0, 15.0)
+    shank_abduction_range_deg: tuple[float, float] = (-5.0, 5.0)
+    shank_axial_range_deg: tuple[float, float] = (-20.0, 20.0)
+
+    slide_efficiency: float = 0.97
+    thigh_slide_damping_n_s_m: float = 50.0
+    thigh_slide_stiffness_n_m: float = 20_000.0
+    pin_stiffness_nm_rad: float = 50.0
+    shank_rotation_stiffness_nm_rad: float = 1.0
+    coupling_damping_nm_s_rad: float = 1.0
+    strap_solref: tuple[float, float] = (0.01, 1.0)
+    strap_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+    thigh_cuff_distance_m: float = 0.20
+    shank_cuff_distance_m: float = 0.22
+    exo_lateral_offset_m: float = 0.10
+    knee_axis_fit_range_deg: tuple[float, float] = (0.0, 95.0)
+
+    motor_limit_nm: float = 100.0
+    exo_knee_damping_nm_s_rad: float = 0.5
+    exo_knee_armature_kg_m2: float = 0.01
+
+    thigh_cuff_mass_kg: float = 0.25
+    exo_thigh_mass_kg: float = 1.0
+    exo_shank_mass_kg: float = 0.6
+    shank_cuff_mass_kg: float = 0.2
+    cuff_radius_m: float = 0.065
+    cuff_height_m: float = 0.06
+
+    def __post_init__(self) -> None:
+        """Validate every field; raise ``ValueError`` naming the first bad one."""
+        for name in (
+            "exo_knee_range_deg",
+            "thigh_slide_range_m",
+            "thigh_pin_range_deg",
+            "shank_pin_range_deg",
+            "shank_abduction_range_deg",
+            "shank_axial_range_deg",
+        ):
+            _check_range(name, getattr(self, name), contains_zero=True)
+        _check_range("knee_axis_fit_range_deg", self.knee_axis_fit_range_deg, contains_zero=False)
+        lo, hi = self.knee_axis_fit_range_deg
+        if lo < 0.0 or hi > 120.0:
+            raise ValueError(
+                f"TwinParams.knee_axis_fit_range_deg must lie within the human knee range "
+                f"[0, 120] deg, got {self.knee_axis_fit_range_deg!r}"
+            )
+
+        positive = (
+            "timestep_s",
+            "motor_limit_nm",
+            "thigh_cuff_distance_m",
+            "shank_cuff_distance_m",
+            "exo_lateral_offset_m",
+            "thigh_cuff_mass_kg",
+            "exo_thigh_mass_kg",
+            "exo_shank_mass_kg",
+            "shank_cuff_mass_kg",
+            "cuff_radius_m",
+            "cuff_height_m",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"TwinParams.{name} must be > 0, got {value!r}")
+        if self.timestep_s > 0.01:
+            raise ValueError(
+                f"TwinParams.timestep_s must be in (0, 0.01] s for the muscle dynamics, "
+                f"got {self.timestep_s!r}"
+            )
+
+        non_negative = (
+            "thigh_slide_damping_n_s_m",
+            "thigh_slide_stiffness_n_m",
+            "pin_stiffness_nm_rad",
+            "shank_rotation_stiffness_nm_rad",
+            "coupling_damping_nm_s_rad",
+            "exo_knee_damping_nm_s_rad",
+            "exo_knee_armature_kg_m2",
+        )
+        for name in non_negative:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"TwinParams.{name} must be >= 0, got {value!r}")
+
+        if not 0.0 < self.slide_efficiency <= 1.0:
+            raise ValueError(
+                f"TwinParams.slide_efficiency must be in (0, 1], got {self.slide_efficiency!r}"
+            )
+        if not 0.0 <= self.hip_flexion_deg <= 120.0:
+            raise ValueError(
+                f"TwinParams.hip_flexion_deg must be in [0, 120] deg (the model's hip range), "
+                f"got {self.hip_flexion_deg!r}"
+            )
+        for name in ("hip_lock_solref", "strap_solref"):
+            timeconst, dampratio = getattr(self, name)
+            if not (timeconst > 0.0 and dampratio > 0.0):
+                raise ValueError(
+                    f"TwinParams.{name} must be (time constant > 0 s, damping ratio > 0), "
+                    f"got {getattr(self, name)!r}"
+                )
+        for name in ("hip_lock_solimp", "strap_solimp"):
+            dmin, dmax, width, mid, power = getattr(self, name)
+            if not (0.0 < dmin <= dmax < 1.0 and width > 0.0 and 0.0 < mid < 1.0 and power >= 1):
+                raise ValueError(
+                    f"TwinParams.{name} must satisfy 0 < dmin <= dmax < 1, width > 0, "
+                    f"0 < midpoint < 1, power >= 1, got {getattr(self, name)!r}"
+                )
+        for name in ("thigh_body", "shank_body"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ValueError(f"TwinParams.{name} must be a non-empty body name")
+
+    @property
+    def slide_frictionloss_n(self) -> float:
+        """Coulomb friction of the thigh slider (N): ``(1 - eta) * nominal strap force``."""
+        nominal_strap_force_n = self.motor_limit_nm / self.thigh_cuff_distance_m
+        return (1.0 - self.slide_efficiency) * nominal_strap_force_n
+
+    def as_dict(self) -> dict[str, object]:
+        """Return the parameters as a plain ``dict`` (for logs and reports)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
