@@ -5,7 +5,8 @@ Measures, in this one run:
 1. PID episodes/s in one process, per level (``evaluate_controller``: env + PID + metrics);
 2. the cost of a SAC decision (``predict`` of the shipped policy if available, else of an
    untrained SB3 SAC with the paper's 64-64 actor), per step;
-3. episodes/s of ``evaluate`` (PID) on all cores, worker start-up and file writing included;
+3. episodes/s of ``evaluate`` (PID) on all cores (steady state, file writing included) and
+   its fixed worker start-up, from two runs of different sizes;
 
 and extrapolates the full protocol: 1000 subjects x 4 levels x 2 controllers (PID + SAC,
 a SAC episode costing a PID episode plus 800 policy decisions).
@@ -71,20 +72,27 @@ def policy_step_s(steps: int = 2000) -> tuple[float, str]:
     return (time.perf_counter() - t0) / steps, name
 
 
-def parallel_pid(subjects: int, workers: int) -> float:
-    """Episodes/s of ``evaluate`` (PID, all levels) on ``workers`` processes."""
-    cfg = EvaluationConfig(
-        controllers=("pid",), subjects=subjects, chunk_size=max(1, subjects // 2)
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        run = evaluate(cfg, tmp, workers=workers, progress=False, log=lambda s: None)
-        return len(run.table) / (time.perf_counter() - t0)
+def parallel_pid(subjects: int, workers: int) -> tuple[float, float]:
+    """Steady-state seconds per episode and fixed start-up seconds of ``evaluate`` (PID, all
+    levels) on ``workers`` processes, from two runs of different sizes (t = t0 + n c)."""
+    sizes, times = [], []
+    for n in (max(1, subjects // 4), subjects):
+        cfg = EvaluationConfig(controllers=("pid",), subjects=n, chunk_size=max(1, n // 2))
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            run = evaluate(cfg, tmp, workers=workers, progress=False, log=lambda s: None)
+            times.append(time.perf_counter() - t0)
+            sizes.append(len(run.table))
+    per_episode = (times[1] - times[0]) / (sizes[1] - sizes[0])
+    return per_episode, times[1] - sizes[1] * per_episode
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subjects", type=int, default=6, help="subjects per level timed")
+    parser.add_argument(
+        "--parallel-subjects", type=int, default=12, help="subjects per level, parallel run"
+    )
     parser.add_argument("--workers", type=int, default=available_cores())
     args = parser.parse_args()
 
@@ -93,8 +101,8 @@ def main() -> None:
     t_step, policy_name = policy_step_s()
     steps = make_eval_env(0).unwrapped.episode_steps
     t_sac = t_pid + steps * t_step
-    par = parallel_pid(args.subjects, args.workers)
-    speedup = par * t_pid
+    par_episode_s, startup_s = parallel_pid(args.parallel_subjects, args.workers)
+    speedup = t_pid / par_episode_s
 
     print(f"PID episode, one process ({args.subjects} subjects per level):")
     for level, t in per_level.items():
@@ -102,12 +110,12 @@ def main() -> None:
     print(f"policy decision ({policy_name}): {t_step * 1e6:.0f} us/step")
     print(f"SAC episode (PID episode + {steps} decisions): {t_sac:.3f} s")
     print(
-        f"evaluate(), PID, {args.workers} workers: {par:.2f} episodes/s "
-        f"(x{speedup:.2f} the single process, start-up included)"
+        f"evaluate(), PID, {args.workers} workers: {1 / par_episode_s:.2f} episodes/s steady "
+        f"(x{speedup:.2f} the single process) + {startup_s:.1f} s start-up"
     )
     n = FULL_SUBJECTS * len(VALID_LEVELS)
     serial_total = n * (t_pid + t_sac)
-    parallel_total = serial_total / max(speedup, 1e-9)
+    parallel_total = startup_s + serial_total / speedup
     print(
         f"full protocol ({FULL_SUBJECTS} subjects x {len(VALID_LEVELS)} levels x "
         f"{FULL_CONTROLLERS} controllers = {n * FULL_CONTROLLERS} episodes): "
