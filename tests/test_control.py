@@ -218,7 +218,10 @@ def test_controller_specs(tmp_path):
 # ----------------------------------------------------------------------------- on the twin
 @pytest.mark.slow
 def test_ziegler_nichols_finds_an_ultimate_point_on_the_twin():
-    settings = zn.ZieglerNicholsSettings(rel_tol=0.15)
+    # the procedure needs an operating point the motor can hold: 30 deg of flexion is one
+    # (with the paper's 7 deg target the current twin pins the knee short of the target with
+    # the command saturated, and `tune` says so instead of returning a gain)
+    settings = zn.ZieglerNicholsSettings(rel_tol=0.15, target_angle_deg=30.0)
     result = zn.tune(settings)
     sustained = [t.kp for t in result.trials if t.sustained]
     decaying = [t.kp for t in result.trials if not t.sustained]

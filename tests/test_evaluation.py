@@ -186,7 +186,7 @@ def test_report_writes_figures_and_the_comparison(reference, tmp_path, capsys):
     text = path.read_text()
     for section in ("## Summary", "## Next to the paper", "## Reductions against the PID"):
         assert section in text
-    assert "6.3" in text and "9.3" in text  # the paper's PID final errors
+    assert "9.3" in text and "11.45" in text  # the paper's level-3 PID and SAC final errors
     assert "`pid:feedback=exo` vs `pid`" in text
     for name in ("fig3_pid", "fig4_comparison", "fig5_rms_vs_settling", "fig6_peak_torque"):
         png = tmp_path / "report" / "figures" / f"{name}.png"
