@@ -15,6 +15,7 @@ import csv
 import json
 import math
 import time
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -149,7 +150,9 @@ def _level_means(controller: Any, level: int, spec: SmallEvalSpec, env: Any) -> 
         res = run_episode(env, controller, subject_seed(level, i, spec.root_seed))
         m = res.metrics.as_dict()
         rows.append([m[k] for k in _EVAL_METRICS] + [float(res.unstable)])
-    means = np.nanmean(np.array(rows, dtype=np.float64), axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # NaN settling time of every subject
+        means = np.nanmean(np.array(rows, dtype=np.float64), axis=0)
     return dict(zip([*_EVAL_METRICS, "unstable"], map(float, means), strict=True))
 
 
