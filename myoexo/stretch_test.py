@@ -2,16 +2,24 @@
 
 The exo moves the relaxed, spastic knee through its range at a constant angular velocity, as a
 clinician does in the Tardieu test, once slowly and once fast. A stiff PD position controller on
-the exo motor tracks a trapezoidal-velocity ramp of the exo knee angle; the spastic reflex
-(:class:`~myoexo.spasticity.SpasticityStage`) runs in the muscle-command pipeline at every
-control step (10 ms, like the envs) and MuJoCo's activation dynamics turn the excitation into
-muscle force. The torque the exo has to produce to keep the prescribed motion is the
+the exo motor makes the human knee angle track a trapezoidal-velocity ramp (the feedback is the
+human knee, as the clinician imposes the limb's motion; the exo encoder is an option); the
+spastic reflex (:class:`~myoexo.spasticity.SpasticityStage`) runs in the muscle-command
+pipeline at every control step (10 ms, like the envs) and MuJoCo's activation dynamics turn the
+excitation into muscle force. The torque the exo has to produce to keep the prescribed motion is the
 *resisting torque*: it must grow with the stretch velocity and with the spasticity level.
 
 Sign conventions: angles are flexion positive (deg), the exo torque is flexion positive (Nm),
 and the resisting torque is the exo torque along the direction of motion (positive: the limb
-resists and the exo pushes). The default manoeuvre is a knee extension from 90 to 5 deg,
-which stretches the spastic hamstrings and gastrocnemii.
+resists and the exo pushes). The default manoeuvre is a knee extension from 90 to 20 deg,
+which stretches the spastic hamstrings and gastrocnemii. It stops at 20 deg because with the hip
+at 90 deg flexion the passive hamstrings limit extension (the clinical popliteal angle): near
+full extension the resistance is passive tension at any speed and level, not the reflex.
+
+The muscle torque at the knee is reported as well. Rajagopal's knee couples the tibial and
+patellar coordinates to ``knee_angle_r`` by joint equalities, and the quadriceps act through the
+patella, so the torque is ``sum_j qfrc_actuator[j] dq_j/dtheta`` over the knee and its coupled
+coordinates (virtual work along the coupling), not ``qfrc_actuator`` of ``knee_angle_r`` alone.
 
 CLI::
 
@@ -54,32 +62,36 @@ class StretchTestParams:
     """Parameters of the simulated stretch test.
 
     Attributes:
-        start_deg: Exo knee angle at the start of the stretch, deg (flexion positive).
-        end_deg: Exo knee angle at the end of the stretch, deg.
+        start_deg: Knee angle at the start of the stretch, deg (flexion positive).
+        end_deg: Knee angle at the end of the stretch, deg.
         velocities_rad_s: Stretch speeds (magnitudes), rad/s: slow and fast Tardieu velocities.
         levels: Spasticity levels to test.
-        kp_nm_per_rad: Proportional gain of the exo position controller, Nm/rad.
+        kp_nm_per_rad: Proportional gain of the exo position controller, Nm/rad (as stiff as
+            the 10 ms control period and the exo's light link allow).
         kd_nm_s_per_rad: Derivative gain of the exo position controller, Nm s/rad.
         accel_time_s: Time to reach (and to leave) the stretch speed, s.
         hold_s: Time held at the start angle before the stretch (the reflex tone and the
             activations settle), s.
         end_hold_s: Time held at the end angle after the stretch, s.
         control_period_s: Control period (the stage and the PD run once per period), s.
-        exo_joint: Exo knee hinge that the PD controls.
+        feedback_joint: Joint whose angle the PD controls: the human knee (default) or the
+            exo hinge (``"exo_knee"``, what a real device's encoder measures).
+        exo_joint: Exo knee hinge.
         exo_actuator: Exo motor (a torque actuator).
         human_joint: Human knee joint, read by the reflex.
     """
 
     start_deg: float = 90.0
-    end_deg: float = 5.0
+    end_deg: float = 20.0
     velocities_rad_s: tuple[float, ...] = (0.2, 3.0)
     levels: tuple[int, ...] = (0, 1, 2, 3)
-    kp_nm_per_rad: float = 1000.0
-    kd_nm_s_per_rad: float = 20.0
+    kp_nm_per_rad: float = 400.0
+    kd_nm_s_per_rad: float = 5.0
     accel_time_s: float = 0.05
     hold_s: float = 0.5
     end_hold_s: float = 0.2
     control_period_s: float = 0.01
+    feedback_joint: str = KNEE_JOINT
     exo_joint: str = "exo_knee"
     exo_actuator: str = "exo_motor"
     human_joint: str = KNEE_JOINT
@@ -128,7 +140,9 @@ class StretchTestResult:
     Attributes:
         traces: One row per control step and condition: ``level, vel_rad_s, time_s, phase,
             ref_deg, exo_deg, knee_deg, knee_vel_rad_s, sc_total, exo_torque_nm,
-            resisting_torque_nm, muscle_torque_nm, saturated``.
+            resisting_torque_nm, muscle_torque_nm (muscles' torque at the human knee along
+            its coupled motion, flexion positive), saturated, tracking_error_deg`` (reference
+            minus the feedback joint's angle).
         summary: One row per (level, speed): ``peak_resisting_torque_nm`` (over the
             constant-speed phase), ``mean_resisting_torque_nm`` (same phase),
             ``peak_resisting_torque_all_nm`` (whole motion, acceleration included),
@@ -230,6 +244,38 @@ def _motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
     return float(model.actuator_gainprm[actuator_id, 0] * model.actuator_gear[actuator_id, 0])
 
 
+class _CoupledJointTorque:
+    """Generalized actuator force along a joint and the joints coupled to it.
+
+    For a joint ``theta`` with dependent joints ``q_j = poly_j(theta)`` (MuJoCo joint
+    equalities), the torque the actuators exert along the coupled motion is
+    ``qfrc_actuator[theta] + sum_j qfrc_actuator[q_j] dpoly_j/dtheta`` (virtual work).
+    """
+
+    def __init__(self, model: mujoco.MjModel, joint: str) -> None:
+        import mujoco
+
+        jid = model.joint(joint).id
+        self._q = int(model.jnt_qposadr[jid])
+        self._d = int(model.jnt_dofadr[jid])
+        eqs = [
+            eq
+            for eq in range(model.neq)
+            if model.eq_type[eq] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[eq] == jid
+        ]
+        self._dep_dofs = np.array(
+            [model.jnt_dofadr[model.eq_obj1id[eq]] for eq in eqs], dtype=np.intp
+        )
+        coef = np.array([model.eq_data[eq, 1:5] for eq in eqs]).reshape(len(eqs), 4)
+        self._dcoef = coef * np.arange(1, 5)  # d/dx of c1 x + c2 x^2 + c3 x^3 + c4 x^4
+
+    def __call__(self, data: mujoco.MjData) -> float:
+        """Torque (Nm, positive along the joint) from the last computed ``qfrc_actuator``."""
+        x = data.qpos[self._q]
+        dq_dx = self._dcoef @ np.array([1.0, x, x * x, x * x * x])
+        return float(data.qfrc_actuator[self._d] + data.qfrc_actuator[self._dep_dofs] @ dq_dx)
+
+
 def simulate_stretch(
     model: mujoco.MjModel,
     level: int,
@@ -265,11 +311,14 @@ def simulate_stretch(
         raise ValueError(f"Unknown spasticity level {level!r}; expected one of {sorted(LEVELS)}.")
     if not (math.isfinite(vel_rad_s) and vel_rad_s > 0):
         raise ValueError(f"vel_rad_s must be a positive speed, got {vel_rad_s!r}.")
+    fb_j = model.joint(params.feedback_joint)
     exo_j = model.joint(params.exo_joint)
     knee_j = model.joint(params.human_joint)
     exo_a = model.actuator(params.exo_actuator).id
-    exo_q, exo_d = int(exo_j.qposadr[0]), int(exo_j.dofadr[0])
+    fb_q, fb_d = int(fb_j.qposadr[0]), int(fb_j.dofadr[0])
+    exo_q = int(exo_j.qposadr[0])
     knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
+    muscle_torque = _CoupledJointTorque(model, params.human_joint)
     nm_per_ctrl = _motor_nm_per_ctrl(model, exo_a)
     ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
     n_sub = max(1, round(params.control_period_s / model.opt.timestep))
@@ -289,7 +338,7 @@ def simulate_stretch(
     rec = np.empty((n_steps, 8))
     ctrl = np.zeros(model.nu)
     for i in range(n_steps):
-        q, qd = data.qpos[exo_q], data.qvel[exo_d]
+        q, qd = data.qpos[fb_q], data.qvel[fb_d]
         torque = params.kp_nm_per_rad * (ref_rad[i] - q) + params.kd_nm_s_per_rad * (
             ref_vel[i] - qd
         )
@@ -298,14 +347,14 @@ def simulate_stretch(
         ctrl[exo_a] = u
         data.ctrl[:] = stage.apply(host, ctrl)
         rec[i] = (
-            math.degrees(q),
+            math.degrees(data.qpos[exo_q]),
             math.degrees(data.qpos[knee_q]),
             data.qvel[knee_d],
             stage.last_sc_total,
             u * nm_per_ctrl,
-            data.qfrc_actuator[knee_d],
+            muscle_torque(data),
             torque,
-            u,
+            math.degrees(q),
         )
         mujoco.mj_step(model, data, nstep=n_sub)
     exo_torque = rec[:, 4]
@@ -324,6 +373,7 @@ def simulate_stretch(
             "resisting_torque_nm": params.direction * exo_torque,
             "muscle_torque_nm": rec[:, 5],
             "saturated": np.abs(rec[:, 6] - exo_torque) > 1e-9,
+            "tracking_error_deg": ref_deg - rec[:, 7],
         }
     )
 
@@ -339,7 +389,7 @@ def _summarize(trace: pd.DataFrame, params: StretchTestParams) -> dict[str, floa
         "mean_resisting_torque_nm": float(res[constant].mean()),
         "peak_resisting_torque_all_nm": float(res[moving].max()),
         "peak_sc_total": float(trace["sc_total"][moving].max()),
-        "max_tracking_error_deg": float((trace["ref_deg"] - trace["exo_deg"])[moving].abs().max()),
+        "max_tracking_error_deg": float(trace["tracking_error_deg"][moving].abs().max()),
         "mean_knee_vel_rad_s": float(params.direction * trace["knee_vel_rad_s"][constant].mean()),
         "saturated_fraction": float(trace["saturated"][moving].mean()),
     }

@@ -58,11 +58,12 @@ def result():
 
 def test_exo_imposes_the_stretch(result) -> None:
     s = result.summary.set_index(["level", "vel_rad_s"])
-    # the stiff controller holds the commanded speed: the knee follows within 10 %
+    # the stiff controller imposes the speed: the human knee follows within 15 % (the
+    # PD lags by resisting torque / Kp, up to ~10 deg at level 3 and 3 rad/s)
     np.testing.assert_allclose(
-        s["mean_knee_vel_rad_s"], s.index.get_level_values("vel_rad_s"), rtol=0.1
+        s["mean_knee_vel_rad_s"], s.index.get_level_values("vel_rad_s"), rtol=0.15
     )
-    assert (s["max_tracking_error_deg"] < 10.0).all()
+    assert (s["max_tracking_error_deg"] < 15.0).all()
     assert (s["saturated_fraction"] == 0.0).all()
     tr = result.traces
     # the reflex is off at level 0 and on at the other levels
@@ -103,3 +104,39 @@ def test_plot_spasticity_writes_fig2b(tmp_path) -> None:
     args = parser.parse_args(["--out", str(tmp_path), "--subjects", "20", "--no-stretch"])
     assert spasticity_plots.run(args) == 0
     assert (tmp_path / "fig2b_spasticity.png").stat().st_size > 10_000
+
+
+def test_muscle_knee_torque_follows_the_coupled_knee() -> None:
+    """The muscles' knee torque equals force . dL/dtheta along Rajagopal's coupled knee.
+
+    The quadriceps pull on the patella, whose coordinates are tied to the knee angle by
+    joint equalities, so ``qfrc_actuator`` of ``knee_angle_r`` alone misstates their torque.
+    """
+    mujoco = pytest.importorskip("mujoco")
+    try:
+        from myoexo.model import TwinParams, build_model, pose_twin
+    except ImportError:  # pragma: no cover
+        pytest.skip("myoexo.model.build_model is not available")
+    from myoexo.spasticity import SPASTIC_EXTENSORS
+    from myoexo.stretch_test import _CoupledJointTorque
+
+    model, _ = build_model(TwinParams())
+    data = mujoco.MjData(model)
+    torque = _CoupledJointTorque(model, "knee_angle_r")
+    ids = np.array([model.actuator(n).id for n in SPASTIC_EXTENSORS])
+    muscles = np.flatnonzero(model.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE)
+    knee_dof = model.joint("knee_angle_r").dofadr[0]
+    h_deg = 1e-3
+    for angle in (80.0, 45.0):
+        lengths = []
+        for a in (angle - h_deg, angle + h_deg):
+            pose_twin(model, data, knee_angle_deg=a)
+            lengths.append(data.actuator_length[muscles].copy())
+        dl_dtheta = (lengths[1] - lengths[0]) / math.radians(2 * h_deg)
+        pose_twin(model, data, knee_angle_deg=angle)
+        data.act[model.actuator_actadr[ids]] = 1.0
+        mujoco.mj_forward(model, data)
+        expected = float(data.actuator_force[muscles] @ dl_dtheta)  # passive ones too
+        assert expected < -50.0  # the quadriceps extend the knee
+        assert torque(data) == pytest.approx(expected, rel=1e-3)
+        assert abs(data.qfrc_actuator[knee_dof] - expected) > 0.1 * abs(expected)
