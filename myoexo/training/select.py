@@ -9,6 +9,7 @@ Criteria (per level, means over the same simulated subjects, SPEC section 5):
   level 3.
 
     python -m myoexo.training.select runs/cpu_main --subjects 10 --last 6
+    python -m myoexo.training.select results/eval --table    # after `myoexo evaluate`
 """
 
 from __future__ import annotations
@@ -176,14 +177,72 @@ def select_checkpoint(
     return chosen, table
 
 
+def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any:
+    """:func:`compare` table of two controllers of a ``myoexo evaluate`` output folder."""
+    from myoexo.evaluation import load_table
+
+    table = load_table(out_dir)
+    missing = {sac, pid} - set(table.controller)
+    if missing:
+        raise ValueError(f"{str(out_dir)!r} has no episodes of {sorted(missing)}")
+    means = {c: level_means(table[table.controller == c]) for c in (sac, pid)}
+    return compare(means[sac], means[pid])
+
+
+def markdown_table(table: Any) -> str:
+    """The comparison as a Markdown table, each of our numbers next to the paper's."""
+    from myoexo.evaluation.paper import PAPER_RESULTS
+
+    def num(x: float | None, fmt: str = ".2f") -> str:
+        return "n/a" if x is None else format(x, fmt)
+
+    lines = [
+        "| level | final error SAC (deg) [paper] | final error PID (deg) [paper] "
+        "| peak SAC / PID (Nm) | peak reduction % [paper] | RMS SAC / PID (Nm) "
+        "| RMS reduction % [paper] | settling SAC (s) [paper] | criteria |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for level, r in table.iterrows():
+        ref = PAPER_RESULTS[int(level)]
+        flags = [
+            name
+            for name, ok in (
+                ("final error", r.final_error_ok),
+                ("peak", r.peak_ok),
+                ("RMS", r.rms_ok),
+            )
+            if not ok
+        ]
+        lines.append(
+            f"| {level} | {r.sac_final_error_deg:.2f} [{ref.sac_final_error_text}] "
+            f"| {r.pid_final_error_deg:.2f} [{ref.pid_final_error_text}] "
+            f"| {r.sac_peak_nm:.1f} / {r.pid_peak_nm:.1f} "
+            f"| {r.peak_reduction_pct:.1f} [{num(ref.peak_reduction_pct, '.1f')}] "
+            f"| {r.sac_rms_nm:.1f} / {r.pid_rms_nm:.1f} "
+            f"| {r.rms_reduction_pct:.1f} [{num(ref.rms_reduction_pct, '.1f')}] "
+            f"| {r.sac_settling_time_s:.2f} [{ref.sac_settling_time_s}] "
+            f"| {'pass' if not flags else 'fails: ' + ', '.join(flags)} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m myoexo.training.select RUN``: print the chosen checkpoint and its table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run", type=Path)
+    parser.add_argument("run", type=Path, help="run folder, or an evaluation folder with --table")
+    parser.add_argument(
+        "--table",
+        action="store_true",
+        help="print the Markdown criteria table of `myoexo "
+        "evaluate --controllers pid sac` output in RUN instead",
+    )
     parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
     parser.add_argument("--last", type=int, default=6, help="newest checkpoints to consider")
     parser.add_argument("--root-seed", type=int, default=0)
     args = parser.parse_args(argv)
+    if args.table:
+        print(markdown_table(compare_evaluation(args.run)))
+        return 0
     chosen, table = select_checkpoint(args.run, args.subjects, args.last, args.root_seed)
     print(f"chosen: {chosen}")
     print(table.round(2).to_string())
