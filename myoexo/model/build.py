@@ -16,7 +16,7 @@ import numpy as np
 
 from myoexo.model.exo import EXO_ACTUATOR, exo_spec, strap_to_shank
 from myoexo.model.geometry import ExoGeometry, KneeAxisFit, exo_geometry, fit_knee_axis
-from myoexo.model.leg import build_spec_quietly, leg_builder
+from myoexo.model.leg import build_spec_quietly, compile_quietly, leg_builder, standalone_spec
 from myoexo.model.params import TwinParams
 from myoexo.model.posing import pose_twin
 
@@ -54,7 +54,7 @@ def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel) -> mujoco.MjModel:
     key.qvel = np.zeros(model.nv)
     key.act = np.zeros(model.na)
     key.ctrl = np.zeros(model.nu)
-    return spec.compile()
+    return compile_quietly(spec)
 
 
 def build_leg_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoco.MjSpec]:
@@ -72,7 +72,8 @@ def build_leg_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, m
     params = TwinParams() if params is None else params
     spec = build_spec_quietly(leg_builder(params))
     _check_bodies(spec, params)
-    model = _add_home_key(spec, spec.compile())
+    spec = standalone_spec(spec)
+    model = _add_home_key(spec, compile_quietly(spec))
     return model, spec
 
 
@@ -81,7 +82,7 @@ def knee_axis_fit(params: TwinParams) -> KneeAxisFit:
     """Least-squares mean flexion axis of the subject's knee (cached per ``params``)."""
     spec = build_spec_quietly(leg_builder(params))
     _check_bodies(spec, params)
-    return fit_knee_axis(spec.compile(), params)
+    return fit_knee_axis(compile_quietly(spec), params)
 
 
 def twin_geometry(params: TwinParams | None = None) -> ExoGeometry:
@@ -112,7 +113,8 @@ def build_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoc
     )
     spec = build_spec_quietly(builder)
     spec.modelname = "myoexo_twin"
-    model = spec.compile()
+    spec = standalone_spec(spec)
+    model = compile_quietly(spec)
     if model.actuator(model.nu - 1).name != EXO_ACTUATOR:
         raise RuntimeError("exo_motor must be the last actuator of the twin")
     model = _add_home_key(spec, model)

@@ -102,7 +102,9 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     cuff = spec.body("exo_thigh_cuff")
     cuff.pos = g.thigh_cuff_m
     cuff.mass = params.thigh_cuff_mass_kg
-    cuff.inertia = _shell_inertia(params.thigh_cuff_mass_kg, params.cuff_radius_m, params.cuff_height_m)
+    cuff.inertia = _shell_inertia(
+        params.thigh_cuff_mass_kg, params.cuff_radius_m, params.cuff_height_m
+    )
     cuff.ipos = np.zeros(3)
     shell = spec.geom("exo_thigh_cuff_shell")
     shell.size = np.array([params.cuff_radius_m, params.cuff_height_m / 2.0, 0.0])
@@ -238,4 +240,3 @@ def strap_to_shank(
         return spec
 
     return transform
-

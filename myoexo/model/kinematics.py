@@ -16,9 +16,7 @@ import numpy as np
 __all__ = ["coupled_joint_values", "relative_pose"]
 
 
-def coupled_joint_values(
-    model: mujoco.MjModel, joint: str, value_rad: float
-) -> dict[int, float]:
+def coupled_joint_values(model: mujoco.MjModel, joint: str, value_rad: float) -> dict[int, float]:
     """Values of every joint coupled to ``joint`` by a polynomial joint equality.
 
     Args:

@@ -139,12 +139,12 @@ class TwinParams:
 
     slide_efficiency: float = 0.97
     thigh_slide_damping_n_s_m: float = 50.0
-    thigh_slide_stiffness_n_m: float = 20_000.0
-    pin_stiffness_nm_rad: float = 50.0
+    thigh_slide_stiffness_n_m: float = 50_000.0
+    pin_stiffness_nm_rad: float = 2_000.0
     shank_rotation_stiffness_nm_rad: float = 1.0
     coupling_damping_nm_s_rad: float = 1.0
-    strap_solref: tuple[float, float] = (0.01, 1.0)
-    strap_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    strap_solref: tuple[float, float] = (0.005, 1.0)
+    strap_solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
 
     thigh_cuff_distance_m: float = 0.20
     shank_cuff_distance_m: float = 0.22
