@@ -12,8 +12,8 @@ root, both legs, 80 muscles, Rajagopal's coupled knees) is loaded through
   equalities, so the thigh is horizontal and the shank hangs under gravity;
 * keeps the knee (with Rajagopal's coupled translations/rotations and the patella
   equalities), ankle, subtalar and mtp joints free;
-* disables all contacts: a single seated leg without floor has nothing to touch, and
-  the broad phase then costs nothing.
+* disables all contacts (and drops the foot touch sensors): a single seated leg without
+  floor has nothing to touch, and the broad phase then costs nothing.
 
 Nothing in MyoSuite's XML files is edited; all changes are made on the spec.
 """
@@ -36,14 +36,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HIP_JOINTS",
-    "build_spec_quietly",
-    "compile_quietly",
-    "standalone_spec",
     "KNEE_JOINT",
     "LEG_FRAGMENT",
+    "build_spec_quietly",
+    "compile_quietly",
     "hip_lock_name",
     "leg_builder",
     "seat_subject",
+    "standalone_spec",
 ]
 
 #: MyoSuite fragment name of the leg model (resolved by ``ModelBuilder``).
@@ -73,7 +73,10 @@ def _remove_left_leg(spec: mujoco.MjSpec) -> None:
         spec.delete(tendon)
     for eq in [e for e in spec.equalities if _is_left(e.name)]:
         spec.delete(eq)
-    for sensor in [s for s in spec.sensors if _is_left(s.name)]:
+    # Left sensors, and the foot touch sensors: with contacts off they would read 0.
+    for sensor in [
+        s for s in spec.sensors if _is_left(s.name) or s.type == mujoco.mjtSensor.mjSENS_TOUCH
+    ]:
         spec.delete(sensor)
     spec.delete(spec.body("femur_l"))
     pelvis = spec.body("pelvis")

@@ -31,7 +31,7 @@ __all__ = ["pose_twin", "strap_violation"]
 _ROT_LENGTH_M = 0.1
 #: Nominal strap stiffness (N/m) that weighs the coupling springs' energy against the
 #: strap violation when the loop is closed.
-_STRAP_STIFFNESS_N_M = 1e5
+_STRAP_STIFFNESS_N_M = 1e7
 #: Levenberg-Marquardt damping (m^2) and per-iteration step bound (rad or m).
 _LM_DAMPING = 1e-5
 _MAX_STEP = 0.05

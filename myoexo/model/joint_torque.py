@@ -1,0 +1,58 @@
+"""Actuator torque along a joint whose motion drags coupled joints with it.
+
+Rajagopal's knee moves the tibia's translations/rotations and the patella as polynomial
+functions of the flexion angle (MuJoCo joint equalities ``q_j = poly_j(theta)``). The quadriceps
+pull on the patella, so ``qfrc_actuator`` at ``knee_angle_r`` alone misstates their knee
+torque (by a factor of ~2 for vastus intermedius at 90 deg). By virtual work the torque
+along the coupled motion is ``qfrc[theta] + sum_j qfrc[q_j] * dpoly_j/dtheta``.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+
+class CoupledJointTorque:
+    """Generalized actuator force along a joint and every joint tied to it by a polynomial
+    joint equality (``eq_obj2id`` = that joint).
+
+    Args:
+        model: The compiled model.
+        joint: Name of the independent joint (e.g. ``"knee_angle_r"``).
+
+    Raises:
+        ValueError: If the model has no such hinge/slide joint.
+    """
+
+    def __init__(self, model: mujoco.MjModel, joint: str) -> None:
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+        if jid < 0:
+            raise ValueError(f"joint {joint!r} is not in the model")
+        self.joint = joint
+        self._qadr = int(model.jnt_qposadr[jid])
+        self._dadr = int(model.jnt_dofadr[jid])
+        eqs = [
+            eq
+            for eq in range(model.neq)
+            if model.eq_type[eq] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[eq] == jid
+        ]
+        self.dependent_dofs = np.array(
+            [model.jnt_dofadr[model.eq_obj1id[eq]] for eq in eqs], dtype=np.intp
+        )
+        coef = np.array([model.eq_data[eq, 1:5] for eq in eqs]).reshape(len(eqs), 4)
+        # d/dx (c1 x + c2 x^2 + c3 x^3 + c4 x^4) = c1 + 2 c2 x + 3 c3 x^2 + 4 c4 x^3
+        self._dcoef = coef * np.arange(1, 5)
+
+    def transmission(self, data: mujoco.MjData) -> np.ndarray:
+        """``d q_j / d theta`` of every dependent joint at the current angle."""
+        x = float(data.qpos[self._qadr])
+        return self._dcoef @ np.array([1.0, x, x * x, x * x * x])
+
+    def from_generalized(self, data: mujoco.MjData, qfrc: np.ndarray) -> float:
+        """Torque (Nm, positive along the joint) of a generalized force vector ``qfrc``."""
+        return float(qfrc[self._dadr] + qfrc[self.dependent_dofs] @ self.transmission(data))
+
+    def __call__(self, data: mujoco.MjData) -> float:
+        """Actuator torque along the joint from the last computed ``qfrc_actuator`` (Nm)."""
+        return self.from_generalized(data, data.qfrc_actuator)
