@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import KNEE_JOINT, LEVELS, SpasticityParams, SpasticityStage
 
 if TYPE_CHECKING:
@@ -244,38 +245,6 @@ def _motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
     return float(model.actuator_gainprm[actuator_id, 0] * model.actuator_gear[actuator_id, 0])
 
 
-class _CoupledJointTorque:
-    """Generalized actuator force along a joint and the joints coupled to it.
-
-    For a joint ``theta`` with dependent joints ``q_j = poly_j(theta)`` (MuJoCo joint
-    equalities), the torque the actuators exert along the coupled motion is
-    ``qfrc_actuator[theta] + sum_j qfrc_actuator[q_j] dpoly_j/dtheta`` (virtual work).
-    """
-
-    def __init__(self, model: mujoco.MjModel, joint: str) -> None:
-        import mujoco
-
-        jid = model.joint(joint).id
-        self._q = int(model.jnt_qposadr[jid])
-        self._d = int(model.jnt_dofadr[jid])
-        eqs = [
-            eq
-            for eq in range(model.neq)
-            if model.eq_type[eq] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[eq] == jid
-        ]
-        self._dep_dofs = np.array(
-            [model.jnt_dofadr[model.eq_obj1id[eq]] for eq in eqs], dtype=np.intp
-        )
-        coef = np.array([model.eq_data[eq, 1:5] for eq in eqs]).reshape(len(eqs), 4)
-        self._dcoef = coef * np.arange(1, 5)  # d/dx of c1 x + c2 x^2 + c3 x^3 + c4 x^4
-
-    def __call__(self, data: mujoco.MjData) -> float:
-        """Torque (Nm, positive along the joint) from the last computed ``qfrc_actuator``."""
-        x = data.qpos[self._q]
-        dq_dx = self._dcoef @ np.array([1.0, x, x * x, x * x * x])
-        return float(data.qfrc_actuator[self._d] + data.qfrc_actuator[self._dep_dofs] @ dq_dx)
-
-
 def simulate_stretch(
     model: mujoco.MjModel,
     level: int,
@@ -318,7 +287,7 @@ def simulate_stretch(
     fb_q, fb_d = int(fb_j.qposadr[0]), int(fb_j.dofadr[0])
     exo_q = int(exo_j.qposadr[0])
     knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
-    muscle_torque = _CoupledJointTorque(model, params.human_joint)
+    muscle_torque = CoupledJointTorque(model, params.human_joint)
     nm_per_ctrl = _motor_nm_per_ctrl(model, exo_a)
     ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
     n_sub = max(1, round(params.control_period_s / model.opt.timestep))

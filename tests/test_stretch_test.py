@@ -117,12 +117,12 @@ def test_muscle_knee_torque_follows_the_coupled_knee() -> None:
         from myoexo.model import TwinParams, build_model, pose_twin
     except ImportError:  # pragma: no cover
         pytest.skip("myoexo.model.build_model is not available")
+    from myoexo.model.joint_torque import CoupledJointTorque
     from myoexo.spasticity import SPASTIC_EXTENSORS
-    from myoexo.stretch_test import _CoupledJointTorque
 
     model, _ = build_model(TwinParams())
     data = mujoco.MjData(model)
-    torque = _CoupledJointTorque(model, "knee_angle_r")
+    torque = CoupledJointTorque(model, "knee_angle_r")
     ids = np.array([model.actuator(n).id for n in SPASTIC_EXTENSORS])
     muscles = np.flatnonzero(model.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE)
     knee_dof = model.joint("knee_angle_r").dofadr[0]

@@ -1,0 +1,194 @@
+"""MyoExoKnee environments: API compliance, determinism, task physics, robustness."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import myoexo
+from myoexo.envs.registration import ENV_LEVELS
+
+ALL_IDS = list(ENV_LEVELS)
+
+
+def _rollout(env: gym.Env, seed: int, n: int, action: float | None = None):
+    obs, info = env.reset(seed=seed)
+    obs_list, rew, infos = [obs], [], [info]
+    for _ in range(n):
+        a = env.action_space.sample() if action is None else np.array([action], np.float32)
+        obs, r, term, trunc, info = env.step(a)
+        obs_list.append(obs)
+        rew.append(r)
+        infos.append(info)
+        if term or trunc:
+            break
+    return np.array(obs_list), np.array(rew), infos
+
+
+@pytest.fixture(scope="module")
+def env1():
+    env = gym.make("MyoExoKnee-v1")
+    yield env
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_gymnasium_and_sb3_env_checkers(env_id):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(env_id)
+    check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(env.unwrapped, warn=True)
+    env.close()
+
+
+def test_ids_reachable_through_myosuite_and_module_prefix():
+    from myosuite.core.registry import make_env
+
+    env = make_env("MyoExoKnee-v2")
+    assert env.unwrapped.level == 2
+    env.close()
+    env = gym.make("myoexo:MyoExoKnee-v3")
+    env.reset(seed=0)
+    assert env.unwrapped.level == 3
+    assert env.spec.max_episode_steps == 800
+    env.close()
+
+
+def test_spaces_dt_and_info_keys(env1):
+    env = env1.unwrapped
+    assert env.action_space.shape == (1,)
+    assert env.dt == pytest.approx(0.01)
+    assert env.episode_steps == 800
+    obs, info = env1.reset(seed=3)
+    assert obs.shape == env.observation_space.shape and obs.dtype == np.float32
+    # normalized scale: no entry far outside O(1) at rest
+    assert np.abs(obs).max() < 10
+    for key in (
+        "time_s",
+        "knee_angle_deg",
+        "knee_vel_rad_s",
+        "exo_angle_deg",
+        "target_angle_deg",
+        "error_deg",
+        "command",
+        "exo_torque_nm",
+        "muscle_knee_torque_nm",
+        "interaction_torque_nm",
+        "thigh_cuff_force_n",
+        "shank_cuff_force_n",
+        "sc_total",
+        "level",
+        "subject",
+        "unstable",
+    ):
+        assert key in info, key
+    assert 87 <= info["knee_angle_deg"] <= 93
+    assert info["level"] == 1 and set(info["subject"]) >= {"s_theta", "s_v", "k"}
+    _, _, _, _, info = env1.step(np.array([0.0], np.float32))
+    assert {"obs_dict", "rwd_dict", "pose", "inter", "vel", "act"} <= set(info)
+
+
+def test_same_seed_bit_identical_different_seed_different_subject():
+    env_a, env_b = gym.make("MyoExoKneeRandom-v0"), gym.make("MyoExoKneeRandom-v0")
+    oa, ra, ia = _rollout(env_a, 11, 60)
+    env_b.action_space.seed(0)
+    env_a.action_space.seed(0)
+    oa, ra, ia = _rollout(env_a, 11, 60)
+    ob, rb, ib = _rollout(env_b, 11, 60)
+    assert np.array_equal(oa, ob) and np.array_equal(ra, rb)
+    assert ia[0]["subject"] == ib[0]["subject"]
+    _, _, ic = _rollout(env_b, 12, 1)
+    assert ic[0]["subject"] != ia[0]["subject"]
+
+
+def test_pickle_roundtrip_behaves_the_same(env1):
+    clone = pickle.loads(pickle.dumps(env1))
+    a, ra, _ = _rollout(env1, 5, 20, action=-0.3)
+    b, rb, _ = _rollout(clone, 5, 20, action=-0.3)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(ra, rb)
+    assert clone.unwrapped.ctrl_stages == ("spasticity",)
+
+
+def test_myosuite_style_accessors(env1):
+    env1.reset(seed=0)
+    env = env1.unwrapped
+    od = env.get_obs_dict(env.model, env.data)
+    assert od["knee_angle_rad"].shape == (1,)
+    rd = env.get_reward_dict(od)
+    assert {"dense", "done", "sparse", "solved"} <= set(rd)
+    t, vec, pdict = env.get_proprioception()
+    assert vec.ndim == 1 and "exo_angle_rad" in pdict and t == pytest.approx(0.0)
+
+
+def _final_angle(env_id: str, action: float, seconds: float = 3.0, seed: int = 0) -> float:
+    env = gym.make(env_id)
+    _, _, infos = _rollout(env, seed, int(seconds / 0.01), action=action)
+    env.close()
+    assert not any(i["unstable"] for i in infos)
+    return infos[-1]["knee_angle_deg"]
+
+
+def test_zero_action_stays_near_hanging_equilibrium():
+    angle = _final_angle("MyoExoKnee-v0", 0.0)
+    assert 60.0 < angle < 100.0
+
+
+def test_constant_extension_reaches_target_region_and_spasticity_resists():
+    a0 = _final_angle("MyoExoKnee-v0", -0.5)
+    a3 = _final_angle("MyoExoKnee-v3", -0.5)
+    assert a0 < 20.0  # the exo extends the passive knee to near the 7 deg target
+    assert a3 > a0 + 5.0  # level 3 reflexes resist the same command
+
+
+@pytest.mark.parametrize("bad", [np.array([np.nan]), np.array([np.inf]), np.zeros(2), [[0.1]]])
+def test_bad_actions_raise(env1, bad):
+    env1.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        env1.step(bad)
+
+
+def test_out_of_range_actions_are_clipped(env1):
+    env1.reset(seed=0)
+    _, _, _, _, info = env1.step(np.array([5.0], np.float32))
+    assert info["command"] == 1.0
+    assert info["exo_torque_nm"] == pytest.approx(100.0, rel=1e-6)
+
+
+def test_bad_constructor_arguments_raise():
+    from myoexo.envs.config import RewardParams, TaskParams
+
+    with pytest.raises(ValueError, match="target_angle_deg"):
+        TaskParams(target_angle_deg=200.0)
+    with pytest.raises(ValueError, match="weights"):
+        RewardParams(weights={"nope": 1.0})
+    with pytest.raises(ValueError):
+        gym.make("MyoExoKnee-v0", spasticity_level=7)
+
+
+def test_episode_truncates_at_8_s():
+    env = gym.make("MyoExoKnee-v0", task=myoexo.envs.TaskParams(episode_duration_s=0.2))
+    _, _, infos = _rollout(env, 0, 1000, action=0.0)
+    assert len(infos) == 21 and infos[-1]["time_s"] == pytest.approx(0.2)
+
+
+def test_vector_envs():
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    venv = gym.make_vec("MyoExoKnee-v1", num_envs=2, vectorization_mode="async")
+    obs, _ = venv.reset(seed=[0, 1])
+    obs, r, *_ = venv.step(np.zeros((2, 1), np.float32))
+    assert obs.shape[0] == 2 and np.isfinite(r).all()
+    venv.close()
+    # worker processes start fresh: the "myoexo:" prefix imports the package there
+    sb3 = SubprocVecEnv([lambda: gym.make("myoexo:MyoExoKnee-v2")] * 2)
+    sb3.seed(0)
+    obs = sb3.reset()
+    obs, r, _, infos = sb3.step(np.zeros((2, 1), np.float32))
+    assert obs.shape[0] == 2 and infos[0]["level"] == 2
+    sb3.close()
