@@ -76,6 +76,7 @@ COUPLING_JOINTS: tuple[str, ...] = (
     "exo_thigh_slide",
     "exo_thigh_pin",
     "exo_shank_pin",
+    "exo_shank_abduction",
     "exo_shank_axial",
 )
 
