@@ -9,6 +9,10 @@ export MUJOCO_GL ?= egl
 .PHONY: demo test install lint format clean bench
 
 $(STAMP): pyproject.toml Makefile
+	@# headless rendering (notebooks, videos) uses Mesa's EGL; install it where it is missing
+	@ldconfig -p | grep -q libEGL_mesa || { apt-get update -qq && \
+		apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri; } || \
+		echo "warning: Mesa EGL not installed: offscreen rendering will not work"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0

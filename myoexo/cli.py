@@ -28,7 +28,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 def build_parser() -> argparse.ArgumentParser:
     """Parser with one sub-parser per available command."""
-    parser = argparse.ArgumentParser(prog="myoexo", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="myoexo",
+        description="myoexo: knee-exoskeleton digital twin with spastic reflexes on MyoSuite.",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():
         try:

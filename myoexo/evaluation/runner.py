@@ -29,6 +29,7 @@ protocol (1000 subjects x 4 levels x 2 controllers), and never all in memory at 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -127,13 +128,37 @@ class EvaluationConfig:
             raise ValueError(f"episode_duration_s = {d!r} must be in (0, 3600] s or None")
 
     def run_key(self) -> dict[str, Any]:
-        """Settings that change the content of an episode's file (checked on resume)."""
+        """Settings that change the content of an episode's file (checked on resume),
+        including a fingerprint of the simulated twin, so that a folder filled by an older
+        model is never silently extended."""
         return {
             "root_seed": int(self.root_seed),
             "episode_duration_s": self.episode_duration_s,
             "trace_stride": int(self.trace_stride),
             "env_id": self.env_id,
+            "env_fingerprint": env_fingerprint(self.env_id.format(level=self.levels[0])),
         }
+
+
+@functools.lru_cache(maxsize=8)
+def env_fingerprint(env_id: str) -> str:
+    """SHA-256 (16 hex digits) of what defines an env's episodes: the compiled MuJoCo model
+    (MJB bytes: geometry, masses, muscles, couplings, timestep), the task and reward
+    parameters and the observation layout."""
+    import gymnasium as gym
+    import mujoco
+
+    env = gym.make(env_id).unwrapped
+    try:
+        model = env.model
+        mjb = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+        mujoco.mj_saveModel(model, None, mjb)
+        h = hashlib.sha256(mjb.tobytes())
+        for part in ("task", "reward_params", "obs_keys"):
+            h.update(repr(getattr(env, part, None)).encode())
+    finally:
+        env.close()
+    return h.hexdigest()[:16]
 
 
 def subject_seed(level: int, index: int, root_seed: int = 0) -> int:
