@@ -67,18 +67,9 @@ from myosuite.envs.gymnasium_env import CpuEnvAccessor, MyoGymnasiumEnv
 from myosuite.envs.muscle_stages import CtrlStageHost
 
 from myoexo.envs.config import RewardParams, TaskParams
-from myoexo.model import TwinParams, build_model, pose_twin
+from myoexo.model import COUPLING_JOINTS, TwinParams, build_model, pose_twin
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import SPASTIC_MUSCLES, SpasticityStage
-
-#: Coupling joints of the twin observed by the env (those present in the model are used).
-COUPLING_JOINTS: tuple[str, ...] = (
-    "exo_thigh_slide",
-    "exo_thigh_pin",
-    "exo_shank_pin",
-    "exo_shank_abduction",
-    "exo_shank_axial",
-)
 
 #: Cuff sensors of the twin: obs key -> sensor name.
 CUFF_SENSORS: dict[str, str] = {
