@@ -192,3 +192,13 @@ def test_vector_envs():
     obs, r, _, infos = sb3.step(np.zeros((2, 1), np.float32))
     assert obs.shape[0] == 2 and infos[0]["level"] == 2
     sb3.close()
+
+
+def test_instability_truncates_with_a_flag_and_finite_observation(env1):
+    env1.reset(seed=0)
+    env1.step(np.array([0.0], np.float32))
+    env1.unwrapped.data.qvel[:] = 1e11  # beyond mjMAXVAL: what a blow-up looks like
+    obs, reward, terminated, truncated, info = env1.step(np.array([0.0], np.float32))
+    assert truncated and not terminated
+    assert info["unstable"] is True
+    assert np.isfinite(obs).all() and np.isfinite(reward)
