@@ -275,6 +275,7 @@ def record_episode(
     width: int = 320,
     height: int = 240,
     show_muscles: bool = True,
+    until_s: float | None = None,
 ) -> EpisodeRecording:
     """Run one episode of *controller* on a MyoExoKnee env and render a frame every *every_s*.
 
@@ -289,15 +290,19 @@ def record_episode(
         width: Frame width, pixels.
         height: Frame height, pixels.
         show_muscles: Draw the muscle paths.
+        until_s: Stop the episode at this simulated time, s (``None``: run it to its end),
+            e.g. to zoom into a fast transient with a small *every_s*.
 
     Returns:
         The frames (first one at reset, t = 0) and the scalar ``info`` signals.
 
     Raises:
-        ValueError: Non-positive or non-finite *every_s*.
+        ValueError: Non-positive or non-finite *every_s* or *until_s*.
     """
     if not (math.isfinite(every_s) and every_s > 0.0):
         raise ValueError(f"every_s = {every_s!r} must be a positive time in s")
+    if until_s is not None and not (math.isfinite(until_s) and until_s > 0.0):
+        raise ValueError(f"until_s = {until_s!r} must be a positive time in s or None")
     base = env.unwrapped
     stride = max(1, round(every_s / float(base.dt)))
     obs, info = env.reset(seed=int(seed))
@@ -317,6 +322,8 @@ def record_episode(
                 times.append(float(info["time_s"]))
                 frames.append(renderer.render(base.data, view))
             if terminated or truncated:
+                break
+            if until_s is not None and float(info["time_s"]) >= until_s - 1e-9:
                 break
     table = np.asarray(rows)
     return EpisodeRecording(
