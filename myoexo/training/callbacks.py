@@ -323,7 +323,8 @@ class PeriodicCheckpointCallback(BaseCallback):
 
     def save(self, with_replay: bool = True) -> Path:
         """Write a checkpoint now (resumable with the replay buffer, else a snapshot)."""
-        score = self.evaluator.last_score if self.evaluator is not None else None
+        ev = self.evaluator
+        score = ev.last_score if ev is not None else None
         elapsed = time.monotonic() - self._t_start
         state = {
             "num_timesteps": int(self.num_timesteps),
@@ -334,6 +335,7 @@ class PeriodicCheckpointCallback(BaseCallback):
                 (self.num_timesteps - self._steps_at_start) / max(elapsed, 1e-9), 2
             ),
             "eval_score": score,
+            "eval_step": ev.last_eval_step if ev is not None else None,
             "resumable": with_replay,
             "saved_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }

@@ -139,7 +139,8 @@ def resolve_checkpoint(path: str | os.PathLike[str], which: str = "latest") -> P
     """A checkpoint folder from a run folder (``which`` = ``latest``, ``best`` or a step
     number) or from a checkpoint folder itself.
 
-    ``best``: the checkpoint with the highest small-evaluation score in its ``state.json``.
+    ``best``: the checkpoint taken at the evaluated step with the highest small-evaluation
+    score (``eval.csv``).
     """
     p = Path(path)
     if (p / MODEL_FILE).is_file() and (p / STATE_FILE).is_file():
@@ -150,11 +151,7 @@ def resolve_checkpoint(path: str | os.PathLike[str], which: str = "latest") -> P
     if which == "latest":
         return ckpts[-1]
     if which == "best":
-        scored = [(read_state(c).get("eval_score"), c) for c in ckpts]
-        scored = [(s, c) for s, c in scored if s is not None]
-        if not scored:
-            raise ValueError(f"no checkpoint of {str(p)!r} has an evaluation score")
-        return max(scored, key=lambda sc: (sc[0], sc[1].name))[1]
+        return _best_checkpoint(p, ckpts)
     try:
         step = int(which)
     except ValueError:
@@ -162,7 +159,26 @@ def resolve_checkpoint(path: str | os.PathLike[str], which: str = "latest") -> P
     match = [c for c in ckpts if c.name == checkpoint_name(step)]
     if not match:
         raise ValueError(
-            f"no checkpoint at step {step} in {str(p)!r}; available: "
-            f"{[int(c.name[len(_PREFIX) :]) for c in ckpts]}"
+            f"no checkpoint at step {step} in {str(p)!r}; available: {[step_of(c) for c in ckpts]}"
         )
     return match[0]
+
+
+def step_of(checkpoint: Path) -> int:
+    """Step counter of a checkpoint folder, from its name."""
+    return int(Path(checkpoint).name[len(_PREFIX) :])
+
+
+def _best_checkpoint(run_dir: Path, ckpts: list[Path]) -> Path:
+    """Checkpoint of the evaluated step with the highest score in ``eval.csv``."""
+    import csv
+
+    path = run_dir / EVAL_FILE
+    scores: dict[int, float] = {}
+    if path.is_file():
+        with open(path, newline="") as f:
+            scores = {int(r["step"]): float(r["score"]) for r in csv.DictReader(f)}
+    scored = [(scores[step_of(c)], c) for c in ckpts if step_of(c) in scores]
+    if not scored:
+        raise ValueError(f"no checkpoint of {str(run_dir)!r} was taken at an evaluated step")
+    return max(scored, key=lambda sc: (sc[0], sc[1].name))[1]
