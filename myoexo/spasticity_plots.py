@@ -69,15 +69,13 @@ def plot_sc_curves(n_subjects: int = 200, seed: int = 0) -> Figure:
         n_subjects: Subjects per level drawn for the band (5-95 %).
         seed: Seed of the subject draws.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: works in scripts and notebooks alike
 
     rng = np.random.default_rng(seed)
     theta_deg = np.linspace(-60.0, 130.0, 381)
     vel_rad_s = np.linspace(-4.0, 4.0, 401)
-    fig, (ax_a, ax_v) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    fig = Figure(figsize=(10, 4), constrained_layout=True)
+    ax_a, ax_v = fig.subplots(1, 2)
     for level, params in LEVELS.items():
         color = LEVEL_COLORS[level]
         for ax, x, term, fn in (
@@ -101,15 +99,11 @@ def plot_sc_curves(n_subjects: int = 200, seed: int = 0) -> Figure:
 
 def plot_stretch_test(result: StretchTestResult) -> Figure:
     """Resisting torque vs knee angle per level, one panel per speed, and the peak torques."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     speeds = list(result.params.velocities_rad_s)
-    fig, axes = plt.subplots(
-        1, len(speeds) + 1, figsize=(4.2 * (len(speeds) + 1), 4), constrained_layout=True
-    )
+    fig = Figure(figsize=(4.2 * (len(speeds) + 1), 4), constrained_layout=True)
+    axes = fig.subplots(1, len(speeds) + 1)
     traces = result.traces
     moving = traces["phase"].isin(["accelerate", "constant", "decelerate"])
     for ax, speed in zip(axes[:-1], speeds, strict=True):
@@ -161,13 +155,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the figures to ``args.out``."""
-    import matplotlib.pyplot as plt
-
     args.out.mkdir(parents=True, exist_ok=True)
     fig = plot_sc_curves(n_subjects=args.subjects, seed=args.seed)
     path = args.out / "fig2b_spasticity.png"
     fig.savefig(path, dpi=args.dpi)
-    plt.close(fig)
     print(f"wrote {path}")
     if not args.no_stretch:
         from myoexo.stretch_test import run_stretch_test
@@ -176,7 +167,6 @@ def run(args: argparse.Namespace) -> int:
         fig = plot_stretch_test(result)
         path = args.out / "stretch_test.png"
         fig.savefig(path, dpi=args.dpi)
-        plt.close(fig)
         result.summary.to_csv(args.out / "stretch_summary.csv", index=False)
         print(f"wrote {path} and {args.out / 'stretch_summary.csv'}")
     return 0

@@ -233,3 +233,27 @@ def test_ziegler_nichols_finds_an_ultimate_point_on_the_twin():
     assert g.kp == pytest.approx(0.6 * result.ultimate_gain)
     assert g.ki == pytest.approx(1.2 * result.ultimate_gain / result.ultimate_period_s)
     print("\n" + zn.format_result(result))
+
+
+def test_sb3_models_see_the_observation_normalization_they_were_trained_with(tmp_path):
+    """A checkpoint's vecnormalize.pkl (cpu preset) is applied before predict()."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from myoexo.control.policy import SB3Controller
+    from myoexo.control.specs import load_obs_normalizer
+
+    vn = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")]), norm_reward=False)
+    vn.obs_rms.mean[:] = 1.0
+    vn.obs_rms.var[:] = 4.0
+    vn.save(str(tmp_path / "vecnormalize.pkl"))
+    assert load_obs_normalizer(str(tmp_path / "elsewhere" / "model.zip")) is None
+
+    class EchoModel:
+        def predict(self, obs, deterministic=True):
+            return np.asarray(obs)[:1] / 10.0, None
+
+    normalizer = load_obs_normalizer(str(tmp_path / "model.zip"))
+    ctrl = SB3Controller(EchoModel(), obs_normalizer=normalizer)
+    action = ctrl.act(np.array([3.0, 3.0, 3.0], np.float32), {})
+    assert action[0] == pytest.approx(0.1, rel=1e-3)  # (3 - 1) / sqrt(4) / 10

@@ -65,12 +65,20 @@ class SB3Controller:
         name: Label used in error messages and tables.
     """
 
-    def __init__(self, model: Any, deterministic: bool = True, name: str | None = None) -> None:
+    def __init__(
+        self,
+        model: Any,
+        deterministic: bool = True,
+        name: str | None = None,
+        obs_normalizer: Any = None,
+    ) -> None:
         if not callable(getattr(model, "predict", None)):
             raise ValueError(f"{type(model).__name__} has no predict(obs, deterministic=...)")
         self.model = model
         self.deterministic = deterministic
         self.name = name or type(model).__name__
+        #: SB3 ``VecNormalize`` statistics the model was trained with (``None``: raw obs).
+        self.obs_normalizer = obs_normalizer
 
     def reset(self, seed: int | None = None) -> None:
         """Seed the model's RNG for stochastic evaluation (no effect when deterministic)."""
@@ -82,6 +90,8 @@ class SB3Controller:
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         """``model.predict(obs)``, clipped to [-1, 1]."""
         del info
+        if self.obs_normalizer is not None:
+            obs = self.obs_normalizer.normalize_obs(obs)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return _to_action(action, self.name)
 

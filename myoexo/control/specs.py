@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.control.pid import PID, PIDConfig, PIDGains
-from myoexo.control.policy import as_controller
+from myoexo.control.policy import SB3Controller, as_controller
 from myoexo.control.protocol import Controller
 
 #: SB3 algorithm prefixes accepted before a model path.
@@ -163,6 +163,32 @@ def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
         ) from exc
 
 
+#: File SB3's ``VecNormalize.save`` writes beside a model trained on normalized observations.
+VECNORMALIZE_FILE = "vecnormalize.pkl"
+
+
+def load_obs_normalizer(model_path: str) -> Any:
+    """The ``VecNormalize`` statistics saved beside an SB3 model file (``None`` if none).
+
+    A model trained with observation normalization (the ``cpu`` preset) must see the same
+    normalization at evaluation; ``myoexo train`` checkpoints keep it in
+    ``vecnormalize.pkl`` next to ``model.zip``.
+    """
+    import pickle
+    from pathlib import Path
+
+    path = Path(model_path).with_name(VECNORMALIZE_FILE)
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as f:
+            normalizer = pickle.load(f)
+    except Exception as exc:
+        raise ValueError(f"cannot read the observation statistics {path} ({exc})") from exc
+    normalizer.training = False
+    return normalizer
+
+
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
     if spec.kind == "pid":
@@ -170,5 +196,9 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     if spec.kind == "shipped":
         return as_controller(load_shipped_policy(), name="sac")
     if spec.kind == "sb3":
-        return as_controller(load_sb3_model(spec.path, spec.algorithm), name=spec.label)
+        return SB3Controller(
+            load_sb3_model(spec.path, spec.algorithm),
+            name=spec.label,
+            obs_normalizer=load_obs_normalizer(spec.path),
+        )
     raise ValueError(f"unknown controller kind {spec.kind!r}")
