@@ -20,9 +20,10 @@ Nothing in MyoSuite's XML files is edited; all changes are made on the spec.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -152,6 +153,26 @@ def leg_builder(params: TwinParams) -> ModelBuilder:
 _EMPTY_PREFIX_WARNING = "Attaching a spec with an empty prefix"
 
 
+@contextlib.contextmanager
+def _quiet_empty_prefix() -> Iterator[None]:
+    """Swallow MuJoCo's empty-prefix attach warning, at the Python level and at the C level
+    (where it is printed to stderr and ``MUJOCO_LOG.TXT``); other MuJoCo warnings are
+    re-issued as Python ``RuntimeWarning``s while the block runs."""
+    previous = mujoco.get_mju_user_warning()
+
+    def handler(message: str) -> None:
+        if _EMPTY_PREFIX_WARNING not in message:
+            warnings.warn(f"MuJoCo: {message}", RuntimeWarning, stacklevel=2)
+
+    mujoco.set_mju_user_warning(handler)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=_EMPTY_PREFIX_WARNING)
+            yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
 def build_spec_quietly(builder: ModelBuilder) -> mujoco.MjSpec:
     """Compose ``builder``'s spec, silencing MuJoCo's empty-prefix attach warning.
 
@@ -159,8 +180,7 @@ def build_spec_quietly(builder: ModelBuilder) -> mujoco.MjSpec:
     MyoSuite: ``knee_angle_r``, ...); MuJoCo warns that such specs may not round-trip
     through XML. The twin's export is checked to round-trip (``tests/test_model.py``).
     """
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=_EMPTY_PREFIX_WARNING)
+    with _quiet_empty_prefix():
         return builder.build_spec()
 
 
@@ -175,8 +195,7 @@ def standalone_spec(spec: mujoco.MjSpec) -> mujoco.MjSpec:
     for mesh in [m for m in spec.meshes if m.name not in used]:
         spec.delete(mesh)
     spec.meshdir = str(_myo_sim_models_dir())
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=_EMPTY_PREFIX_WARNING)
+    with _quiet_empty_prefix():
         xml = spec.to_xml()
     return mujoco.MjSpec.from_string(xml)
 
@@ -190,6 +209,5 @@ def _myo_sim_models_dir() -> Path:
 
 def compile_quietly(spec: mujoco.MjSpec) -> mujoco.MjModel:
     """``spec.compile()`` without the (expected) empty-prefix attach warning."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=_EMPTY_PREFIX_WARNING)
+    with _quiet_empty_prefix():
         return spec.compile()
