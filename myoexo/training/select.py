@@ -8,7 +8,7 @@ Criteria (per level, means over the same simulated subjects, SPEC section 5):
 * mean absolute final error below 1 deg at levels 0-2, and below the paper's 11.45 deg at
   level 3.
 
-    python -m myoexo.training.select runs/cpu_main --subjects 10 --last 6
+    python -m myoexo.training.select runs/cpu_main --subjects 10 --last 2 --top 4
     python -m myoexo.training.select results/eval --table    # after `myoexo evaluate`
 """
 
@@ -145,21 +145,31 @@ def evaluate_checkpoint(
 
 
 def select_checkpoint(
-    run_dir: Path, subjects: int = 10, last: int = 6, root_seed: int = 0, verbose: bool = True
+    run_dir: Path,
+    subjects: int = 10,
+    last: int = 2,
+    top: int = 4,
+    root_seed: int = 0,
+    verbose: bool = True,
 ) -> tuple[Path, Any]:
-    """Evaluate the ``last`` checkpoints of a run plus the best by small-evaluation score,
-    and return the one with the smallest :func:`shortfall` (ties: the largest mean peak
-    torque reduction) with its comparison table."""
+    """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
+    score (``eval.csv``) on ``subjects`` subjects per level, and return the one with the
+    smallest :func:`shortfall` (ties: the largest mean peak torque reduction) with its
+    comparison table."""
+    import csv
+
     ckpts = ck.list_checkpoints(run_dir)
     if not ckpts:
         raise ValueError(f"{str(run_dir)!r} holds no checkpoint")
-    candidates = list(ckpts[-last:])
-    try:
-        best = ck.resolve_checkpoint(run_dir, "best")
-        if best not in candidates:
-            candidates.append(best)
-    except ValueError:
-        pass
+    candidates = list(ckpts[-last:]) if last > 0 else []
+    eval_path = Path(run_dir) / ck.EVAL_FILE
+    if top > 0 and eval_path.is_file():
+        with open(eval_path, newline="") as f:
+            scores = {int(r["step"]): float(r["score"]) for r in csv.DictReader(f)}
+        scored = sorted(
+            (c for c in ckpts if ck.step_of(c) in scores), key=lambda c: -scores[ck.step_of(c)]
+        )
+        candidates += [c for c in scored[:top] if c not in candidates]
     pid = evaluate_pid(subjects, root_seed=root_seed)
     results = []
     for c in candidates:
@@ -237,13 +247,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "evaluate --controllers pid sac` output in RUN instead",
     )
     parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
-    parser.add_argument("--last", type=int, default=6, help="newest checkpoints to consider")
+    parser.add_argument("--last", type=int, default=2, help="newest checkpoints to consider")
+    parser.add_argument("--top", type=int, default=4, help="best-scored checkpoints to consider")
     parser.add_argument("--root-seed", type=int, default=0)
     args = parser.parse_args(argv)
     if args.table:
         print(markdown_table(compare_evaluation(args.run)))
         return 0
-    chosen, table = select_checkpoint(args.run, args.subjects, args.last, args.root_seed)
+    chosen, table = select_checkpoint(args.run, args.subjects, args.last, args.top, args.root_seed)
     print(f"chosen: {chosen}")
     print(table.round(2).to_string())
     return 0
