@@ -73,6 +73,24 @@ def _range_rad(range_deg: tuple[float, float]) -> np.ndarray:
     return np.radians(np.asarray(range_deg, dtype=float))
 
 
+def _soft_joint(
+    spec: mujoco.MjSpec,
+    name: str,
+    axis: np.ndarray,
+    joint_range: np.ndarray,
+    stiffness: float,
+    damping: float,
+) -> mujoco.MjsJoint:
+    """Set a coupling joint's axis, range and soft-tissue spring/damper (SI units: N/m or
+    Nm/rad, N s/m or Nm s/rad) and return it."""
+    joint = spec.joint(name)
+    joint.axis = axis
+    joint.range = joint_range
+    joint.stiffness = np.array([stiffness, 0.0, 0.0])
+    joint.damping = np.array([damping, 0.0, 0.0])
+    return joint
+
+
 def _rod_inertia(mass_kg: float, length_m: float, radius_m: float) -> np.ndarray:
     """Principal inertia (kg m^2) of a rod along the body y axis (x, y, z order)."""
     transverse = mass_kg * (length_m**2 / 12.0 + radius_m**2 / 4.0)
@@ -127,11 +145,10 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     slide.frictionloss = params.slide_frictionloss_n
     slide.damping = np.array([params.thigh_slide_damping_n_s_m, 0.0, 0.0])
     slide.stiffness = np.array([params.thigh_slide_stiffness_n_m, 0.0, 0.0])
-    thigh_pin = spec.joint("exo_thigh_pin")
-    thigh_pin.axis = g.knee_axis
-    thigh_pin.range = _range_rad(params.thigh_pin_range_deg)
-    thigh_pin.stiffness = np.array([params.pin_stiffness_nm_rad, 0.0, 0.0])
-    thigh_pin.damping = np.array([params.coupling_damping_nm_s_rad, 0.0, 0.0])
+    pin_spring = (params.pin_stiffness_nm_rad, params.coupling_damping_nm_s_rad)
+    _soft_joint(
+        spec, "exo_thigh_pin", g.knee_axis, _range_rad(params.thigh_pin_range_deg), *pin_spring
+    )
 
     shank_link = spec.body("exo_shank_link")
     shank_link.pos = g.exo_knee_m - g.thigh_pin_m
@@ -161,23 +178,26 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     )
     bracket = spec.geom("exo_shank_cuff_bracket")
     bracket.pos = (g.shank_pin_m - g.shank_cuff_m) * 0.85
-    shank_pin = spec.joint("exo_shank_pin")
+    shank_pin = _soft_joint(
+        spec, "exo_shank_pin", g.knee_axis, _range_rad(params.shank_pin_range_deg), *pin_spring
+    )
     shank_pin.pos = g.shank_pin_m - g.shank_cuff_m
-    shank_pin.axis = g.knee_axis
-    shank_pin.range = _range_rad(params.shank_pin_range_deg)
-    shank_pin.stiffness = np.array([params.pin_stiffness_nm_rad, 0.0, 0.0])
-    shank_pin.damping = np.array([params.coupling_damping_nm_s_rad, 0.0, 0.0])
-    abduction = spec.joint("exo_shank_abduction")
+    rotation_spring = (params.shank_rotation_stiffness_nm_rad, params.coupling_damping_nm_s_rad)
+    abduction = _soft_joint(
+        spec,
+        "exo_shank_abduction",
+        g.abduction_axis,
+        _range_rad(params.shank_abduction_range_deg),
+        *rotation_spring,
+    )
     abduction.pos = g.tibia_origin_m - g.shank_cuff_m
-    abduction.axis = g.abduction_axis
-    abduction.range = _range_rad(params.shank_abduction_range_deg)
-    abduction.stiffness = np.array([params.shank_rotation_stiffness_nm_rad, 0.0, 0.0])
-    abduction.damping = np.array([params.coupling_damping_nm_s_rad, 0.0, 0.0])
-    axial = spec.joint("exo_shank_axial")
-    axial.axis = g.axial_axis
-    axial.range = _range_rad(params.shank_axial_range_deg)
-    axial.stiffness = np.array([params.shank_rotation_stiffness_nm_rad, 0.0, 0.0])
-    axial.damping = np.array([params.coupling_damping_nm_s_rad, 0.0, 0.0])
+    _soft_joint(
+        spec,
+        "exo_shank_axial",
+        g.axial_axis,
+        _range_rad(params.shank_axial_range_deg),
+        *rotation_spring,
+    )
 
     motor = spec.actuator(EXO_ACTUATOR)
     gain = np.zeros(len(motor.gainprm))
