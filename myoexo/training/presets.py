@@ -80,6 +80,9 @@ class SACPreset:
         eval_every_steps: Transitions between two small evaluations (0: none).
         eval_subjects: Fixed subjects per level in each small evaluation.
         eval_levels: Levels of the small evaluation.
+        reward_weights: Overrides of the env's ``weighted_reward_keys`` as ``(key, weight)``
+            pairs (e.g. ``(("inter", -0.5),)``); empty keeps the env's defaults. MyoExoKnee
+            envs only.
     """
 
     name: str = "custom"
@@ -108,6 +111,7 @@ class SACPreset:
     eval_every_steps: int = 50_000
     eval_subjects: int = 2
     eval_levels: tuple[int, ...] = (0, 1, 2, 3)
+    reward_weights: tuple[tuple[str, float], ...] = ()
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (
         "total_timesteps",
@@ -123,6 +127,14 @@ class SACPreset:
     def __post_init__(self) -> None:
         for f in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             object.__setattr__(self, f, tuple(int(v) for v in getattr(self, f)))
+        pairs = tuple((str(k), float(w)) for k, w in self.reward_weights)
+        object.__setattr__(self, "reward_weights", pairs)
+        from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS
+
+        unknown = sorted({k for k, _ in pairs} - set(DEFAULT_REWARD_WEIGHTS))
+        if unknown:
+            accepted = sorted(DEFAULT_REWARD_WEIGHTS)
+            raise ValueError(f"reward_weights has unknown keys {unknown}; accepted: {accepted}")
         for f in self._POSITIVE_INTS:
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
@@ -174,7 +186,7 @@ class SACPreset:
         d = dataclasses.asdict(self)
         for k, v in d.items():
             if isinstance(v, tuple):
-                d[k] = list(v)
+                d[k] = [list(x) if isinstance(x, tuple) else x for x in v]
         return d
 
 
@@ -287,6 +299,10 @@ def parse_override(text: str) -> tuple[str, Any]:
     try:
         if key == "ent_coef":
             value: Any = raw if raw.startswith("auto") else float(raw)
+        elif key == "reward_weights":  # "inter:-0.5,act:-0.5"
+            value = tuple(
+                (k.strip(), float(w)) for k, w in (p.split(":") for p in raw.split(",") if p)
+            )
         elif key == "episode_duration_s":
             value = None if raw.lower() == "none" else float(raw)
         elif isinstance(default, bool):

@@ -67,11 +67,14 @@ def is_myoexo_env(env_id: str) -> bool:
 
 
 def make_env_fn(
-    env_id: str, rank: int, episode_duration_s: float | None = None
+    env_id: str,
+    rank: int,
+    episode_duration_s: float | None = None,
+    reward_weights: tuple[tuple[str, float], ...] = (),
 ) -> Callable[[], Any]:
     """Factory of env ``rank`` of a vector env: ``gymnasium.make`` + ``Monitor``
     (picklable, so it also works with ``SubprocVecEnv``)."""
-    return _EnvFactory(env_id, rank, episode_duration_s)
+    return _EnvFactory(env_id, rank, episode_duration_s, tuple(reward_weights))
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,7 @@ class _EnvFactory:
     env_id: str
     rank: int
     episode_duration_s: float | None
+    reward_weights: tuple[tuple[str, float], ...] = ()
 
     def __call__(self) -> Any:
         import gymnasium as gym
@@ -93,9 +97,15 @@ class _EnvFactory:
 
                 task = TaskParams(episode_duration_s=self.episode_duration_s)
                 kwargs = {"task": task, "max_episode_steps": task.episode_steps}
-        elif self.episode_duration_s is not None:
+            if self.reward_weights:
+                from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS
+
+                weights = {**DEFAULT_REWARD_WEIGHTS, **dict(self.reward_weights)}
+                kwargs["weighted_reward_keys"] = weights
+        elif self.episode_duration_s is not None or self.reward_weights:
             raise ValueError(
-                f"episode_duration_s applies to the MyoExoKnee envs only, not {self.env_id!r}"
+                "episode_duration_s and reward_weights apply to the MyoExoKnee envs only, "
+                f"not {self.env_id!r}"
             )
         return Monitor(gym.make(self.env_id, **kwargs))
 
@@ -105,7 +115,10 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
     wrapped in ``VecNormalize`` (observations only) if the preset says so."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    fns = [make_env_fn(preset.env_id, i, preset.episode_duration_s) for i in range(preset.n_envs)]
+    fns = [
+        make_env_fn(preset.env_id, i, preset.episode_duration_s, preset.reward_weights)
+        for i in range(preset.n_envs)
+    ]
     venv = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(seed)
     if preset.normalize_obs:
