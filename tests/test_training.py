@@ -255,3 +255,18 @@ def test_train_cli_arguments():
     assert args.preset == "paper" and args.set == ["n_envs=2"] and args.no_progress
     args = parser.parse_args(["--resume", "runs/x"])
     assert args.resume == "runs/x"
+
+
+def test_reward_weight_overrides_reach_the_training_envs():
+    from myoexo.training.presets import get_preset, parse_override, preset_from_dict
+    from myoexo.training.train import make_env_fn
+
+    key, value = parse_override("reward_weights=inter:-0.5,act:-0.25")
+    preset = get_preset("cpu", **{key: value})
+    assert preset_from_dict(preset.to_dict()) == preset  # survives the run's config.json
+    env = make_env_fn(ENV_ID, 0, reward_weights=preset.reward_weights)()
+    weights = env.unwrapped.rwd_keys_wt
+    assert weights["inter"] == -0.5 and weights["act"] == -0.25 and weights["pose"] == 1.0
+    env.close()
+    with pytest.raises(ValueError, match="reward_weights"):
+        get_preset("cpu", reward_weights=(("nope", 1.0),))
