@@ -249,6 +249,13 @@ def phi(k: float, b: Any, b0: float) -> np.ndarray:
     return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(b, dtype=np.float64) - b0)))
 
 
+def _outside_window(x: np.ndarray, k: float, upper: float, lower: float, scale: float):
+    """``scale * [1 - (phi(k, x, upper) - phi(k, x, lower))]``: ~0 inside ``[lower, upper]``,
+    ``scale / 2`` at a limit, -> ``scale`` far outside (the shape of eqs. 2 and 3)."""
+    out = scale * (1.0 - (phi(k, x, upper) - phi(k, x, lower)))
+    return float(out) if out.ndim == 0 else out
+
+
 def sc_angle(theta_deg: Any, params: SpasticityParams) -> np.ndarray | float:
     """Angle term ``sc_a`` of the spasticity coefficient.
 
@@ -263,11 +270,8 @@ def sc_angle(theta_deg: Any, params: SpasticityParams) -> np.ndarray | float:
         ValueError: If an angle is NaN or infinite.
     """
     theta = _finite_array("theta_deg", theta_deg)
-    window = phi(params.k, theta, params.theta_flex_deg) - phi(
-        params.k, theta, params.theta_ext_deg
-    )
-    out = params.s_theta * (1.0 - window)
-    return float(out) if out.ndim == 0 else out
+    p = params
+    return _outside_window(theta, p.k, p.theta_flex_deg, p.theta_ext_deg, p.s_theta)
 
 
 def sc_velocity(vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
@@ -284,9 +288,8 @@ def sc_velocity(vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
         ValueError: If a velocity is NaN or infinite.
     """
     vel = _finite_array("vel_rad_s", vel_rad_s)
-    window = phi(params.k, vel, params.v_upper_rad_s) - phi(params.k, vel, params.v_lower_rad_s)
-    out = params.s_v * (1.0 - window)
-    return float(out) if out.ndim == 0 else out
+    p = params
+    return _outside_window(vel, p.k, p.v_upper_rad_s, p.v_lower_rad_s, p.s_v)
 
 
 def sc_total(theta_deg: Any, vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
