@@ -438,7 +438,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
         obs_dict = self._get_obs_dict(self._accessor)
         rwd_dict = self.get_reward_dict(obs_dict)
-        obs = (obs_dict["time"].base[self._vec_idx] * self._vec_scale).astype(np.float32)
+        obs = self._obs_dict_to_vec(obs_dict)
         info = {k: v for k, v in rwd_dict.items() if k not in ("dense", "done")}
         info["obs_dict"] = obs_dict
         info["rwd_dict"] = rwd_dict
