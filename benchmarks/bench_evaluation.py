@@ -24,14 +24,9 @@ import numpy as np
 
 from myoexo.control import PID
 from myoexo.control.specs import PolicyUnavailableError, load_shipped_policy
-from myoexo.evaluation.runner import (
-    VALID_LEVELS,
-    EvaluationConfig,
-    available_cores,
-    evaluate,
-    evaluate_controller,
-    make_eval_env,
-)
+from myoexo.envs import make_env
+from myoexo.evaluation import EvaluationConfig, available_cores, evaluate, evaluate_controller
+from myoexo.spasticity import VALID_LEVELS
 
 FULL_SUBJECTS, FULL_CONTROLLERS = 1000, 2
 
@@ -40,7 +35,7 @@ def serial_pid(subjects: int) -> dict[int, float]:
     """Seconds per PID episode, per level, in this process."""
     out = {}
     for level in VALID_LEVELS:
-        env = make_eval_env(level)
+        env = make_env(level)
         pid = PID.from_env(env)
         env.close()
         evaluate_controller(pid, level, 1)  # warm-up (model build, imports)
@@ -54,7 +49,7 @@ def policy_step_s(steps: int = 2000) -> tuple[float, str]:
     """Seconds per policy decision and which policy was timed."""
     from myoexo.control.policy import as_controller
 
-    env = make_eval_env(1)
+    env = make_env(1)
     obs, info = env.reset(seed=0)
     try:
         policy, name = load_shipped_policy(), "shipped SAC policy"
@@ -99,7 +94,7 @@ def main() -> None:
     per_level = serial_pid(args.subjects)
     t_pid = float(np.mean(list(per_level.values())))
     t_step, policy_name = policy_step_s()
-    steps = make_eval_env(0).unwrapped.episode_steps
+    steps = make_env(0).unwrapped.episode_steps
     t_sac = t_pid + steps * t_step
     par_episode_s, startup_s = parallel_pid(args.parallel_subjects, args.workers)
     speedup = t_pid / par_episode_s

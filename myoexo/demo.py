@@ -41,8 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo evaluation and report; 0 on success, 2 on bad arguments."""
+    from myoexo.evaluation import EvaluationConfig, available_cores, evaluate
     from myoexo.evaluation.report import summarize, write_report
-    from myoexo.evaluation.runner import EvaluationConfig, available_cores, evaluate
 
     workers = args.workers or available_cores()
     t0 = time.perf_counter()

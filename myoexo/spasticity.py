@@ -1,4 +1,6 @@
-"""Spastic stretch reflex of the knee muscles (paper Table I and eqs. 1-4, SPEC section 2).
+"""Spastic stretch reflex of the knee muscles (paper Table I and eqs. 1-4).
+
+The paper's model and the project's reading of it are in docs/reference.md section 2.
 
 The reflex adds a spasticity coefficient ``SC_total`` (a fraction of maximum isometric force)
 to the excitation of the 11 spastic knee muscles. It is the sum of an angle term and a
@@ -13,10 +15,10 @@ with the knee angle ``theta`` in degrees (MyoSuite ``knee_angle_r``, flexion pos
 the knee velocity ``v`` in rad/s (flexion positive). Inside a level's range each bracket is
 ~0, at a limit it is 1/2 and far outside it tends to 1. The paper's eq. 4 prints the two
 velocity sigmoids in the other order, which read literally gives ``2 s_v`` inside the range;
-we follow the text and eq. 3 (zero inside, ``s_v`` outside), see SPEC section 2. One slope
-``k`` per level acts on both terms, so with ``k = 0.1`` (level 3) the velocity window is far
-wider than its range and the velocity term stays near ``s_v / 2`` at rest: the "maintained"
-tone the paper describes for levels 2 and 3.
+we follow the text and eq. 3 (zero inside, ``s_v`` outside). One slope ``k`` per level acts
+on both terms, so with ``k = 0.1`` (level 3) the velocity window is far wider than its range
+and the velocity term stays near ``s_v / 2`` at rest: the "maintained" tone the paper
+describes for levels 2 and 3.
 
 Contents:
 
@@ -44,11 +46,13 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.utils import RecordConstructorArgs
+
+from myoexo.model.leg import KNEE_JOINT  # the joint whose angle and velocity drive the reflex
 
 if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
     import torch
@@ -56,11 +60,13 @@ if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
 __all__ = [
     "KNEE_JOINT",
     "LEVELS",
+    "RANDOM_LEVEL",
     "SPASTIC_EXTENSORS",
     "SPASTIC_FLEXORS",
     "SPASTIC_MUSCLES",
     "STAGE_NAME",
     "SUBJECT_REL_STD",
+    "VALID_LEVELS",
     "SpasticityParams",
     "SpasticityStage",
     "SpasticityWrapper",
@@ -75,7 +81,7 @@ __all__ = [
     "sc_velocity_torch",
 ]
 
-#: Spastic knee flexors (SPEC section 2).
+#: Spastic knee flexors (docs/reference.md section 2).
 SPASTIC_FLEXORS: tuple[str, ...] = (
     "gaslat_r",
     "gasmed_r",
@@ -88,8 +94,6 @@ SPASTIC_FLEXORS: tuple[str, ...] = (
 SPASTIC_EXTENSORS: tuple[str, ...] = ("grac_r", "vasmed_r", "vaslat_r", "vasint_r", "recfem_r")
 #: The 11 muscles that receive ``SC_total``: flexors then extensors.
 SPASTIC_MUSCLES: tuple[str, ...] = SPASTIC_FLEXORS + SPASTIC_EXTENSORS
-#: Joint whose angle (rad in MuJoCo, deg in the model) and velocity (rad/s) drive the reflex.
-KNEE_JOINT = "knee_angle_r"
 #: Name of the stage in MyoSuite's muscle-command pipeline.
 STAGE_NAME = "spasticity"
 #: Standard deviation of a subject's parameters, relative to the level's nominal |value|.
@@ -182,6 +186,19 @@ LEVELS: Mapping[int, SpasticityParams] = MappingProxyType(
         3: SpasticityParams(-15.0, 60.0, -0.25, 0.25, s_theta=0.3, s_v=0.5, k=0.1),
     }
 )
+
+
+#: The levels the twin models, in order (Table I; level 4 is left out as unsafe).
+VALID_LEVELS: tuple[int, ...] = tuple(sorted(LEVELS))
+#: Level setting that draws the level uniformly from :data:`VALID_LEVELS` at every reset.
+RANDOM_LEVEL = "random"
+
+
+def _check_level_setting(level: Any) -> int | str:
+    """A level (``int`` of :data:`VALID_LEVELS`) or :data:`RANDOM_LEVEL`, or a ``ValueError``."""
+    if isinstance(level, str) and level == RANDOM_LEVEL:
+        return RANDOM_LEVEL
+    return _check_level(level)
 
 
 def _check_level(level: Any) -> int:
@@ -393,6 +410,19 @@ def sc_total_torch(theta_deg: Any, vel_rad_s: Any, params: _TorchParams) -> torc
 # ----------------------------------------------------------------------------- MyoSuite stage
 
 
+class _StepCoefficients(NamedTuple):
+    """A subject's constants of :meth:`SpasticityStage.sc_now` (halved slope and gains:
+    ``1 - (phi(a) - phi(b))`` is written with tanh, ``phi(x) = (1 - tanh(k x / 2)) / 2``)."""
+
+    half_k: float
+    theta_ext_deg: float
+    theta_flex_deg: float
+    v_lower_rad_s: float
+    v_upper_rad_s: float
+    half_s_theta: float
+    half_s_v: float
+
+
 class SpasticityStage:
     """The spastic reflex as a stage of MyoSuite's muscle-command pipeline.
 
@@ -420,6 +450,8 @@ class SpasticityStage:
         joint: Hinge joint whose angle and velocity drive the reflex.
 
     Attributes:
+        level_setting: The configured level: an ``int`` level, or ``"random"``
+            (:data:`RANDOM_LEVEL`, a new level at every reset).
         level: Level of the current subject. Until the first :meth:`reset` the stage uses the
             nominal parameters of its level (level 0 for ``"random"``).
         subject: :class:`SpasticityParams` of the current subject.
@@ -440,17 +472,12 @@ class SpasticityStage:
         muscles: Sequence[str] = SPASTIC_MUSCLES,
         joint: str = KNEE_JOINT,
     ) -> None:
-        if isinstance(level, str) and level == "random":
-            self.random_level = True
-            initial = min(LEVELS)
-        else:
-            self.random_level = False
-            initial = _check_level(level)
+        self.level_setting: int | str = _check_level_setting(level)
+        initial = min(LEVELS) if self.level_setting == RANDOM_LEVEL else int(self.level_setting)
         if not (math.isfinite(rel_std) and rel_std >= 0.0):
             raise ValueError(f"rel_std must be a finite value >= 0, got {rel_std!r}.")
         if len(muscles) == 0:
             raise ValueError("muscles must name at least one actuator.")
-        self.level_mode: int | str = "random" if self.random_level else initial
         self.subject_noise = bool(subject_noise)
         self.rel_std = float(rel_std)
         self.muscles = tuple(muscles)
@@ -465,14 +492,14 @@ class SpasticityStage:
         self.subject = subject
         p = subject
         # constants of the per-step formula (python floats: scalar math is fastest)
-        self._coef = (
-            0.5 * p.k,
-            p.theta_ext_deg,
-            p.theta_flex_deg,
-            p.v_lower_rad_s,
-            p.v_upper_rad_s,
-            0.5 * p.s_theta,
-            0.5 * p.s_v,
+        self._coef = _StepCoefficients(
+            half_k=0.5 * p.k,
+            theta_ext_deg=p.theta_ext_deg,
+            theta_flex_deg=p.theta_flex_deg,
+            v_lower_rad_s=p.v_lower_rad_s,
+            v_upper_rad_s=p.v_upper_rad_s,
+            half_s_theta=0.5 * p.s_theta,
+            half_s_v=0.5 * p.s_v,
         )
 
     def set_subject(self, subject: SpasticityParams, level: int | None = None) -> None:
@@ -488,16 +515,15 @@ class SpasticityStage:
 
     def set_level(self, level: int | str) -> None:
         """Change the level (or ``"random"``) used from the next :meth:`reset` on."""
-        if isinstance(level, str) and level == "random":
-            self.random_level, self.level_mode = True, "random"
-        else:
-            self.random_level, self.level_mode = False, _check_level(level)
+        self.level_setting = _check_level_setting(level)
 
     def reset(self, env: Any) -> None:
         """Draw the next level (``"random"`` only) and subject from ``env.np_random``."""
         rng = env.np_random
-        keys = sorted(LEVELS)
-        level = keys[int(rng.integers(len(keys)))] if self.random_level else int(self.level_mode)
+        if self.level_setting == RANDOM_LEVEL:
+            level = VALID_LEVELS[int(rng.integers(len(VALID_LEVELS)))]
+        else:
+            level = int(self.level_setting)
         subject = sample_subject(level, rng, self.rel_std) if self.subject_noise else LEVELS[level]
         self._set_subject(level, subject)
         self.last_sc_total = 0.0
@@ -598,7 +624,7 @@ class SpasticityStage:
 
     def __repr__(self) -> str:
         return (
-            f"SpasticityStage(level_mode={self.level_mode!r}, level={self.level}, "
+            f"SpasticityStage(level_setting={self.level_setting!r}, level={self.level}, "
             f"subject_noise={self.subject_noise}, subject={self.subject})"
         )
 

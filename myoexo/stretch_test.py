@@ -304,7 +304,17 @@ def simulate_stretch(
     times = np.arange(n_steps) * dt
     ref_deg, ref_vel, phase = reference_profile(times, vel_rad_s, params)
     ref_rad = np.radians(ref_deg)
-    rec = np.empty((n_steps, 8))
+    columns = (
+        "exo_deg",
+        "knee_deg",
+        "knee_vel_rad_s",
+        "sc_total",
+        "exo_torque_nm",
+        "muscle_torque_nm",
+        "pd_torque_nm",
+        "feedback_deg",
+    )
+    rec = np.empty((n_steps, len(columns)))
     ctrl = np.zeros(model.nu)
     for i in range(n_steps):
         q, qd = data.qpos[fb_q], data.qvel[fb_d]
@@ -315,7 +325,7 @@ def simulate_stretch(
         ctrl[:] = 0.0  # relaxed limb: the muscles get the reflex only
         ctrl[exo_a] = u
         data.ctrl[:] = stage.apply(host, ctrl)
-        rec[i] = (
+        rec[i] = (  # in the order of `columns`
             math.degrees(data.qpos[exo_q]),
             math.degrees(data.qpos[knee_q]),
             data.qvel[knee_d],
@@ -326,7 +336,8 @@ def simulate_stretch(
             math.degrees(q),
         )
         mujoco.mj_step(model, data, nstep=n_sub)
-    exo_torque = rec[:, 4]
+    col = {name: rec[:, j] for j, name in enumerate(columns)}
+    exo_torque = col["exo_torque_nm"]
     return pd.DataFrame(
         {
             "time_s": times,
@@ -334,15 +345,15 @@ def simulate_stretch(
                 phase, categories=["hold", "accelerate", "constant", "decelerate", "end_hold"]
             ),
             "ref_deg": ref_deg,
-            "exo_deg": rec[:, 0],
-            "knee_deg": rec[:, 1],
-            "knee_vel_rad_s": rec[:, 2],
-            "sc_total": rec[:, 3],
+            "exo_deg": col["exo_deg"],
+            "knee_deg": col["knee_deg"],
+            "knee_vel_rad_s": col["knee_vel_rad_s"],
+            "sc_total": col["sc_total"],
             "exo_torque_nm": exo_torque,
             "resisting_torque_nm": params.direction * exo_torque,
-            "muscle_torque_nm": rec[:, 5],
-            "saturated": np.abs(rec[:, 6] - exo_torque) > 1e-9,
-            "tracking_error_deg": ref_deg - rec[:, 7],
+            "muscle_torque_nm": col["muscle_torque_nm"],
+            "saturated": np.abs(col["pd_torque_nm"] - exo_torque) > 1e-9,
+            "tracking_error_deg": ref_deg - col["feedback_deg"],
         }
     )
 

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from myoexo.model.leg import KNEE_JOINT
+
 if TYPE_CHECKING:
     import mujoco
     from matplotlib.figure import Figure
@@ -54,7 +56,7 @@ __all__ = [
 ]
 
 #: Joint the cameras look at (the human knee).
-LOOKAT_JOINT = "knee_angle_r"
+LOOKAT_JOINT = KNEE_JOINT
 #: Bodies whose name starts with this prefix belong to the exoskeleton.
 EXO_BODY_PREFIX = "exo_"
 #: Colour of the exo's geoms when highlighted (RGB; the alpha of each geom is kept).
@@ -299,37 +301,24 @@ def record_episode(
     Raises:
         ValueError: Non-positive or non-finite *every_s* or *until_s*.
     """
+    from myoexo.control.rollout import rollout
+
     if not (math.isfinite(every_s) and every_s > 0.0):
         raise ValueError(f"every_s = {every_s!r} must be a positive time in s")
-    if until_s is not None and not (math.isfinite(until_s) and until_s > 0.0):
-        raise ValueError(f"until_s = {until_s!r} must be a positive time in s or None")
     base = env.unwrapped
     stride = max(1, round(every_s / float(base.dt)))
-    obs, info = env.reset(seed=int(seed))
-    controller.reset(int(seed))
-    keys = [k for k, v in info.items() if isinstance(v, (int, float)) and not isinstance(v, bool)]
-    rows = [[float(info[k]) for k in keys]]
-    times, frames = [], []
+    times: list[float] = []
+    frames: list[np.ndarray] = []
     with TwinRenderer(base.model, width, height, show_muscles=show_muscles) as renderer:
-        times.append(float(info["time_s"]))
-        frames.append(renderer.render(base.data, view))
-        step = 0
-        while True:
-            obs, _, terminated, truncated, info = env.step(controller.act(obs, info))
-            step += 1
-            rows.append([float(info[k]) for k in keys])
+
+        def grab(step: int, info: Mapping[str, Any]) -> None:
             if step % stride == 0:
                 times.append(float(info["time_s"]))
                 frames.append(renderer.render(base.data, view))
-            if terminated or truncated:
-                break
-            if until_s is not None and float(info["time_s"]) >= until_s - 1e-9:
-                break
-    table = np.asarray(rows)
+
+        episode = rollout(env, controller, seed, until_s=until_s, on_step=grab)
     return EpisodeRecording(
-        frame_times_s=np.asarray(times),
-        frames=np.stack(frames),
-        signals={k: table[:, j] for j, k in enumerate(keys)},
+        frame_times_s=np.asarray(times), frames=np.stack(frames), signals=episode.signals
     )
 
 

@@ -14,15 +14,11 @@ import pandas as pd
 import pytest
 
 from myoexo.cli import main as cli_main
+from myoexo.envs import make_env
+from myoexo.evaluation import EvaluationConfig, evaluate, load_traces, subject_seed
+from myoexo.evaluation.engine import resolve_controllers
 from myoexo.evaluation.report import write_report
-from myoexo.evaluation.runner import (
-    TRACE_CHANNELS,
-    EvaluationConfig,
-    evaluate,
-    load_traces,
-    resolve_controllers,
-    subject_seed,
-)
+from myoexo.evaluation.storage import TRACE_CHANNELS
 
 SHORT_S = 2.0  # episode length of the machinery tests (the PID pattern test runs the full 8 s)
 CONFIG = EvaluationConfig(
@@ -165,9 +161,7 @@ def test_missing_shipped_policy_is_skipped_with_a_message(monkeypatch):
 def test_an_sb3_model_file_is_evaluated(tmp_path):
     from stable_baselines3 import SAC
 
-    from myoexo.evaluation.runner import make_eval_env
-
-    env = make_eval_env(0)
+    env = make_env(0)
     model = SAC("MlpPolicy", env, buffer_size=1, policy_kwargs={"net_arch": [16, 16]}, seed=0)
     env.close()
     path = tmp_path / "tiny_sac.zip"
@@ -208,9 +202,9 @@ def test_pid_on_the_twin_follows_the_papers_pattern():
     (see the README's comparison with the paper). These assertions pin what the twin does.
     """
     from myoexo.control import PID
-    from myoexo.evaluation.runner import evaluate_controller, make_eval_env
+    from myoexo.evaluation import evaluate_controller
 
-    env = make_eval_env(0)
+    env = make_env(0)
     pid = PID.from_env(env)
     env.close()
     stats = {}

@@ -42,7 +42,7 @@ assert sys.prefix == {sys.prefix!r}, (
 
 
 def test_all_notebooks_present() -> None:
-    """The four notebooks of the issue exist (a rename would silently drop one from CI)."""
+    """The four notebooks exist (a rename would silently drop one from CI)."""
     names = {p.name for p in NOTEBOOKS}
     assert set(EXPECTED) <= names, f"missing notebooks: {sorted(set(EXPECTED) - names)}"
 

@@ -36,7 +36,7 @@ def _phi_ref(k: float, b: float, b0: float) -> float:
 
 
 def _sc_ref(theta_deg: float, vel_rad_s: float, p: SpasticityParams) -> float:
-    """Eqs. 2-4 (SPEC section 2 reading), written literally."""
+    """Eqs. 2-4 (docs/reference.md section 2 reading), written literally."""
     sc_a = p.s_theta * (
         1.0
         - (_phi_ref(p.k, theta_deg, p.theta_flex_deg) - _phi_ref(p.k, theta_deg, p.theta_ext_deg))
@@ -350,7 +350,7 @@ def test_wrapper_reproducible_and_picklable(walk_env_factory) -> None:
     assert (a.spasticity.level, a.spasticity.subject) == (b.spasticity.level, b.spasticity.subject)
     c = pickle.loads(pickle.dumps(a))
     assert c.unwrapped.ctrl_stages == ("spasticity",)
-    assert c.spasticity.level_mode == "random"
+    assert c.spasticity.level_setting == "random"
     c.reset(seed=11)
     assert c.spasticity.subject == a.spasticity.subject
     for env in (a, b, c):

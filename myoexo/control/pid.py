@@ -1,4 +1,4 @@
-"""PID position controller of the paper's baseline (SPEC section 4).
+"""PID position controller of the paper's baseline (docs/reference.md section 4).
 
 The controller acts on the knee position error in **radians** and outputs the normalized exo
 command in [-1, 1] (``u * 100 Nm``, positive = flexion torque). With the paper's gains

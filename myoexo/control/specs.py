@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.control.pid import PID, PIDConfig, PIDGains
-from myoexo.control.policy import SB3Controller, as_controller
+from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
 
 #: SB3 algorithm prefixes accepted before a model path.
@@ -71,8 +71,13 @@ class ControllerSpec:
 
     @property
     def slug(self) -> str:
-        """File-system-safe form of the label."""
-        return re.sub(r"[^A-Za-z0-9_.+-]+", "_", self.label).strip("_") or "controller"
+        """File-system-safe form of the label (:func:`controller_slug`)."""
+        return controller_slug(self.label)
+
+
+def controller_slug(label: str) -> str:
+    """File-system-safe form of a controller label (its folder and figure names)."""
+    return re.sub(r"[^A-Za-z0-9_.+-]+", "_", label).strip("_") or "controller"
 
 
 def parse_controller_spec(text: str) -> ControllerSpec:
@@ -137,7 +142,7 @@ def pid_config(options: dict[str, Any]) -> PIDConfig:
     return PIDConfig(gains=gains, **opts)
 
 
-def load_shipped_policy() -> Any:
+def load_shipped_policy() -> Controller:
     """``myoexo.load_policy()``, or :class:`PolicyUnavailableError` saying why not."""
     try:
         import myoexo
@@ -163,10 +168,6 @@ def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
         ) from exc
 
 
-#: File SB3's ``VecNormalize.save`` writes beside a model trained on normalized observations.
-VECNORMALIZE_FILE = "vecnormalize.pkl"
-
-
 def load_obs_normalizer(model_path: str) -> Any:
     """The ``VecNormalize`` statistics saved beside an SB3 model file (``None`` if none).
 
@@ -177,7 +178,9 @@ def load_obs_normalizer(model_path: str) -> Any:
     import pickle
     from pathlib import Path
 
-    path = Path(model_path).with_name(VECNORMALIZE_FILE)
+    from myoexo.training.checkpoints import VECNORM_FILE
+
+    path = Path(model_path).with_name(VECNORM_FILE)
     if not path.is_file():
         return None
     try:
@@ -194,7 +197,7 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     if spec.kind == "pid":
         return PID.from_env(env, pid_config(spec.options))
     if spec.kind == "shipped":
-        return as_controller(load_shipped_policy(), name="sac")
+        return load_shipped_policy()
     if spec.kind == "sb3":
         return SB3Controller(
             load_sb3_model(spec.path, spec.algorithm),

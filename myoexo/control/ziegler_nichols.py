@@ -1,8 +1,8 @@
 """Ziegler-Nichols tuning of the knee PID on the digital twin (``myoexo tune-pid``).
 
 The paper tuned its PID "to a spasticity level of 1 following the Ziegler-Nichols method"
-and reports Kp = 7, Ki = 40, Kd = 0.05 (SPEC section 4). This module runs the closed-loop
-("ultimate sensitivity") procedure of Ziegler & Nichols, "Optimum settings for automatic
+and reports Kp = 7, Ki = 40, Kd = 0.05 (docs/reference.md section 4). This module runs the
+closed-loop ("ultimate sensitivity") procedure of Ziegler & Nichols, "Optimum settings for automatic
 controllers", Trans. ASME 64 (1942), on the twin:
 
 1. P-only control (Ki = Kd = 0) of the knee extension task at level 1, on the level's
@@ -40,6 +40,8 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.pid import PID, PIDConfig, PIDGains
+from myoexo.control.rollout import rollout
+from myoexo.spasticity import VALID_LEVELS
 
 #: Classic Ziegler-Nichols closed-loop PID table: Kp = a Ku, Ti = Tu / b, Td = Tu / c.
 ZN_KP_FACTOR = 0.6
@@ -85,8 +87,8 @@ class ZieglerNicholsSettings:
     sustain_ratio: float = 0.9
 
     def __post_init__(self) -> None:
-        if self.level not in (0, 1, 2, 3):
-            raise ValueError(f"level = {self.level!r}; accepted: 0, 1, 2, 3")
+        if self.level not in VALID_LEVELS:
+            raise ValueError(f"level = {self.level!r}; accepted: {VALID_LEVELS}")
         if not 0.0 < self.kp_start < self.kp_max:
             raise ValueError(f"need 0 < kp_start ({self.kp_start}) < kp_max ({self.kp_max})")
         if not 0.0 < self.rel_tol < 1.0:
@@ -209,21 +211,15 @@ class ZieglerNicholsResult:
 
 
 def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
-    """The level's env; with ``nominal_subject`` its reflex stage keeps Table I values."""
-    import gymnasium as gym
-
-    import myoexo  # noqa: F401  (registers the ids)
-    from myoexo.envs.config import TaskParams
+    """The level's env; with ``nominal_subject`` its reflex keeps Table I's values."""
+    from myoexo.envs import TaskParams, make_env
 
     task = TaskParams()
     if settings.episode_duration_s is not None:
         task = dataclasses.replace(task, episode_duration_s=settings.episode_duration_s)
     if settings.target_angle_deg is not None:
         task = dataclasses.replace(task, target_angle_deg=settings.target_angle_deg)
-    env = gym.make(f"MyoExoKnee-v{settings.level}", task=task, max_episode_steps=task.episode_steps)
-    if settings.nominal_subject:
-        env.unwrapped.spasticity.subject_noise = False
-    return env
+    return make_env(settings.level, task=task, subject_noise=not settings.nominal_subject)
 
 
 def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainTrial:
@@ -231,31 +227,26 @@ def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainT
     config = PIDConfig(
         gains=PIDGains(kp=kp, ki=0.0, kd=0.0), anti_windup="none", feedback=settings.feedback
     )
-    pid = PID.from_env(env, config)
-    obs, info = env.reset(seed=settings.seed)
-    pid.reset(settings.seed)
-    t, err, saturated = [info["time_s"]], [info["error_deg"]], 0
-    while True:
-        action = pid.act(obs, info)
-        saturated += abs(float(action[0])) >= config.output_limit
-        obs, _, terminated, truncated, info = env.step(action)
-        t.append(info["time_s"])
-        err.append(info["error_deg"])
-        if terminated or truncated:
-            break
-    osc = analyze_oscillation(np.array(t), np.array(err), settings.analysis_start_s)
+    episode = rollout(
+        env, PID.from_env(env, config), settings.seed, channels=("time_s", "error_deg", "command")
+    )
+    err = episode.signals["error_deg"]
+    osc = analyze_oscillation(episode.signals["time_s"], err, settings.analysis_start_s)
     sustained = (
         osc.half_cycles >= settings.min_half_cycles
         and osc.last_amplitude >= settings.min_amplitude_deg
         and osc.amplitude_ratio >= settings.sustain_ratio
-        and not info.get("unstable", False)
+        and not episode.unstable
     )
+    commands = episode.signals["command"][1:]  # the commands applied at the steps
     return GainTrial(
         kp=float(kp),
         sustained=bool(sustained),
         oscillation=osc,
         final_error_deg=float(err[-1]),
-        saturated_fraction=saturated / max(1, len(err) - 1),
+        saturated_fraction=float(np.mean(np.abs(commands) >= config.output_limit))
+        if commands.size
+        else 0.0,
     )
 
 

@@ -1,9 +1,21 @@
-"""Gymnasium environments of myoexo (registered on ``import myoexo``)."""
+"""Gymnasium environments of myoexo (registered on ``import myoexo``).
+
+``make_env(level, ...)`` builds one (:func:`~myoexo.envs.registration.make_env`).
+"""
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, RewardParams, TaskParams
-from myoexo.envs.registration import ENV_LEVELS, register_envs
+from myoexo.envs.registration import ENV_LEVELS, RANDOM_ENV_ID, env_id, make_env, register_envs
 
-__all__ = ["DEFAULT_REWARD_WEIGHTS", "ENV_LEVELS", "RewardParams", "TaskParams", "register_envs"]
+__all__ = [
+    "DEFAULT_REWARD_WEIGHTS",
+    "ENV_LEVELS",
+    "RANDOM_ENV_ID",
+    "RewardParams",
+    "TaskParams",
+    "env_id",
+    "make_env",
+    "register_envs",
+]
 
 
 def __getattr__(name: str):

@@ -1,4 +1,4 @@
-"""Task and reward parameters of the MyoExoKnee environments (SPEC section 3).
+"""Task and reward parameters of the MyoExoKnee environments (docs/reference.md section 3).
 
 Everything the task needs is a frozen dataclass with the paper's values (or, where the paper
 is silent, the project's documented choice) as defaults. The env constructor takes them as
@@ -60,7 +60,7 @@ class TaskParams:
 
 @dataclass(frozen=True)
 class RewardParams:
-    """Shape of the paper's four reward terms (SPEC section 3).
+    """Shape of the paper's four reward terms (docs/reference.md section 3).
 
     Attributes:
         sigma_rad: Width of the pose kernel exp(-e^2 / (2 sigma^2)). The paper gives no value;

@@ -1,4 +1,6 @@
-"""MyoExoKnee: knee extension with an exoskeleton on a spastic MyoSuite leg (SPEC section 3).
+"""MyoExoKnee: knee extension with an exoskeleton on a spastic MyoSuite leg.
+
+The task, observation and reward are specified in docs/reference.md section 3.
 
 The agent commands the exoskeleton's knee motor only; the 40 muscles receive nothing but the
 spastic reflex, which the :class:`~myoexo.spasticity.SpasticityStage` adds in MyoSuite's
@@ -41,7 +43,7 @@ spastic_velocity              11     their velocity / length range (1/s)        
 time_frac                     1      time / episode duration (-)                 1
 ============================  =====  ==========================================  =======
 
-Reward (MyoSuite ``weighted_reward_keys``; SPEC section 3, defaults in
+Reward (MyoSuite ``weighted_reward_keys``; docs/reference.md section 3, defaults in
 :data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`): ``pose`` = exp(-e^2/(2 sigma^2)) - |e|;
 ``bonus`` = 0.01 while |e| < 0.05 rad and |knee vel| < 0.05 rad/s; ``inter`` =
 (d tau_knee / 100 Nm)^2 + (tau_knee / 100 Nm)^2 when tau_knee > 75 Nm; ``vel`` = |d knee
@@ -67,17 +69,21 @@ from myosuite.envs.gymnasium_env import CpuEnvAccessor, MyoGymnasiumEnv
 from myosuite.envs.muscle_stages import CtrlStageHost
 
 from myoexo.envs.config import RewardParams, TaskParams
-from myoexo.model import COUPLING_JOINTS, TwinParams, build_model, pose_twin
+from myoexo.model import (
+    COUPLING_JOINTS,
+    CUFF_SENSORS,
+    EXO_ACTUATOR,
+    EXO_JOINT,
+    KNEE_JOINT,
+    TwinParams,
+    build_model,
+    pose_twin,
+)
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import SPASTIC_MUSCLES, SpasticityStage
 
-#: Cuff sensors of the twin: obs key -> sensor name.
-CUFF_SENSORS: dict[str, str] = {
-    "thigh_cuff_force_n": "thigh_cuff_force",
-    "thigh_cuff_torque_nm": "thigh_cuff_torque",
-    "shank_cuff_force_n": "shank_cuff_force",
-    "shank_cuff_torque_nm": "shank_cuff_torque",
-}
+#: Cuff sensors of the twin: obs key (sensor name + unit) -> sensor name.
+CUFF_OBS_KEYS: dict[str, str] = {f"{name}_{unit}": name for name, unit in CUFF_SENSORS.items()}
 
 #: Fixed observation scales (vector = obs_dict value * scale); coupling scales come from the
 #: joint ranges of the model.
@@ -150,6 +156,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         twin: Parameters of the human + exo digital twin.
         obs_keys: Observation entries (default :data:`DEFAULT_OBS_KEYS`).
         weighted_reward_keys: Shortcut overriding ``reward.weights``.
+        subject_noise: Draw an individual subject (10 % variability) at every reset;
+            ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
         seed: Seed of the env's RNG (``reset(seed=...)`` reseeds it).
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
     """
@@ -164,6 +172,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         twin: TwinParams | None = None,
         obs_keys: list[str] | tuple[str, ...] | None = None,
         weighted_reward_keys: dict[str, float] | None = None,
+        subject_noise: bool = True,
         seed: int | None = None,
         render_mode: str | None = None,
         **kwargs: Any,
@@ -195,6 +204,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             twin=twin,
             obs_keys=obs_keys,
             weighted_reward_keys=weighted_reward_keys,
+            subject_noise=subject_noise,
             seed=seed,
             render_mode=render_mode,
         )
@@ -207,7 +217,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.rwd_keys_wt = dict(self.reward_params.weights)
         self._resolve_indices()
 
-        self.spasticity = SpasticityStage(level=spasticity_level)
+        self.spasticity = SpasticityStage(level=spasticity_level, subject_noise=subject_noise)
         self.add_ctrl_stage("spasticity", self.spasticity.apply, self.spasticity.reset)
 
         self._input_seed = seed
@@ -223,15 +233,15 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     def _resolve_indices(self) -> None:
         """Resolve every name once: the step gathers observations with index arrays."""
         m = self.model
-        knee = m.joint("knee_angle_r")
-        exo = m.joint("exo_knee")
+        knee = m.joint(KNEE_JOINT)
+        exo = m.joint(EXO_JOINT)
         self._knee_qadr = int(knee.qposadr[0])
         self._knee_dadr = int(knee.dofadr[0])
         self._exo_qadr = int(exo.qposadr[0])
         self._exo_dadr = int(exo.dofadr[0])
-        self._exo_act = int(m.actuator("exo_motor").id)
+        self._exo_act = int(m.actuator(EXO_ACTUATOR).id)
         self._muscle_act_ind = m.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE
-        self._knee_torque = CoupledJointTorque(m, "knee_angle_r")
+        self._knee_torque = CoupledJointTorque(m, KNEE_JOINT)
         self._ctrl = np.zeros(m.nu)
 
         names = [n for n in COUPLING_JOINTS if _has(m, mujoco.mjtObj.mjOBJ_JOINT, n)]
@@ -243,7 +253,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         coupling_scale = 1.0 / np.maximum(half_range, 1e-6)
 
         sensor_idx = []
-        for sensor in CUFF_SENSORS.values():
+        for sensor in CUFF_OBS_KEYS.values():
             sid = m.sensor(sensor).id
             adr, dim = int(m.sensor_adr[sid]), int(m.sensor_dim[sid])
             sensor_idx.extend(range(adr, adr + dim))
@@ -262,7 +272,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
         # Layout of the raw observation buffer (physical units): key -> slice.
         nc = len(names)
-        sizes = {**dict.fromkeys(_SCALAR_KEYS, 1), **dict.fromkeys(CUFF_SENSORS, 3)}
+        sizes = {**dict.fromkeys(_SCALAR_KEYS, 1), **dict.fromkeys(CUFF_OBS_KEYS, 3)}
         sizes.update(coupling_qpos=nc, coupling_qvel=nc)
         sizes.update(dict.fromkeys(_MUSCLE_KEYS, n))
         self._slices: dict[str, slice] = {}
@@ -370,7 +380,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
     # ------------------------------------------------------------------ reward
     def get_reward_dict(self, obs_dict: dict[str, np.ndarray]) -> dict[str, Any]:
-        """The paper's reward terms (SPEC section 3) and their weighted sum."""
+        """The paper's reward terms (docs/reference.md section 3) and their weighted sum."""
         p = self.reward_params
         e = float(obs_dict["error_rad"][0])
         knee_vel = float(obs_dict["knee_vel_rad_s"][0])
@@ -498,7 +508,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
     def get_proprioception(self) -> tuple:
         """``(time, vector, dict)`` of what the exo itself senses (encoder, torque, cuffs)."""
-        keys = ("exo_angle_rad", "exo_vel_rad_s", "exo_torque_nm", *CUFF_SENSORS)
+        keys = ("exo_angle_rad", "exo_vel_rad_s", "exo_torque_nm", *CUFF_OBS_KEYS)
         od = self._get_obs_dict(self._accessor)
         pdict = {k: od[k] for k in keys}
         return float(self.data.time), np.concatenate([np.ravel(v) for v in pdict.values()]), pdict

@@ -1,36 +1,44 @@
-"""Env ids of myoexo, registered with gymnasium and MyoSuite's registry on ``import myoexo``.
+"""Env ids of myoexo and the one way to build their envs.
 
+The ids are registered with gymnasium and MyoSuite's registry on ``import myoexo``:
 ``gymnasium.make("MyoExoKnee-v2")`` (after ``import myoexo``), ``gymnasium.make(
 "myoexo:MyoExoKnee-v2")`` (imports the package itself) and
 ``myosuite.core.registry.make_env("MyoExoKnee-v2")`` all build the same env.
+
+The env truncates its episodes itself (at ``TaskParams.episode_steps``, 800 control steps
+by default) and reports instability as a truncation, so neither gymnasium's ``TimeLimit``
+nor MyoSuite's instability wrapper is added: an env built with another ``TaskParams`` needs
+nothing more. :func:`make_env` is the shortcut every part of myoexo uses::
+
+    env = make_env(2, episode_duration_s=4.0, reward_weights={"inter": -0.5})
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
+from collections.abc import Mapping
+from typing import Any
 
-from myoexo.envs.config import TaskParams
+from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
+from myoexo.spasticity import RANDOM_LEVEL, VALID_LEVELS
 
 ENTRY_POINT = "myoexo.envs.knee_exo:MyoExoKneeEnv"
+#: Id of the env whose level is drawn uniformly at every reset (the paper's training).
+RANDOM_ENV_ID = "MyoExoKneeRandom-v0"
 
-#: env id -> spasticity level (``"random"``: uniform over 0..3 at every reset).
+#: env id -> spasticity level (``"random"``: uniform over the levels at every reset).
 ENV_LEVELS: dict[str, int | str] = {
-    "MyoExoKnee-v0": 0,
-    "MyoExoKnee-v1": 1,
-    "MyoExoKnee-v2": 2,
-    "MyoExoKnee-v3": 3,
-    "MyoExoKneeRandom-v0": "random",
+    **{f"MyoExoKnee-v{level}": level for level in VALID_LEVELS},
+    RANDOM_ENV_ID: RANDOM_LEVEL,
 }
 
-#: Default episode length in control steps (8 s at 100 Hz). An env built with another
-#: ``TaskParams`` truncates itself at its own length; pass ``max_episode_steps`` to
-#: ``gymnasium.make`` as well if it is longer than this.
+#: Default episode length in control steps (8 s at 100 Hz), recorded in the registry.
 MAX_EPISODE_STEPS = TaskParams().episode_steps
 
 
 def register_envs() -> None:
-    """Register every id (idempotent). Instability is reported by the env itself as a
-    truncation with ``info["unstable"]``, so MyoSuite's termination wrapper is not added."""
+    """Register every id (idempotent)."""
     from myosuite.core.registry import register_env
 
     # Gymnasium reads "-vN" as a version and warns that v0..v2 are "out of date" next to v3;
@@ -45,6 +53,56 @@ def register_envs() -> None:
             env_id,
             ENTRY_POINT,
             max_episode_steps=MAX_EPISODE_STEPS,
+            time_limit=False,
             wrap_mj_instability_termination=False,
             kwargs={"spasticity_level": level},
         )
+
+
+def env_id(level: int | str) -> str:
+    """The id of a level's env: ``MyoExoKnee-v<level>``, or :data:`RANDOM_ENV_ID`."""
+    for key, value in ENV_LEVELS.items():
+        if value == level and type(value) is type(level):
+            return key
+    raise ValueError(
+        f"unknown spasticity level {level!r}; accepted: {list(VALID_LEVELS)} or {RANDOM_LEVEL!r}"
+    )
+
+
+def make_env(
+    env: int | str = 0,
+    *,
+    task: TaskParams | None = None,
+    episode_duration_s: float | None = None,
+    reward_weights: Mapping[str, float] | None = None,
+    subject_noise: bool = True,
+    **kwargs: Any,
+) -> Any:
+    """Build a MyoExoKnee env through ``gymnasium.make``.
+
+    Args:
+        env: A spasticity level (0..3 or ``"random"``) or an env id (``"MyoExoKnee-v2"``,
+            ``"module:EnvId"`` for an env registered by another module).
+        task: Task parameters (default: the env's, i.e. :class:`TaskParams`' defaults).
+        episode_duration_s: Shortcut replacing ``task.episode_duration_s`` (``None``: keep).
+        reward_weights: Reward-weight overrides on top of the defaults
+            (:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`); an unknown key raises.
+        subject_noise: Draw individual subjects at reset (``False``: Table I's nominal
+            subject of the level, e.g. for tuning).
+        **kwargs: Other keyword arguments of :class:`~myoexo.envs.knee_exo.MyoExoKneeEnv`
+            (``twin``, ``obs_keys``, ``render_mode``, ...).
+    """
+    import gymnasium as gym
+
+    import myoexo  # noqa: F401  (registers the ids)
+
+    env_name = env if isinstance(env, str) and env != RANDOM_LEVEL else env_id(env)
+    if episode_duration_s is not None:
+        task = dataclasses.replace(task or TaskParams(), episode_duration_s=episode_duration_s)
+    if task is not None:
+        kwargs["task"] = task
+    if reward_weights:
+        kwargs["weighted_reward_keys"] = {**DEFAULT_REWARD_WEIGHTS, **dict(reward_weights)}
+    if not subject_noise:
+        kwargs["subject_noise"] = False
+    return gym.make(env_name, **kwargs)

@@ -1,31 +1,40 @@
-"""The paper's evaluation protocol: metrics, the paired multi-subject runner, figures and the
+"""The paper's evaluation protocol: metrics, the paired multi-subject engine, figures and the
 Markdown report (``myoexo evaluate``, ``myoexo report``).
 
     from myoexo.evaluation import EvaluationConfig, evaluate
 
     run = evaluate(EvaluationConfig(controllers=("pid", "sac"), subjects=100), "results/eval")
     run.table.groupby(["controller", "level"]).peak_interaction_torque_nm.mean()
+
+Modules: :mod:`.config` (what a run is, subject seeds, ``config.json``), :mod:`.engine`
+(episodes, chunks, workers), :mod:`.storage` (chunk, table and trace files),
+:mod:`.metrics`, :mod:`.criteria` (the acceptance criteria), :mod:`.paper` (the study's
+numbers), :mod:`.figures`, :mod:`.report`.
 """
 
-from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
-from myoexo.evaluation.runner import (
-    EvaluationConfig,
+from myoexo.evaluation.config import EvaluationConfig, load_config, subject_seed
+from myoexo.evaluation.engine import (
+    EpisodeResult,
     EvaluationRun,
+    available_cores,
     evaluate,
     evaluate_controller,
-    load_table,
-    load_traces,
     run_episode,
-    subject_seed,
 )
+from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
+from myoexo.evaluation.storage import Traces, load_table, load_traces
 
 __all__ = [
     "EpisodeMetrics",
+    "EpisodeResult",
     "EvaluationConfig",
     "EvaluationRun",
+    "Traces",
+    "available_cores",
     "episode_metrics",
     "evaluate",
     "evaluate_controller",
+    "load_config",
     "load_table",
     "load_traces",
     "run_episode",

@@ -5,7 +5,7 @@
     myoexo report results/eval
 
 Interrupting and re-running the same command continues where it stopped: finished chunks of
-episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.runner`). Bad
+episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.engine`). Bad
 arguments (an unknown level, ``--subjects 0``, an unreadable policy file) stop the command
 with a one-line error before anything is written.
 """
@@ -16,7 +16,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from myoexo.evaluation.runner import VALID_LEVELS, EvaluationConfig, available_cores
+from myoexo.evaluation.config import EvaluationConfig
+from myoexo.evaluation.engine import available_cores
+from myoexo.spasticity import VALID_LEVELS
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
 DEFAULT_OUT = Path("results") / "evaluation"
@@ -84,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments."""
-    from myoexo.evaluation.runner import evaluate
+    from myoexo.evaluation.engine import evaluate
 
     try:
         config = EvaluationConfig(

@@ -1,6 +1,6 @@
 """Figures of the evaluation, the equivalents of the paper's Fig. 3-6.
 
-Each function takes data (the episode table, :class:`~myoexo.evaluation.runner.Traces`) and
+Each function takes data (the episode table, :class:`~myoexo.evaluation.storage.Traces`) and
 returns a :class:`matplotlib.figure.Figure` built without pyplot (no GUI backend, no global
 state); :mod:`myoexo.evaluation.report` saves them as PNG.
 
@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.evaluation.runner import Traces
+from myoexo.evaluation.storage import Traces
 
 #: Level colours of the paper's Fig. 5 caption (green, yellow, orange, red).
 LEVEL_COLORS: dict[int, str] = {0: "#2ca02c", 1: "#e6b800", 2: "#ff7f0e", 3: "#d62728"}

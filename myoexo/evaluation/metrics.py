@@ -1,4 +1,6 @@
-"""Per-episode metrics of the evaluation protocol (SPEC section 5), with standard definitions.
+"""Per-episode metrics of the evaluation protocol, with standard definitions.
+
+The protocol and the paper's metric definitions are in docs/reference.md section 5.
 
 The knee extension is read as a step response of the knee angle ``y(t)`` from ``y0`` (about
 90 deg) towards the target (7 deg). Step-response quantities follow the definitions of

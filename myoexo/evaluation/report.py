@@ -6,10 +6,10 @@ Writes, into ``DIR`` (or ``--out``):
   ``figures/fig4_comparison.png``, ``figures/fig5_rms_vs_settling.png``,
   ``figures/fig6_peak_torque.png`` (:mod:`myoexo.evaluation.figures`);
 * ``summary.csv``: per controller and level, mean / std / median / IQR of the metrics;
-* ``report.md``: the summary table, the comparison with the paper's numbers (SPEC section 5,
-  :mod:`myoexo.evaluation.paper`), the reductions of every other controller against the PID
-  per level (in % of the PID's mean, and the paired per-subject difference in Nm), the
-  run's configuration and the package versions.
+* ``report.md``: the summary table, the comparison with the paper's numbers
+  (docs/reference.md section 5, :mod:`myoexo.evaluation.paper`), the reductions of every
+  other controller against the PID per level (in % of the PID's mean, and the paired
+  per-subject difference in Nm), the run's configuration and the package versions.
 
 Reductions follow the paper: ``100 (mean_PID - mean_other) / mean_PID`` for the peak
 interaction torque and its RMS up to the settling time; the paired difference uses the same
@@ -28,8 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.control.specs import controller_slug
+from myoexo.evaluation.config import load_config
 from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
-from myoexo.evaluation.runner import load_config, load_table, load_traces
+from myoexo.evaluation.storage import load_table, load_traces
 
 #: Metrics summarized per controller and level (column -> label in the report).
 SUMMARY_METRICS: dict[str, str] = {
@@ -49,24 +51,28 @@ def summarize(table: Any) -> Any:
     import pandas as pd
 
     rows = []
-    for (label, level), g in table.groupby(["controller", "level"], sort=False):
+    for (label, level), episodes in table.groupby(["controller", "level"], sort=False):
         row: dict[str, Any] = {
             "controller": label,
             "level": int(level),
-            "n": len(g),
-            "unstable": int(g["unstable"].sum()),
-            "not_settled": int(g["settling_time_s"].isna().sum()),
+            "n": len(episodes),
+            "unstable": int(episodes["unstable"].sum()),
+            "not_settled": int(episodes["settling_time_s"].isna().sum()),
         }
         for col in SUMMARY_METRICS:
-            x = g[col].to_numpy(dtype=float)
-            x = x[np.isfinite(x)]
+            values = episodes[col].to_numpy(dtype=float)
+            values = values[np.isfinite(values)]
             stats = (
-                (x.mean(), x.std(ddof=1) if x.size > 1 else 0.0, *np.percentile(x, [50, 25, 75]))
-                if x.size
+                (
+                    values.mean(),
+                    values.std(ddof=1) if values.size > 1 else 0.0,
+                    *np.percentile(values, [50, 25, 75]),
+                )
+                if values.size
                 else (math.nan,) * 5
             )
-            for name, v in zip(("mean", "std", "median", "q25", "q75"), stats, strict=True):
-                row[f"{col}_{name}"] = float(v)
+            for name, value in zip(("mean", "std", "median", "q25", "q75"), stats, strict=True):
+                row[f"{col}_{name}"] = float(value)
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -89,13 +95,15 @@ def reductions(table: Any, reference: str, other: str) -> Any:
     ref = table[table.controller == reference].set_index(["level", "subject"])
     oth = table[table.controller == other].set_index(["level", "subject"])
     for level in sorted(set(ref.index.get_level_values(0)) & set(oth.index.get_level_values(0))):
-        r, o = ref.loc[level], oth.loc[level]
-        common = r.index.intersection(o.index)
+        ref_level, other_level = ref.loc[level], oth.loc[level]
+        common = ref_level.index.intersection(other_level.index)
         row: dict[str, Any] = {"level": int(level), "n_paired": len(common)}
         for key, col in cols.items():
-            mr, mo = r[col].mean(), o[col].mean()
-            diff = (r.loc[common, col] - o.loc[common, col]).to_numpy(dtype=float)
-            row[f"{key}_reduction_pct"] = 100.0 * (mr - mo) / mr if mr else math.nan
+            mean_ref, mean_other = ref_level[col].mean(), other_level[col].mean()
+            diff = (ref_level.loc[common, col] - other_level.loc[common, col]).to_numpy(dtype=float)
+            row[f"{key}_reduction_pct"] = (
+                100.0 * (mean_ref - mean_other) / mean_ref if mean_ref else math.nan
+            )
             row[f"{key}_paired_diff_nm_mean"] = float(diff.mean()) if diff.size else math.nan
             row[f"{key}_paired_diff_nm_std"] = (
                 float(diff.std(ddof=1)) if diff.size > 1 else math.nan
@@ -122,43 +130,49 @@ def _pm(mean: float, std: float, digits: int = 2) -> str:
 
 
 def _md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines)
+    """A Markdown table (pandas ``to_markdown``) of pre-formatted cells."""
+    import pandas as pd
+
+    frame = pd.DataFrame([[str(cell) for cell in row] for row in rows], columns=list(headers))
+    return str(frame.to_markdown(index=False, disable_numparse=True))
 
 
 def _summary_section(summary: Any) -> str:
     headers = ["controller", "level", "n", *SUMMARY_METRICS.values(), "unstable", "not settled"]
     rows = []
-    for _, s in summary.iterrows():
-        cells = [s.controller, s.level, s.n]
+    for _, stats in summary.iterrows():
+        cells = [stats.controller, stats.level, stats.n]
         for col in SUMMARY_METRICS:
             digits = 3 if col.startswith("command") else 2
-            cells.append(_pm(s[f"{col}_mean"], s[f"{col}_std"], digits))
-        cells += [s.unstable, s.not_settled]
+            cells.append(_pm(stats[f"{col}_mean"], stats[f"{col}_std"], digits))
+        cells += [stats.unstable, stats.not_settled]
         rows.append(cells)
     return _md_table(headers, rows)
 
 
 def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> str:
     """Measured numbers next to the paper's, level by level."""
-    s = summary.set_index(["controller", "level"])
+    by_key = summary.set_index(["controller", "level"])
     levels = sorted(set(summary.level))
     parts = []
     if reference is not None:
         rows = []
         for lv in levels:
-            if (reference, lv) not in s.index:
+            if (reference, lv) not in by_key.index:
                 continue
-            r, p = s.loc[(reference, lv)], PAPER_RESULTS[lv]
+            ours, paper = by_key.loc[(reference, lv)], PAPER_RESULTS[lv]
             rows.append(
                 [
                     lv,
-                    _pm(r.final_error_deg_mean, r.final_error_deg_std),
-                    _pm(r.target_overshoot_deg_mean, r.target_overshoot_deg_std),
-                    p.pid_final_error_text,
-                    _pm(r.settling_time_s_mean, r.settling_time_s_std),
-                    _pm(r.peak_interaction_torque_nm_mean, r.peak_interaction_torque_nm_std, 1),
+                    _pm(ours.final_error_deg_mean, ours.final_error_deg_std),
+                    _pm(ours.target_overshoot_deg_mean, ours.target_overshoot_deg_std),
+                    paper.pid_final_error_text,
+                    _pm(ours.settling_time_s_mean, ours.settling_time_s_std),
+                    _pm(
+                        ours.peak_interaction_torque_nm_mean,
+                        ours.peak_interaction_torque_nm_std,
+                        1,
+                    ),
                 ]
             )
         parts.append(
@@ -178,25 +192,26 @@ def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> 
             )
         )
     for other, rdf in red.items():
-        rr = rdf.set_index("level")
+        red_by_level = rdf.set_index("level")
         rows = []
         for lv in levels:
-            if (other, lv) not in s.index:
+            if (other, lv) not in by_key.index:
                 continue
-            o, p = s.loc[(other, lv)], PAPER_RESULTS[lv]
-            rms = rr.loc[lv, "rms_reduction_pct"] if lv in rr.index else math.nan
-            peak = rr.loc[lv, "peak_reduction_pct"] if lv in rr.index else math.nan
+            ours, paper = by_key.loc[(other, lv)], PAPER_RESULTS[lv]
+            has = lv in red_by_level.index
+            rms = red_by_level.loc[lv, "rms_reduction_pct"] if has else math.nan
+            peak = red_by_level.loc[lv, "peak_reduction_pct"] if has else math.nan
             rows.append(
                 [
                     lv,
-                    _pm(o.settling_time_s_mean, o.settling_time_s_std),
-                    _fmt(p.sac_settling_time_s),
-                    _pm(o.final_error_deg_mean, o.final_error_deg_std),
-                    p.sac_final_error_text,
+                    _pm(ours.settling_time_s_mean, ours.settling_time_s_std),
+                    _fmt(paper.sac_settling_time_s),
+                    _pm(ours.final_error_deg_mean, ours.final_error_deg_std),
+                    paper.sac_final_error_text,
                     _fmt(rms, 1),
-                    _fmt(p.rms_reduction_pct, 1),
+                    _fmt(paper.rms_reduction_pct, 1),
                     _fmt(peak, 1),
-                    _fmt(p.peak_reduction_pct, 1),
+                    _fmt(paper.peak_reduction_pct, 1),
                 ]
             )
         parts.append(
@@ -222,18 +237,18 @@ def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> 
 
 def _reduction_section(red: dict[str, Any], reference: str) -> str:
     parts = []
-    h = PAPER_HEADLINES
+    headlines = PAPER_HEADLINES
     for other, rdf in red.items():
         rows = [
             [
-                int(r.level),
-                int(r.n_paired),
-                _fmt(r.rms_reduction_pct, 1),
-                _pm(r.rms_paired_diff_nm_mean, r.rms_paired_diff_nm_std),
-                _fmt(r.peak_reduction_pct, 1),
-                _pm(r.peak_paired_diff_nm_mean, r.peak_paired_diff_nm_std),
+                int(red.level),
+                int(red.n_paired),
+                _fmt(red.rms_reduction_pct, 1),
+                _pm(red.rms_paired_diff_nm_mean, red.rms_paired_diff_nm_std),
+                _fmt(red.peak_reduction_pct, 1),
+                _pm(red.peak_paired_diff_nm_mean, red.peak_paired_diff_nm_std),
             ]
-            for r in rdf.itertuples()
+            for red in rdf.itertuples()
         ]
         mean_peak = float(rdf.peak_reduction_pct.mean())
         mean_rms = float(rdf.rms_reduction_pct.mean())
@@ -252,10 +267,11 @@ def _reduction_section(red: dict[str, Any], reference: str) -> str:
                 rows,
             )
             + f"\n\nMean over levels: peak torque {_fmt(mean_peak, 1)} % "
-            f"(paper {h.peak_reduction_pct} %), "
+            f"(paper {headlines.peak_reduction_pct} %), "
             f"{_pm(level_nm.mean(), level_nm.std(ddof=1) if level_nm.size > 1 else 0.0, 1)} Nm "
-            f"across levels (paper {h.peak_reduction_nm} ± {h.peak_reduction_std_nm} Nm); "
-            f"RMS to settling {_fmt(mean_rms, 1)} % (paper {h.rms_reduction_pct} %)."
+            f"across levels (paper {headlines.peak_reduction_nm} ± "
+            f"{headlines.peak_reduction_std_nm} Nm); "
+            f"RMS to settling {_fmt(mean_rms, 1)} % (paper {headlines.rms_reduction_pct} %)."
         )
     return "\n\n".join(parts)
 
@@ -276,8 +292,7 @@ def write_figures(out_dir: Path, fig_dir: Path, table: Any) -> list[Path]:
 
     traces = {c: {lv: load_traces(out_dir, c, lv) for lv in levels} for c in labels}
     for label in labels:
-        slug = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in label)
-        save(figures.plot_level_traces(traces[label], label), f"fig3_{slug}.png")
+        save(figures.plot_level_traces(traces[label], label), f"fig3_{controller_slug(label)}.png")
     save(figures.plot_controller_comparison(traces), "fig4_comparison.png")
     del traces
     save(figures.plot_rms_vs_settling(table), "fig5_rms_vs_settling.png")
@@ -334,7 +349,7 @@ def write_report(out_dir: str | Path, report_dir: str | Path | None = None) -> P
         "",
         _summary_section(summary),
         "",
-        "## Next to the paper (SPEC section 5)",
+        "## Next to the paper (docs/reference.md section 5)",
         "",
         _paper_section(summary, red, reference),
         "",

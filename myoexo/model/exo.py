@@ -50,13 +50,14 @@ COUPLING_JOINTS: tuple[str, ...] = (
 )
 #: All exo joints, in tree order.
 EXO_JOINTS: tuple[str, ...] = ("exo_thigh_slide", "exo_thigh_pin", EXO_JOINT, *COUPLING_JOINTS[2:])
-#: Cuff force/torque sensors (N, Nm; in the cuff site frames).
-CUFF_SENSORS: tuple[str, ...] = (
-    "thigh_cuff_force",
-    "thigh_cuff_torque",
-    "shank_cuff_force",
-    "shank_cuff_torque",
-)
+#: Cuff force/torque sensors (3-D, in the cuff site frames) -> unit suffix of their readings
+#: (``n``: N, ``nm``: Nm); the env observes each as ``<sensor>_<unit>``.
+CUFF_SENSORS: dict[str, str] = {
+    "thigh_cuff_force": "n",
+    "thigh_cuff_torque": "nm",
+    "shank_cuff_force": "n",
+    "shank_cuff_torque": "nm",
+}
 #: All exo sensors.
 EXO_SENSORS: tuple[str, ...] = ("exo_knee_pos", "exo_knee_vel", "exo_motor_torque", *CUFF_SENSORS)
 #: Weld equality of the shank strap and its two sites (cuff side, tibia side).
@@ -136,8 +137,7 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     thigh_link.ipos = thigh_bar * (2.0 / 3.0)
     thigh_link.inertia = _rod_inertia(params.exo_thigh_mass_kg, thigh_len, bar_radius_m)
     spec.geom("exo_thigh_bar").fromto = np.concatenate([np.zeros(3), thigh_bar])
-    for geom in ("exo_thigh_pin_housing",):
-        spec.geom(geom).quat = _quat_z_to(g.knee_axis)
+    spec.geom("exo_thigh_pin_housing").quat = _quat_z_to(g.knee_axis)
 
     slide = spec.joint("exo_thigh_slide")
     slide.axis = g.slide_axis

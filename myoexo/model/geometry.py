@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model.kinematics import coupled_joint_values, relative_pose
+from myoexo.model.leg import KNEE_JOINT
 from myoexo.model.params import TwinParams
 
 __all__ = ["ExoGeometry", "KneeAxisFit", "exo_geometry", "fit_knee_axis"]
@@ -89,7 +90,7 @@ def fit_knee_axis(
     model: mujoco.MjModel,
     params: TwinParams,
     *,
-    knee_joint: str = "knee_angle_r",
+    knee_joint: str = KNEE_JOINT,
     n_samples: int = 40,
 ) -> KneeAxisFit:
     """Fit the knee's mean fixed flexion axis over ``params.knee_axis_fit_range_deg``.

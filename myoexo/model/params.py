@@ -2,7 +2,7 @@
 
 Every number that shapes the twin lives in :class:`TwinParams`, with the paper's values as
 defaults where the paper gives them (``paper.tex`` section "Human MS system with Exo
-coupling"; ``SPEC.md`` section 1) and documented, physically plausible choices elsewhere.
+coupling"; docs/reference.md section 1) and documented, physically plausible choices elsewhere.
 
 Conventions
 -----------
@@ -77,7 +77,7 @@ class TwinParams:
         shank_axial_range_deg: Shank cuff axial pin range (deg). Not in the paper: it
             leaves the tibia's coupled axial rotation (``knee_angle_rotation3_r``,
             ~15 deg over the flexion range) free; without it the knee is locked near
-            extension (SPEC section 1).
+            extension (docs/reference.md section 1).
         shank_abduction_range_deg: Shank cuff ab/adduction pin range (deg). Not in the
             paper: it follows the tibia's coupled ab/adduction
             (``knee_angle_rotation2_r``, up to ~2 deg, i.e. ~7 mm sideways at the cuff),

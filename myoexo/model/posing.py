@@ -59,7 +59,7 @@ def strap_violation(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[float, 
     return dist, float(np.linalg.norm(_rotation_vector(rel)))
 
 
-def _strap_residual(model: mujoco.MjModel, data: mujoco.MjData, s1: int, s2: int) -> np.ndarray:
+def _strap_residual(data: mujoco.MjData, s1: int, s2: int) -> np.ndarray:
     pos = data.site_xpos[s1] - data.site_xpos[s2]
     rel = data.site_xmat[s1].reshape(3, 3) @ data.site_xmat[s2].reshape(3, 3).T
     return np.concatenate([pos, _ROT_LENGTH_M * _rotation_vector(rel)])
@@ -84,7 +84,7 @@ def _close_exo_loop(model: mujoco.MjModel, data: mujoco.MjData) -> None:
 
     def objective() -> tuple[float, np.ndarray]:
         mujoco.mj_kinematics(model, data)
-        res = _strap_residual(model, data, s1, s2)
+        res = _strap_residual(data, s1, s2)
         q = data.qpos[qadr]
         return float(res @ res + np.sum(reg * q * q)), res
 

@@ -5,6 +5,7 @@
     policy = myoexo.load_policy()              # offline: two small files in this folder
     env = gym.make("MyoExoKnee-v1")
     obs, info = env.reset(seed=0)
+    action = policy.act(obs, info)                         # a myoexo Controller
     action, _ = policy.predict(obs, deterministic=True)   # SB3's signature
     action = policy(obs)                                   # or simply call it
 

@@ -60,7 +60,8 @@ class MLPActor:
         action_high: Upper action bound(s).
         metadata: Provenance (env id, steps, seed, ...), kept as given.
 
-    The object follows SB3's ``predict(obs, state=None, episode_start=None,
+    The object is a myoexo :class:`~myoexo.control.protocol.Controller` (``reset(seed)``,
+    ``act(obs, info)``), follows SB3's ``predict(obs, state=None, episode_start=None,
     deterministic=True) -> (action, state)`` and is callable: ``actor(obs) -> action``.
     """
 
@@ -139,6 +140,19 @@ class MLPActor:
         squashed = np.tanh(h @ w.T + b)
         span = self.action_high - self.action_low
         return (self.action_low + 0.5 * (squashed + 1.0) * span).astype(np.float32)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start of an episode: the deterministic actor has no state to clear."""
+        del seed
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any] | None = None) -> np.ndarray:
+        """The controller's decision: the deterministic action for one observation, shape
+        ``(action_dim,)`` float32 in [action_low, action_high]."""
+        del info
+        action = self(np.asarray(obs).reshape(self.obs_dim))
+        if not np.isfinite(action).all():
+            raise ValueError(f"the actor returned a non-finite action {action.tolist()}")
+        return action
 
     def predict(
         self,

@@ -1,5 +1,5 @@
-"""SAC training of the exoskeleton controller (SPEC section 3): presets, resumable runs,
-logging, and the export of a trained actor.
+"""SAC training of the exoskeleton controller (docs/reference.md section 3): presets,
+resumable runs, logging, and the export of a trained actor.
 
     from myoexo.training import get_preset, train, resume
 

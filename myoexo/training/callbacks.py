@@ -4,7 +4,8 @@
   and the paper's episode quantities per level, to the SB3 logger (tensorboard, CSV).
 * :class:`PaperMetricsEvalCallback`: every ``eval_every_steps``, the deterministic policy on
   a few fixed subjects per level, next to the PID on the same subjects: final error, peak
-  and RMS interaction torque (SPEC section 5), and a scalar score used to rank checkpoints.
+  and RMS interaction torque (docs/reference.md section 5), and the score that ranks
+  checkpoints (:func:`myoexo.evaluation.criteria.score`).
 * :class:`PeriodicCheckpointCallback`: model + replay buffer + normalization statistics +
   step counter every ``every_s`` seconds (and/or steps), and at the end of training.
 """
@@ -24,6 +25,10 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from myoexo.evaluation import criteria
+from myoexo.evaluation.criteria import CRITERIA_METRICS
+from myoexo.io import write_json_atomic
+from myoexo.spasticity import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
 #: Reward-dict entries that are not reward terms.
@@ -103,43 +108,12 @@ class SmallEvalSpec:
         root_seed: Root seed of the subjects (a held-out root by default: the training
             envs draw their subjects from the training seed, not from these).
         episode_duration_s: Episode length (``None``: the env's 8 s).
-        final_error_tol_deg: Final-error bound per level for the score (the issue's
-            criteria: 1 deg at levels 0-2, the paper's 11.45 deg at level 3).
     """
 
-    levels: tuple[int, ...] = (0, 1, 2, 3)
+    levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 2
     root_seed: int = 0
     episode_duration_s: float | None = None
-    final_error_tol_deg: tuple[float, ...] = (1.0, 1.0, 1.0, 11.45)
-
-
-def eval_score(
-    sac: dict[int, dict[str, float]], pid: dict[int, dict[str, float]], spec: SmallEvalSpec
-) -> float:
-    """Rank of a policy on the small evaluation (higher is better).
-
-    Mean over levels of the relative peak-interaction-torque reduction vs the PID, minus,
-    per level, how far the mean absolute final error exceeds its bound (in units of the
-    bound). A policy meeting every final-error bound scores its mean torque reduction.
-    """
-    score = 0.0
-    for level in spec.levels:
-        p = pid[level]["peak_interaction_torque_nm"]
-        s = sac[level]["peak_interaction_torque_nm"]
-        tol = spec.final_error_tol_deg[level]
-        excess = max(0.0, sac[level]["abs_final_error_deg"] - tol) / tol
-        score += (p - s) / max(p, 1e-9) - excess
-    return score / len(spec.levels)
-
-
-_EVAL_METRICS = (
-    "abs_final_error_deg",
-    "final_error_deg",
-    "peak_interaction_torque_nm",
-    "rms_interaction_torque_nm",
-    "settling_time_s",
-)
 
 
 def _level_means(controller: Any, level: int, spec: SmallEvalSpec, env: Any) -> dict[str, float]:
@@ -149,18 +123,19 @@ def _level_means(controller: Any, level: int, spec: SmallEvalSpec, env: Any) -> 
     for i in range(spec.subjects):
         res = run_episode(env, controller, subject_seed(level, i, spec.root_seed))
         m = res.metrics.as_dict()
-        rows.append([m[k] for k in _EVAL_METRICS] + [float(res.unstable)])
+        rows.append([m[k] for k in CRITERIA_METRICS] + [float(res.unstable)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # NaN settling time of every subject
         means = np.nanmean(np.array(rows, dtype=np.float64), axis=0)
-    return dict(zip([*_EVAL_METRICS, "unstable"], map(float, means), strict=True))
+    return dict(zip([*CRITERIA_METRICS, "unstable"], map(float, means), strict=True))
 
 
 class PaperMetricsEvalCallback(BaseCallback):
     """Small periodic evaluation of the deterministic policy against the PID.
 
     Logs ``eval/L<level>/<metric>`` and ``eval/L<level>/peak_vs_pid_pct`` (negative = less
-    peak torque than the PID) and ``eval/score`` (:func:`eval_score`) to the SB3 logger,
+    peak torque than the PID) and ``eval/score`` (:func:`myoexo.evaluation.criteria.score`)
+    to the SB3 logger,
     appends the rows to ``<run>/eval.csv`` and keeps :attr:`last_score` for the
     checkpoints. The PID's numbers are computed once per run (``eval_pid.json``).
 
@@ -186,9 +161,9 @@ class PaperMetricsEvalCallback(BaseCallback):
 
     def _env(self, level: int) -> Any:
         if level not in self._envs:
-            from myoexo.evaluation.runner import make_eval_env
+            from myoexo.envs import make_env
 
-            self._envs[level] = make_eval_env(level, self.spec.episode_duration_s)
+            self._envs[level] = make_env(level, episode_duration_s=self.spec.episode_duration_s)
         return self._envs[level]
 
     def _on_training_start(self) -> None:
@@ -204,7 +179,7 @@ class PaperMetricsEvalCallback(BaseCallback):
                 env = self._env(level)
                 pid = build_controller(parse_controller_spec("pid"), env)
                 self._pid[level] = _level_means(pid, level, self.spec, env)
-            ck.write_json_atomic(path, {str(k): v for k, v in sorted(self._pid.items())})
+            write_json_atomic(path, {str(k): v for k, v in sorted(self._pid.items())})
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
@@ -214,16 +189,12 @@ class PaperMetricsEvalCallback(BaseCallback):
 
     def evaluate(self) -> float:
         """Run the small evaluation now; returns the score."""
-        from myoexo.control import CallableController
         from myoexo.training.export import actor_from_sac
 
         actor = actor_from_sac(self.model)
-        controller = CallableController(actor, name="sac")
         t0 = time.perf_counter()
-        sac = {
-            lv: _level_means(controller, lv, self.spec, self._env(lv)) for lv in self.spec.levels
-        }
-        score = eval_score(sac, self._pid, self.spec)
+        sac = {lv: _level_means(actor, lv, self.spec, self._env(lv)) for lv in self.spec.levels}
+        score = criteria.score(criteria.compare(sac, {lv: self._pid[lv] for lv in sac}))
         rows = []
         for level, m in sac.items():
             pid_peak = self._pid[level]["peak_interaction_torque_nm"]
@@ -245,7 +216,7 @@ class PaperMetricsEvalCallback(BaseCallback):
 
     def _append_rows(self, rows: list[dict[str, Any]], score: float) -> None:
         path = self.run_dir / ck.EVAL_FILE
-        fields = ["step", "level", *_EVAL_METRICS, "unstable", "peak_vs_pid_pct", "score"]
+        fields = ["step", "level", *CRITERIA_METRICS, "unstable", "peak_vs_pid_pct", "score"]
         new = not path.is_file()
         with open(path, "a", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=fields)

@@ -6,7 +6,8 @@
     <run>/sessions.jsonl           one line per training session (start/end step, wall time)
     <run>/eval.csv                 the periodic small evaluation (one row per level and step)
     <run>/eval_pid.json            the PID's metrics on the same fixed subjects (computed once)
-    <run>/progress.csv, <run>/tb/  SB3 logger output (CSV and tensorboard)
+    <run>/progress_<NN>.csv        SB3 logger output of training session NN (CSV)
+    <run>/tb/                      the same as tensorboard event files
     <run>/checkpoints/step_<n>/    model.zip, vecnormalize.pkl, state.json and, for the
                                    newest ``keep_replay`` resumable checkpoints,
                                    replay_buffer.pkl (the others are policy snapshots)
@@ -25,6 +26,8 @@ import shutil
 import tempfile
 from pathlib import Path
 from typing import Any
+
+from myoexo.io import write_json_atomic
 
 CONFIG_FILE = "config.json"
 SESSIONS_FILE = "sessions.jsonl"
@@ -45,16 +48,6 @@ _PREFIX = "step_"
 def checkpoint_name(num_timesteps: int) -> str:
     """Folder name of the checkpoint at ``num_timesteps`` (sorts by step)."""
     return f"{_PREFIX}{int(num_timesteps):010d}"
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as JSON to ``path`` through a temporary file and a rename."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        json.dump(data, f, indent=1)
-        f.write("\n")
-    os.replace(tmp, path)
 
 
 def save_checkpoint(

@@ -9,7 +9,7 @@ field                  ``paper``       ``cpu``         why ``cpu`` differs
 =====================  ==============  ==============  ============================================
 net_arch               64-64 GELU      64-64 GELU      same networks (the shipped actor is the
                                                        paper's 93-64-64-1 shape, with our obs size)
-total_timesteps        5e7             2e6             the issue's CPU budget (2 M steps, ~2 h)
+total_timesteps        5e7             2e6             a 2-core CPU budget (2 M steps, ~2 h)
 buffer_size            5e6             1e6             holds every transition of a 2 M-step run's
                                                        recent half (~1,250 episodes); ~0.6 GB
 batch_size             4096            256             ~5x more gradient updates per CPU second
@@ -38,6 +38,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
+
+from myoexo.spasticity import VALID_LEVELS
 
 #: Env every preset trains on (level drawn uniformly at every reset, as the paper trains).
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
@@ -110,7 +112,7 @@ class SACPreset:
     checkpoint_every_steps: int = 0
     eval_every_steps: int = 50_000
     eval_subjects: int = 2
-    eval_levels: tuple[int, ...] = (0, 1, 2, 3)
+    eval_levels: tuple[int, ...] = VALID_LEVELS
     reward_weights: tuple[tuple[str, float], ...] = ()
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (
@@ -172,9 +174,9 @@ class SACPreset:
                 raise ValueError(f"ent_coef = {self.ent_coef!r}: a float > 0 or 'auto[_<init>]'")
         else:
             _check_float("ent_coef", float(self.ent_coef), 0.0, 1e3, low_open=True)
-        bad = [v for v in self.eval_levels if v not in (0, 1, 2, 3)]
+        bad = [v for v in self.eval_levels if v not in VALID_LEVELS]
         if bad:
-            raise ValueError(f"eval_levels has unknown level(s) {bad}; accepted: 0, 1, 2, 3")
+            raise ValueError(f"eval_levels has unknown level(s) {bad}; accepted: {VALID_LEVELS}")
 
     @property
     def updates_per_transition(self) -> float:

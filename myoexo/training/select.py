@@ -1,12 +1,5 @@
 """Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
-harness and check the issue's acceptance criteria.
-
-Criteria (per level, means over the same simulated subjects, SPEC section 5):
-
-* peak interaction torque lower than the PID's at every level;
-* RMS interaction torque up to settling lower than the PID's at levels 0-2;
-* mean absolute final error below 1 deg at levels 0-2, and below the paper's 11.45 deg at
-  level 3.
+harness and check the acceptance criteria (:mod:`myoexo.evaluation.criteria`).
 
     python -m myoexo.training.select runs/cpu_main --subjects 10 --last 2 --top 4
     python -m myoexo.training.select results/eval --table    # after `myoexo evaluate`
@@ -16,117 +9,29 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.evaluation.criteria import compare, level_means, shortfall
+from myoexo.spasticity import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
-LEVELS: tuple[int, ...] = (0, 1, 2, 3)
 
-
-@dataclass(frozen=True)
-class Criteria:
-    """The acceptance criteria of a shipped policy.
-
-    Attributes:
-        final_error_deg: Bound on the mean absolute final error per level (1 deg at levels
-            0-2; the paper's own SAC result, 11.45 deg, at level 3).
-        rms_levels: Levels where the RMS-to-settling must be lower than the PID's.
-        peak_levels: Levels where the peak interaction torque must be lower than the PID's.
-    """
-
-    final_error_deg: tuple[float, ...] = (1.0, 1.0, 1.0, 11.45)
-    rms_levels: tuple[int, ...] = (0, 1, 2)
-    peak_levels: tuple[int, ...] = (0, 1, 2, 3)
-
-
-_METRICS = (
-    "abs_final_error_deg",
-    "final_error_deg",
-    "settling_time_s",
-    "rms_interaction_torque_nm",
-    "peak_interaction_torque_nm",
-)
-
-
-def level_means(table: Any) -> Any:
-    """Per-level means of the criteria's metrics from an evaluation table."""
-    return table.groupby("level")[list(_METRICS)].mean()
-
-
-def compare(sac: Any, pid: Any, criteria: Criteria = Criteria()) -> Any:
-    """Side-by-side table per level (pandas) with reductions vs the PID and pass flags.
-
-    Args:
-        sac: Per-level means of the policy (:func:`level_means`).
-        pid: Per-level means of the PID on the same subjects.
-        criteria: Bounds.
-    """
-    import pandas as pd
-
-    rows = []
-    for level in sac.index:
-        s, p = sac.loc[level], pid.loc[level]
-        peak_red = 100 * (p.peak_interaction_torque_nm - s.peak_interaction_torque_nm)
-        rms_red = 100 * (p.rms_interaction_torque_nm - s.rms_interaction_torque_nm)
-        row = {
-            "level": int(level),
-            "sac_final_error_deg": s.final_error_deg,
-            "sac_abs_final_error_deg": s.abs_final_error_deg,
-            "pid_final_error_deg": p.final_error_deg,
-            "sac_settling_time_s": s.settling_time_s,
-            "pid_settling_time_s": p.settling_time_s,
-            "sac_rms_nm": s.rms_interaction_torque_nm,
-            "pid_rms_nm": p.rms_interaction_torque_nm,
-            "rms_reduction_pct": rms_red / p.rms_interaction_torque_nm,
-            "sac_peak_nm": s.peak_interaction_torque_nm,
-            "pid_peak_nm": p.peak_interaction_torque_nm,
-            "peak_reduction_pct": peak_red / p.peak_interaction_torque_nm,
-        }
-        ok_err = s.abs_final_error_deg < criteria.final_error_deg[int(level)]
-        ok_peak = level not in criteria.peak_levels or peak_red > 0
-        ok_rms = level not in criteria.rms_levels or rms_red > 0
-        row.update(final_error_ok=ok_err, peak_ok=ok_peak, rms_ok=ok_rms)
-        row["pass"] = bool(ok_err and ok_peak and ok_rms)
-        rows.append(row)
-    return pd.DataFrame(rows).set_index("level")
-
-
-def shortfall(table: Any, criteria: Criteria = Criteria()) -> float:
-    """How far a :func:`compare` table is from passing (0 when it passes; larger is worse):
-    the sum over levels of the relative excess of the final error over its bound and of the
-    relative peak / RMS increase over the PID."""
-    total = 0.0
-    for level, row in table.iterrows():
-        total += max(0.0, row.sac_abs_final_error_deg / criteria.final_error_deg[level] - 1.0)
-        if level in criteria.peak_levels:
-            total += max(0.0, -row.peak_reduction_pct / 100)
-        if level in criteria.rms_levels:
-            total += max(0.0, -row.rms_reduction_pct / 100)
-    return total
-
-
-def evaluate_pid(subjects: int, levels: Sequence[int] = LEVELS, root_seed: int = 0) -> Any:
+def evaluate_pid(subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = 0) -> Any:
     """Per-level means of the paper's PID on subjects ``0..subjects-1``."""
-    import gymnasium as gym
     import pandas as pd
 
-    from myoexo.control import build_controller, parse_controller_spec
+    from myoexo.control import PID
+    from myoexo.envs import TaskParams
     from myoexo.evaluation import evaluate_controller
 
-    tables = []
-    for level in levels:
-        env = gym.make(f"MyoExoKnee-v{level}")
-        pid = build_controller(parse_controller_spec("pid"), env)
-        env.close()
-        table, _ = evaluate_controller(pid, level, subjects, root_seed, label="pid")
-        tables.append(table)
+    pid = PID(dt_s=TaskParams().control_period_s)  # the paper's gains
+    tables = [evaluate_controller(pid, lv, subjects, root_seed, label="pid")[0] for lv in levels]
     return level_means(pd.concat(tables))
 
 
 def evaluate_checkpoint(
-    checkpoint: Path, subjects: int, levels: Sequence[int] = LEVELS, root_seed: int = 0
+    checkpoint: Path, subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = 0
 ) -> Any:
     """Per-level means of a checkpoint's deterministic actor on subjects ``0..subjects-1``."""
     import pandas as pd
@@ -201,20 +106,17 @@ def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any
 
 def markdown_table(table: Any) -> str:
     """The comparison as a Markdown table, each of our numbers next to the paper's."""
+    import pandas as pd
+
     from myoexo.evaluation.paper import PAPER_RESULTS
 
     def num(x: float | None, fmt: str = ".2f") -> str:
         return "n/a" if x is None else format(x, fmt)
 
-    lines = [
-        "| level | final error SAC (deg) [paper] | final error PID (deg) [paper] "
-        "| peak SAC / PID (Nm) | peak reduction % [paper] | RMS SAC / PID (Nm) "
-        "| RMS reduction % [paper] | settling SAC (s) [paper] | criteria |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+    rows = []
     for level, r in table.iterrows():
         ref = PAPER_RESULTS[int(level)]
-        flags = [
+        failed = [
             name
             for name, ok in (
                 ("final error", r.final_error_ok),
@@ -223,17 +125,30 @@ def markdown_table(table: Any) -> str:
             )
             if not ok
         ]
-        lines.append(
-            f"| {level} | {r.sac_final_error_deg:.2f} [{ref.sac_final_error_text}] "
-            f"| {r.pid_final_error_deg:.2f} [{ref.pid_final_error_text}] "
-            f"| {r.sac_peak_nm:.1f} / {r.pid_peak_nm:.1f} "
-            f"| {r.peak_reduction_pct:.1f} [{num(ref.peak_reduction_pct, '.1f')}] "
-            f"| {r.sac_rms_nm:.1f} / {r.pid_rms_nm:.1f} "
-            f"| {r.rms_reduction_pct:.1f} [{num(ref.rms_reduction_pct, '.1f')}] "
-            f"| {r.sac_settling_time_s:.2f} [{ref.sac_settling_time_s}] "
-            f"| {'pass' if not flags else 'fails: ' + ', '.join(flags)} |"
+        rows.append(
+            {
+                "level": int(level),
+                "final error SAC (deg) [paper]": (
+                    f"{r.sac_final_error_deg:.2f} [{ref.sac_final_error_text}]"
+                ),
+                "final error PID (deg) [paper]": (
+                    f"{r.pid_final_error_deg:.2f} [{ref.pid_final_error_text}]"
+                ),
+                "peak SAC / PID (Nm)": f"{r.sac_peak_nm:.1f} / {r.pid_peak_nm:.1f}",
+                "peak reduction % [paper]": (
+                    f"{r.peak_reduction_pct:.1f} [{num(ref.peak_reduction_pct, '.1f')}]"
+                ),
+                "RMS SAC / PID (Nm)": f"{r.sac_rms_nm:.1f} / {r.pid_rms_nm:.1f}",
+                "RMS reduction % [paper]": (
+                    f"{r.rms_reduction_pct:.1f} [{num(ref.rms_reduction_pct, '.1f')}]"
+                ),
+                "settling SAC (s) [paper]": (
+                    f"{r.sac_settling_time_s:.2f} [{ref.sac_settling_time_s}]"
+                ),
+                "criteria": "pass" if not failed else "fails: " + ", ".join(failed),
+            }
         )
-    return "\n".join(lines)
+    return str(pd.DataFrame(rows).to_markdown(index=False))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

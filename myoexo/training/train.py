@@ -23,23 +23,12 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from myoexo.io import package_versions, write_json_atomic
 from myoexo.training import checkpoints as ck
 from myoexo.training.presets import SACPreset, preset_from_dict
-
-#: Packages whose versions are recorded in a run's config.
-RECORDED_PACKAGES = (
-    "myoexo",
-    "stable-baselines3",
-    "torch",
-    "gymnasium",
-    "mujoco",
-    "myosuite",
-    "numpy",
-)
 
 
 @dataclass(frozen=True)
@@ -88,26 +77,22 @@ class _EnvFactory:
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
 
-        kwargs: dict[str, Any] = {}
         if is_myoexo_env(self.env_id):
-            import myoexo  # noqa: F401  (registers the ids)
+            from myoexo.envs import make_env
 
-            if self.episode_duration_s is not None:
-                from myoexo.envs.config import TaskParams
-
-                task = TaskParams(episode_duration_s=self.episode_duration_s)
-                kwargs = {"task": task, "max_episode_steps": task.episode_steps}
-            if self.reward_weights:
-                from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS
-
-                weights = {**DEFAULT_REWARD_WEIGHTS, **dict(self.reward_weights)}
-                kwargs["weighted_reward_keys"] = weights
+            env = make_env(
+                self.env_id,
+                episode_duration_s=self.episode_duration_s,
+                reward_weights=dict(self.reward_weights),
+            )
         elif self.episode_duration_s is not None or self.reward_weights:
             raise ValueError(
                 "episode_duration_s and reward_weights apply to the MyoExoKnee envs only, "
                 f"not {self.env_id!r}"
             )
-        return Monitor(gym.make(self.env_id, **kwargs))
+        else:
+            env = gym.make(self.env_id)
+        return Monitor(env)
 
 
 def make_vec_env(preset: SACPreset, seed: int) -> Any:
@@ -156,17 +141,6 @@ def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
     )
 
 
-def package_versions() -> dict[str, str]:
-    """Python and :data:`RECORDED_PACKAGES` versions."""
-    out = {"python": platform.python_version()}
-    for name in RECORDED_PACKAGES:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
 def _make_logger(run_dir: Path, session: int, verbose: int) -> Any:
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, make_output_format
 
@@ -190,7 +164,6 @@ def _learn(
     model: Any,
     preset: SACPreset,
     run_dir: Path,
-    seed: int,
     total_timesteps: int,
     wall_time_offset_s: float,
     progress_bar: bool,
@@ -307,12 +280,10 @@ def train(
         "platform": platform.platform(),
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-    ck.write_json_atomic(run_dir / ck.CONFIG_FILE, config)
+    write_json_atomic(run_dir / ck.CONFIG_FILE, config)
     model = build_sac(preset, venv, seed)
     try:
-        return _learn(
-            model, preset, run_dir, seed, preset.total_timesteps, 0.0, progress_bar, verbose
-        )
+        return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, progress_bar, verbose)
     finally:
         venv.close()
 
@@ -359,7 +330,7 @@ def resume(
     total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
     try:
         return _learn(
-            model, preset, run_dir, seed, total, float(state["wall_time_s"]), progress_bar, verbose
+            model, preset, run_dir, total, float(state["wall_time_s"]), progress_bar, verbose
         )
     finally:
         venv.close()

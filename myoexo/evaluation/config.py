@@ -1,0 +1,204 @@
+"""What an evaluation runs, how its subjects are seeded, and its ``config.json``.
+
+Pairing. Subject ``i`` of level ``l`` is the same simulated person for every controller:
+its episode seed is :func:`subject_seed` ``(l, i, root_seed)``, the first 64-bit word of
+``numpy.random.SeedSequence(root_seed, spawn_key=(l, i))``. The env draws the subject's
+spasticity parameters and start-angle perturbation from that seed at ``reset`` and the
+controller gets it in ``reset(seed)``; so an episode depends on (controller, level, i,
+root seed) only, whatever the worker that runs it, and results are identical for any number
+of workers.
+
+A folder is tied to its run by ``config.json``: its ``run_key`` (the settings that change an
+episode's content, including a fingerprint of the simulated twin) must match on resume.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.control.specs import ControllerSpec
+from myoexo.envs.config import TaskParams
+from myoexo.io import package_versions, write_json_atomic
+from myoexo.spasticity import VALID_LEVELS
+
+CONFIG_FILE = "config.json"
+
+#: How a subject's seed is derived (recorded in ``config.json``).
+SEED_RULE = (
+    "numpy.random.SeedSequence(root_seed, spawn_key=(level, subject)).generate_state(1, uint64)[0]"
+)
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """What an evaluation runs (the worker count is not part of it: it changes no result).
+
+    Attributes:
+        controllers: Controller specs (:mod:`myoexo.control.specs`): ``pid``, ``sac``, a
+            model path ...
+        levels: Spasticity levels, each in :data:`~myoexo.spasticity.VALID_LEVELS`.
+        subjects: Subjects per level (paper: 1000).
+        root_seed: Root of every subject seed (:func:`subject_seed`).
+        episode_duration_s: Simulated time per episode; ``None`` = the env's default (8 s).
+        trace_stride: Keep every n-th control step in the stored traces.
+        chunk_size: Subjects per unit of work (and per resume file).
+        env_id: Gymnasium id of the env of a level, formatted with ``level``; any env
+            registered with the MyoExoKnee API (e.g. a variant with other ``TaskParams`` or
+            wrappers, ``"module:EnvId-v{level}"`` imports its module first).
+    """
+
+    controllers: tuple[str, ...] = ("pid",)
+    levels: tuple[int, ...] = VALID_LEVELS
+    subjects: int = 1000
+    root_seed: int = 0
+    episode_duration_s: float | None = None
+    trace_stride: int = 2
+    chunk_size: int = 10
+    env_id: str = "MyoExoKnee-v{level}"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "controllers", tuple(self.controllers))
+        object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
+        if not self.controllers:
+            raise ValueError("controllers is empty: name at least one (e.g. 'pid')")
+        bad = [v for v in self.levels if v not in VALID_LEVELS]
+        if bad or not self.levels:
+            raise ValueError(
+                f"unknown spasticity level(s) {bad or '(none given)'}; accepted: {VALID_LEVELS}"
+            )
+        if len(set(self.levels)) != len(self.levels):
+            raise ValueError(f"levels {self.levels} has duplicates")
+        for name in ("subjects", "trace_stride", "chunk_size"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value <= 0:
+                raise ValueError(f"{name} = {value!r} must be a positive integer")
+        if not isinstance(self.root_seed, (int, np.integer)) or self.root_seed < 0:
+            raise ValueError(f"root_seed = {self.root_seed!r} must be an integer >= 0")
+        if "{level}" not in self.env_id:
+            raise ValueError(f"env_id = {self.env_id!r} must contain '{{level}}'")
+        d = self.episode_duration_s
+        if d is not None and not (math.isfinite(d) and 0.0 < d <= 3600.0):
+            raise ValueError(f"episode_duration_s = {d!r} must be in (0, 3600] s or None")
+
+    def level_env_id(self, level: int) -> str:
+        """The env id of one level."""
+        return self.env_id.format(level=level)
+
+    @property
+    def trace_samples(self) -> int:
+        """Samples per stored trace (reset + every ``trace_stride``-th step)."""
+        task = TaskParams()
+        if self.episode_duration_s is not None:
+            task = dataclasses.replace(task, episode_duration_s=self.episode_duration_s)
+        return task.episode_steps // self.trace_stride + 1
+
+    def run_key(self) -> dict[str, Any]:
+        """Settings that change the content of an episode's file (checked on resume),
+        including a fingerprint of the simulated twin, so that a folder filled by an older
+        model is never silently extended."""
+        return {
+            "root_seed": int(self.root_seed),
+            "episode_duration_s": self.episode_duration_s,
+            "trace_stride": int(self.trace_stride),
+            "env_id": self.env_id,
+            "env_fingerprint": env_fingerprint(self.level_env_id(self.levels[0])),
+        }
+
+
+@functools.lru_cache(maxsize=8)
+def env_fingerprint(env_id: str) -> str:
+    """SHA-256 (16 hex digits) of what defines an env's episodes: the compiled MuJoCo model
+    (MJB bytes: geometry, masses, muscles, couplings, timestep), the task and reward
+    parameters and the observation layout."""
+    import mujoco
+
+    from myoexo.envs import make_env
+
+    env = make_env(env_id).unwrapped
+    try:
+        model = env.model
+        mjb = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+        mujoco.mj_saveModel(model, None, mjb)
+        h = hashlib.sha256(mjb.tobytes())
+        for part in ("task", "reward_params", "obs_keys"):
+            h.update(repr(getattr(env, part, None)).encode())
+    finally:
+        env.close()
+    return h.hexdigest()[:16]
+
+
+def subject_seed(level: int, index: int, root_seed: int = 0) -> int:
+    """Seed of subject ``index`` of ``level``: same person for every controller.
+
+    ``numpy.random.SeedSequence(root_seed, spawn_key=(level, index))``'s first 64-bit word:
+    independent streams per (level, index), stable across numpy versions (NEP 19).
+    """
+    if level < 0 or index < 0 or root_seed < 0:
+        raise ValueError(
+            f"level, index and root_seed must be >= 0, got {level}, {index}, {root_seed}"
+        )
+    ss = np.random.SeedSequence(int(root_seed), spawn_key=(int(level), int(index)))
+    return int(ss.generate_state(1, dtype=np.uint64)[0])
+
+
+def _file_sha256(path: str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def write_config(
+    out_dir: Path, config: EvaluationConfig, specs: Sequence[ControllerSpec]
+) -> dict[str, Any]:
+    """Create or update ``config.json`` atomically; refuse a folder holding a different run."""
+    path = out_dir / CONFIG_FILE
+    previous: dict[str, Any] = {}
+    if path.is_file():
+        previous = json.loads(path.read_text())
+        if previous.get("run_key") != config.run_key():
+            raise ValueError(
+                f"{out_dir} holds a run with other settings {previous.get('run_key')} than "
+                f"this one {config.run_key()}; choose another --out folder"
+            )
+    controllers = dict(previous.get("controllers", {}))
+    for spec in specs:
+        entry = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
+        if spec.path:
+            entry["sha256"] = _file_sha256(spec.path)
+        old = controllers.get(spec.slug)
+        if old is not None and old != entry:
+            raise ValueError(
+                f"{out_dir} holds results of another controller under the label "
+                f"{spec.slug!r} ({old}); choose another --out folder"
+            )
+        controllers[spec.slug] = entry
+    doc = {
+        "run_key": config.run_key(),
+        "config": dataclasses.asdict(config),
+        "controllers": controllers,
+        "versions": package_versions(),
+        "seed_rule": SEED_RULE,
+    }
+    write_json_atomic(path, doc, indent=2)
+    return doc
+
+
+def load_config(out_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``config.json`` of an evaluation folder."""
+    path = Path(out_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise ValueError(f"{str(out_dir)!r} has no {CONFIG_FILE}: not an evaluation folder")
+    return json.loads(path.read_text())

@@ -1,0 +1,147 @@
+"""The acceptance criteria of a controller against the PID, and the scores that rank them.
+
+Per level, on the same simulated subjects (means over subjects; docs/reference.md
+section 5):
+
+* mean absolute final error below the paper's SAC bound: 1 deg at levels 0-2, 11.45 deg at
+  level 3 (:attr:`~myoexo.evaluation.paper.PaperLevelResults.sac_final_error_bound_deg`);
+* peak interaction torque lower than the PID's at every level;
+* RMS interaction torque up to settling lower than the PID's at levels 0-2 (the paper gives
+  no level-3 RMS reduction).
+
+:func:`compare` makes the per-level table, :func:`shortfall` says how far a table is from
+passing (0 = passes; checkpoint selection minimises it), :func:`score` ranks policies during
+training (mean peak-torque reduction minus the final-error excess; higher is better).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from myoexo.evaluation.paper import PAPER_RESULTS
+from myoexo.spasticity import VALID_LEVELS
+
+#: The per-episode metrics the criteria use (columns of the evaluation table).
+CRITERIA_METRICS: tuple[str, ...] = (
+    "abs_final_error_deg",
+    "final_error_deg",
+    "settling_time_s",
+    "rms_interaction_torque_nm",
+    "peak_interaction_torque_nm",
+)
+
+
+def _paper_bounds() -> dict[int, float]:
+    return {lv: PAPER_RESULTS[lv].sac_final_error_bound_deg for lv in VALID_LEVELS}
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """The acceptance criteria of a controller against the PID.
+
+    Attributes:
+        final_error_deg: Bound on the mean absolute final error per level, deg (default:
+            the paper's SAC results).
+        rms_levels: Levels where the RMS-to-settling must be lower than the PID's.
+        peak_levels: Levels where the peak interaction torque must be lower than the PID's.
+    """
+
+    final_error_deg: Mapping[int, float] = field(default_factory=_paper_bounds)
+    rms_levels: tuple[int, ...] = (0, 1, 2)
+    peak_levels: tuple[int, ...] = VALID_LEVELS
+
+
+def level_means(table: Any) -> Any:
+    """Per-level means of :data:`CRITERIA_METRICS` from an evaluation table (pandas)."""
+    return table.groupby("level")[list(CRITERIA_METRICS)].mean()
+
+
+def _as_frame(means: Any) -> Any:
+    """A per-level means table, from a DataFrame or a ``{level: {metric: value}}`` dict."""
+    import pandas as pd
+
+    if isinstance(means, Mapping):
+        return pd.DataFrame.from_dict(dict(means), orient="index")
+    return means
+
+
+def compare(policy: Any, pid: Any, criteria: Criteria | None = None) -> Any:
+    """Side-by-side table per level with reductions against the PID and pass flags.
+
+    Args:
+        policy: Per-level means of the controller (:func:`level_means`, or a
+            ``{level: {metric: value}}`` dict).
+        pid: Per-level means of the PID on the same subjects.
+        criteria: Bounds (default :class:`Criteria`).
+
+    Returns:
+        A DataFrame indexed by level: the policy's and the PID's final error, settling time,
+        RMS and peak torque, ``rms_reduction_pct`` and ``peak_reduction_pct`` (positive =
+        less than the PID), and the flags ``final_error_ok``, ``peak_ok``, ``rms_ok``,
+        ``pass``.
+    """
+    import pandas as pd
+
+    c = criteria or Criteria()
+    pol, ref = _as_frame(policy), _as_frame(pid)
+    rows = []
+    for level in pol.index:
+        s, p = pol.loc[level], ref.loc[level]
+        pid_peak = float(p["peak_interaction_torque_nm"])
+        pid_rms = float(p["rms_interaction_torque_nm"])
+        peak_red = 100 * (pid_peak - float(s["peak_interaction_torque_nm"])) / max(pid_peak, 1e-9)
+        rms_red = 100 * (pid_rms - float(s["rms_interaction_torque_nm"])) / max(pid_rms, 1e-9)
+        row = {
+            "level": int(level),
+            "sac_final_error_deg": s.get("final_error_deg", float("nan")),
+            "sac_abs_final_error_deg": float(s["abs_final_error_deg"]),
+            "pid_final_error_deg": p.get("final_error_deg", float("nan")),
+            "sac_settling_time_s": s.get("settling_time_s", float("nan")),
+            "pid_settling_time_s": p.get("settling_time_s", float("nan")),
+            "sac_rms_nm": float(s["rms_interaction_torque_nm"]),
+            "pid_rms_nm": pid_rms,
+            "rms_reduction_pct": rms_red,
+            "sac_peak_nm": float(s["peak_interaction_torque_nm"]),
+            "pid_peak_nm": pid_peak,
+            "peak_reduction_pct": peak_red,
+        }
+        ok_err = row["sac_abs_final_error_deg"] < c.final_error_deg[int(level)]
+        ok_peak = int(level) not in c.peak_levels or peak_red > 0
+        ok_rms = int(level) not in c.rms_levels or rms_red > 0
+        row.update(final_error_ok=ok_err, peak_ok=ok_peak, rms_ok=ok_rms)
+        row["pass"] = bool(ok_err and ok_peak and ok_rms)
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("level")
+
+
+def final_error_excess(table: Any, criteria: Criteria | None = None) -> Any:
+    """Per level, how far the mean absolute final error exceeds its bound, in units of the
+    bound (0 where it is met)."""
+    c = criteria or Criteria()
+    bounds = table.index.map(lambda lv: c.final_error_deg[int(lv)])
+    return (table.sac_abs_final_error_deg / bounds - 1.0).clip(lower=0.0)
+
+
+def shortfall(table: Any, criteria: Criteria | None = None) -> float:
+    """How far a :func:`compare` table is from passing (0 when it passes; larger is worse):
+    the sum over levels of the relative excess of the final error over its bound and of the
+    relative peak / RMS increase over the PID."""
+    c = criteria or Criteria()
+    total = float(final_error_excess(table, c).sum())
+    for level, row in table.iterrows():
+        if level in c.peak_levels:
+            total += max(0.0, -row.peak_reduction_pct / 100)
+        if level in c.rms_levels:
+            total += max(0.0, -row.rms_reduction_pct / 100)
+    return total
+
+
+def score(table: Any, criteria: Criteria | None = None) -> float:
+    """Rank of a controller (higher is better): the mean over levels of its relative
+    peak-torque reduction against the PID minus its final-error excess
+    (:func:`final_error_excess`). A controller meeting every final-error bound scores its
+    mean peak-torque reduction (a fraction)."""
+    per_level = table.peak_reduction_pct / 100 - final_error_excess(table, criteria)
+    return float(per_level.mean())

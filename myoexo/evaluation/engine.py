@@ -1,0 +1,373 @@
+"""The evaluation engine: episodes with metrics, chunks of subjects, parallel and resumable.
+
+Work is cut into *chunks* (one controller, one level, ``chunk_size`` consecutive subjects),
+run in worker processes (``spawn``; each keeps one env per level and one controller per
+spec) and stored as they finish (:mod:`.storage`). Running the same command again only
+computes the missing chunks; an episode depends only on (controller, level, subject, root
+seed) (:mod:`.config`), so the table is the same whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.control.protocol import Controller
+from myoexo.control.rollout import rollout
+from myoexo.control.specs import (
+    ControllerSpec,
+    PolicyUnavailableError,
+    build_controller,
+    load_sb3_model,
+    load_shipped_policy,
+    parse_controller_spec,
+)
+from myoexo.evaluation.config import EvaluationConfig, subject_seed, write_config
+from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
+from myoexo.evaluation.storage import (
+    TRACE_CHANNELS,
+    TRACES_DIR,
+    chunk_done,
+    chunk_path,
+    collect_table,
+    save_chunk,
+    write_table,
+)
+from myoexo.io import remove_stale_temporaries
+
+#: Signals recorded at full rate for the metrics (traces keep a subset, downsampled).
+RECORDED_CHANNELS: tuple[str, ...] = (*TRACE_CHANNELS, "time_s", "target_angle_deg")
+
+
+# ----------------------------------------------------------------------------- episodes
+@dataclass
+class EpisodeResult:
+    """One episode: its metrics, subject, and full-rate signals.
+
+    Attributes:
+        seed: Episode seed.
+        level: Spasticity level.
+        subject: The subject's spasticity parameters (``info["subject"]``).
+        metrics: :class:`~myoexo.evaluation.metrics.EpisodeMetrics`.
+        signals: ``info`` key -> array over the samples (reset + every step), float64.
+        unstable: The physics diverged and the env truncated the episode.
+        n_steps: Control steps run.
+    """
+
+    seed: int
+    level: int
+    subject: dict[str, float]
+    metrics: EpisodeMetrics
+    signals: dict[str, np.ndarray]
+    unstable: bool
+    n_steps: int
+
+
+def run_episode(env: Any, controller: Controller, seed: int) -> EpisodeResult:
+    """One episode (:func:`~myoexo.control.rollout.rollout`) and its metrics."""
+    ep = rollout(env, controller, seed, channels=RECORDED_CHANNELS)
+    return EpisodeResult(
+        seed=ep.seed,
+        level=ep.level,
+        subject=ep.subject,
+        metrics=episode_metrics(ep.signals),
+        signals=ep.signals,
+        unstable=ep.unstable,
+        n_steps=ep.n_steps,
+    )
+
+
+def episode_row(result: EpisodeResult, controller: str, subject_index: int) -> dict[str, Any]:
+    """The table row of an episode: ``controller, level, subject, seed, unstable, n_steps``,
+    the subject's parameters as ``subject_<name>``, then the metrics."""
+    row: dict[str, Any] = {
+        "controller": controller,
+        "level": result.level,
+        "subject": int(subject_index),
+        "seed": int(result.seed),
+        "unstable": bool(result.unstable),
+        "n_steps": int(result.n_steps),
+    }
+    row.update({f"subject_{k}": v for k, v in result.subject.items()})
+    row.update(result.metrics.as_dict())
+    return row
+
+
+def downsample_trace(result: EpisodeResult, stride: int, n_samples: int) -> np.ndarray:
+    """Traces of one episode as float32 ``(n_samples, len(TRACE_CHANNELS))``: every
+    ``stride``-th sample, NaN-padded if the episode ended early."""
+    out = np.full((n_samples, len(TRACE_CHANNELS)), np.nan, dtype=np.float32)
+    for j, key in enumerate(TRACE_CHANNELS):
+        x = result.signals[key][::stride][:n_samples]
+        out[: x.size, j] = x
+    return out
+
+
+def evaluate_controller(
+    controller: Controller,
+    level: int,
+    subjects: int | Sequence[int],
+    root_seed: int = 0,
+    episode_duration_s: float | None = None,
+    label: str = "controller",
+) -> tuple[Any, list[EpisodeResult]]:
+    """In-process evaluation of a controller *object* (notebooks, tuning, selection).
+
+    Args:
+        controller: Any :class:`~myoexo.control.protocol.Controller`.
+        level: Spasticity level.
+        subjects: Number of subjects (indices ``0..n-1``) or explicit subject indices; the
+            same indices give the same persons as :func:`evaluate`.
+        root_seed: Root seed of :func:`~.config.subject_seed`.
+        episode_duration_s: Episode length (``None``: the env's default).
+        label: Value of the ``controller`` column.
+
+    Returns:
+        ``(table, results)``: a pandas DataFrame (one row per episode) and the
+        :class:`EpisodeResult` list with the full-rate signals.
+    """
+    import pandas as pd
+
+    from myoexo.envs import make_env
+
+    indices = list(range(subjects)) if isinstance(subjects, (int, np.integer)) else list(subjects)
+    env = make_env(level, episode_duration_s=episode_duration_s)
+    try:
+        results = [run_episode(env, controller, subject_seed(level, i, root_seed)) for i in indices]
+    finally:
+        env.close()
+    rows = [episode_row(r, label, i) for r, i in zip(results, indices, strict=True)]
+    return pd.DataFrame(rows), results
+
+
+# ----------------------------------------------------------------------------- chunks
+@dataclass(frozen=True)
+class Chunk:
+    """Unit of work: subjects ``start..stop-1`` of one level under one controller."""
+
+    spec: ControllerSpec
+    level: int
+    start: int
+    stop: int
+
+    def path(self, out_dir: Path) -> Path:
+        """Where the finished chunk is stored."""
+        return chunk_path(out_dir, self.spec.label, self.level, self.start, self.stop)
+
+
+def plan_chunks(specs: Sequence[ControllerSpec], config: EvaluationConfig) -> list[Chunk]:
+    """All chunks of a run, ordered level, subjects, controller (a partial run stays
+    paired across controllers)."""
+    chunks = []
+    for level in config.levels:
+        for start in range(0, config.subjects, config.chunk_size):
+            stop = min(start + config.chunk_size, config.subjects)
+            chunks.extend(Chunk(spec, level, start, stop) for spec in specs)
+    return chunks
+
+
+#: Per-process caches of the workers: one env per env id and duration, one controller per spec.
+_ENVS: dict[tuple[str, float | None], Any] = {}
+_CONTROLLERS: dict[str, Controller] = {}
+
+
+def _init_worker() -> None:
+    """Worker start-up: one thread per process (the pool provides the parallelism)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+
+
+def _close_worker_state() -> None:
+    for env in _ENVS.values():
+        env.close()
+    _ENVS.clear()
+    _CONTROLLERS.clear()
+
+
+def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chunk, int]:
+    """Run one chunk and store it atomically; returns ``(chunk, episodes run)``."""
+    from myoexo.envs import make_env
+
+    key = (config.level_env_id(chunk.level), config.episode_duration_s)
+    env = _ENVS.get(key)
+    if env is None:
+        env = _ENVS[key] = make_env(key[0], episode_duration_s=config.episode_duration_s)
+    controller = _CONTROLLERS.get(chunk.spec.text)
+    if controller is None:
+        controller = _CONTROLLERS[chunk.spec.text] = build_controller(chunk.spec, env)
+    n_samples = config.trace_samples
+    rows, traces = [], []
+    for i in range(chunk.start, chunk.stop):
+        result = run_episode(env, controller, subject_seed(chunk.level, i, config.root_seed))
+        row = episode_row(result, chunk.spec.label, i)
+        row["controller_spec"] = chunk.spec.text
+        rows.append(row)
+        traces.append(downsample_trace(result, config.trace_stride, n_samples))
+    dt = float(env.unwrapped.dt)
+    time_s = (np.arange(n_samples) * config.trace_stride * dt).astype(np.float32)
+    save_chunk(chunk.path(Path(out_dir)), rows, np.stack(traces), time_s)
+    return chunk, len(rows)
+
+
+# ----------------------------------------------------------------------------- the run
+@dataclass
+class EvaluationRun:
+    """What :func:`evaluate` produced.
+
+    Attributes:
+        out_dir: The output folder.
+        table: One row per episode (also in ``episodes.parquet`` / ``.csv``).
+        controllers: Labels of the controllers evaluated.
+        skipped: Spec -> reason, for controllers left out (e.g. no shipped policy yet).
+        computed: Episodes computed by this call (the rest came from earlier runs).
+    """
+
+    out_dir: Path
+    table: Any
+    controllers: list[str]
+    skipped: dict[str, str] = field(default_factory=dict)
+    computed: int = 0
+
+
+def resolve_controllers(
+    specs_text: Iterable[str], log: Callable[[str], None] = print
+) -> tuple[list[ControllerSpec], dict[str, str]]:
+    """Parse and check every controller before anything is written.
+
+    A model file that cannot be loaded raises ``ValueError``; ``sac`` without a shipped
+    policy is skipped with a message (and reported in the second return value).
+    """
+    specs: list[ControllerSpec] = []
+    skipped: dict[str, str] = {}
+    labels: dict[str, str] = {}
+    for text in specs_text:
+        spec = parse_controller_spec(text)
+        if spec.kind == "sb3":
+            load_sb3_model(str(spec.path), str(spec.algorithm))  # ValueError if unreadable
+        elif spec.kind == "shipped":
+            try:
+                load_shipped_policy()
+            except PolicyUnavailableError as exc:
+                skipped[text] = str(exc)
+                log(f"myoexo evaluate: skipping controller 'sac': {exc}")
+                continue
+        if spec.slug in labels:
+            raise ValueError(
+                f"controllers {labels[spec.slug]!r} and {text!r} have the same label "
+                f"{spec.slug!r}; rename one model file"
+            )
+        labels[spec.slug] = text
+        specs.append(spec)
+    if not specs:
+        raise ValueError(f"no controller left to evaluate (skipped: {skipped})")
+    return specs, skipped
+
+
+def available_cores() -> int:
+    """CPU cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def evaluate(
+    config: EvaluationConfig,
+    out_dir: str | os.PathLike[str],
+    workers: int | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> EvaluationRun:
+    """Run (or continue) an evaluation and write its table.
+
+    Args:
+        config: What to run.
+        out_dir: Output folder (created; a folder of the same run is continued).
+        workers: Worker processes (default: all available cores); 1 runs in-process.
+        progress: Show a tqdm progress bar.
+        log: Where messages go.
+
+    Raises:
+        ValueError: Bad settings, an unreadable model file, or an output folder that holds
+            a different run; nothing is written in those cases.
+    """
+    from tqdm.auto import tqdm
+
+    if workers is None:
+        workers = available_cores()
+    if not isinstance(workers, (int, np.integer)) or workers <= 0:
+        raise ValueError(f"workers = {workers!r} must be a positive integer")
+    specs, skipped = resolve_controllers(config.controllers, log)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output path {str(out)!r} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    write_config(out, config, specs)
+    remove_stale_temporaries(out / TRACES_DIR, "*/L*/.tmp-*")  # writes cut short by a kill
+
+    chunks = plan_chunks(specs, config)
+    todo = [c for c in chunks if not chunk_done(c.path(out))]
+    total = sum(c.stop - c.start for c in chunks)
+    pending = sum(c.stop - c.start for c in todo)
+    bar = tqdm(
+        total=total,
+        initial=total - pending,
+        unit="episode",
+        desc="evaluate",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
+    computed = 0
+    try:
+        if workers == 1 or len(todo) <= 1:
+            try:
+                for chunk in todo:
+                    _, n = run_chunk(chunk, config, str(out))
+                    computed += n
+                    bar.update(n)
+            finally:
+                _close_worker_state()
+        elif todo:
+            computed = _run_parallel(todo, config, out, min(workers, len(todo)), bar)
+    finally:
+        bar.close()
+    table = collect_table([c.path(out) for c in chunks], [s.label for s in specs])
+    write_table(out, table)
+    return EvaluationRun(
+        out_dir=out,
+        table=table,
+        controllers=[s.label for s in specs],
+        skipped=skipped,
+        computed=computed,
+    )
+
+
+def _run_parallel(
+    todo: list[Chunk], config: EvaluationConfig, out: Path, workers: int, bar: Any
+) -> int:
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+
+    computed = 0
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker) as pool:
+        futures = {pool.submit(run_chunk, c, config, str(out)) for c in todo}
+        try:
+            while futures:
+                done, futures = wait(futures, return_when=FIRST_EXCEPTION)
+                for fut in done:
+                    _, n = fut.result()  # re-raises a worker's error
+                    computed += n
+                    bar.update(n)
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+    return computed

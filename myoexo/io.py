@@ -1,0 +1,92 @@
+"""Files that survive a kill: atomic writes, and the provenance record of a run.
+
+Every file myoexo writes for later reading (evaluation chunks and tables, run configs,
+checkpoint states) goes through :func:`atomic_path`: the content is written to a temporary
+file in the same folder, with a name unique to the writing process, and renamed into place.
+A reader therefore sees either the old file or the complete new one, never a partial one, and
+two processes writing the same file never share a temporary name.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import tempfile
+from collections.abc import Iterator
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Packages whose versions a run records (evaluation ``config.json``, training config).
+RECORDED_PACKAGES: tuple[str, ...] = (
+    "myoexo",
+    "myosuite",
+    "mujoco",
+    "gymnasium",
+    "numpy",
+    "stable-baselines3",
+    "torch",
+)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success rename it onto ``path``.
+
+    The temporary name starts with ``.tmp-`` and is unique per call (``tempfile.mkstemp``),
+    so concurrent writers never collide; on any exception it is removed and ``path`` is left
+    as it was. The parent folder is created if missing.
+    """
+    final = Path(path)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(dir=final.parent, prefix=f".tmp-{final.name}.")
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_json_atomic(path: str | os.PathLike[str], data: Any, indent: int = 1) -> None:
+    """Write ``data`` as JSON (and a final newline) to ``path`` atomically."""
+    write_text_atomic(path, json.dumps(data, indent=indent) + "\n")
+
+
+def savez_atomic(path: str | os.PathLike[str], **arrays: Any) -> None:
+    """``numpy.savez_compressed`` to ``path`` atomically."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str], pattern: str = "**/.tmp-*") -> int:
+    """Delete temporaries left by writes cut short by a kill; returns how many."""
+    n = 0
+    for stale in Path(folder).glob(pattern):
+        if stale.is_file():
+            stale.unlink(missing_ok=True)
+            n += 1
+    return n
+
+
+def package_versions() -> dict[str, str]:
+    """Python's and :data:`RECORDED_PACKAGES`' versions (``"not installed"`` if absent)."""
+    out = {"python": platform.python_version()}
+    for name in RECORDED_PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
