@@ -659,7 +659,7 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
     ) -> None:
         RecordConstructorArgs.__init__(self, level=level, subject_noise=subject_noise, order=order)
         gym.Wrapper.__init__(self, env)
-        host = env.unwrapped
+        host: Any = env.unwrapped
         if not getattr(host, "supports_ctrl_stages", False):
             raise TypeError(
                 f"SpasticityWrapper needs an env whose action pipeline runs muscle stages; "
@@ -675,4 +675,4 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
         return {"env": self.env, "kwargs": kwargs}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["env"], **state["kwargs"])
+        SpasticityWrapper.__init__(self, state["env"], **state["kwargs"])

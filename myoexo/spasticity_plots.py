@@ -123,15 +123,15 @@ def plot_stretch_test(result: StretchTestResult) -> Figure:
     axes[0].legend(fontsize=8)
     peaks = result.peak_table()
     width = 0.8 / len(peaks.columns)
-    for j, speed in enumerate(peaks.columns):
+    for j, speed_column in enumerate(peaks.columns):
         axes[-1].bar(
             peaks.index + (j - (len(peaks.columns) - 1) / 2) * width,
-            peaks[speed],
+            peaks[speed_column],
             width=width,
             color=[LEVEL_COLORS[lv] for lv in peaks.index],
             alpha=0.45 + 0.55 * j / max(1, len(peaks.columns) - 1),
             edgecolor="black",
-            label=f"{speed:g} rad/s",
+            label=f"{speed_column:g} rad/s",
         )
     axes[-1].set(xlabel="spasticity level", ylabel="peak resisting torque (Nm)")
     axes[-1].set_xticks(list(peaks.index))

@@ -31,7 +31,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -342,7 +342,8 @@ def simulate_stretch(
         {
             "time_s": times,
             "phase": pd.Categorical.from_codes(
-                phase, categories=["hold", "accelerate", "constant", "decelerate", "end_hold"]
+                phase.astype(np.int64),
+                categories=pd.Index(["hold", "accelerate", "constant", "decelerate", "end_hold"]),
             ),
             "ref_deg": ref_deg,
             "exo_deg": col["exo_deg"],
@@ -401,7 +402,9 @@ def run_stretch_test(
         default_model, default_pose = _default_twin()
         model = default_model if model is None else model
         pose = default_pose if pose is None else pose
-    conditions = [(lv, v) for lv in params.levels for v in params.velocities_rad_s]
+    conditions: Iterable[tuple[int, float]] = [
+        (lv, v) for lv in params.levels for v in params.velocities_rad_s
+    ]
     if progress:
         from tqdm.auto import tqdm
 

@@ -176,7 +176,7 @@ class PID:
         cfg, g, dt = self.config, self.config.gains, self.dt_s
         error = setpoint_rad - measurement_rad
         p = g.kp * error
-        if self._prev_measurement_rad is None:
+        if self._prev_measurement_rad is None or self._prev_error_rad is None:
             d = 0.0
         elif cfg.derivative_on_measurement:
             d = -g.kd * (measurement_rad - self._prev_measurement_rad) / dt

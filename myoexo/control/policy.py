@@ -44,7 +44,7 @@ class CallableController:
         if not callable(fn):
             raise ValueError(f"CallableController needs a callable, got {type(fn).__name__}")
         self.fn = fn
-        self.name = name or getattr(fn, "__name__", type(fn).__name__)
+        self.name: str = name or str(getattr(fn, "__name__", type(fn).__name__))
 
     def reset(self, seed: int | None = None) -> None:
         """Stateless: nothing to clear."""

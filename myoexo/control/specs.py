@@ -198,9 +198,9 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
         return PID.from_env(env, pid_config(spec.options))
     if spec.kind == "shipped":
         return load_shipped_policy()
-    if spec.kind == "sb3":
+    if spec.kind == "sb3" and spec.path is not None:
         return SB3Controller(
-            load_sb3_model(spec.path, spec.algorithm),
+            load_sb3_model(spec.path, spec.algorithm or "SAC"),
             name=spec.label,
             obs_normalizer=load_obs_normalizer(spec.path),
         )

@@ -252,7 +252,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         half_range = np.array([0.5 * (m.jnt_range[j, 1] - m.jnt_range[j, 0]) for j in jids])
         coupling_scale = 1.0 / np.maximum(half_range, 1e-6)
 
-        sensor_idx = []
+        sensor_idx: list[int] = []
         for sensor in CUFF_OBS_KEYS.values():
             sid = m.sensor(sensor).id
             adr, dim = int(m.sensor_adr[sid]), int(m.sensor_dim[sid])

@@ -164,7 +164,7 @@ class Chunk:
 def plan_chunks(specs: Sequence[ControllerSpec], config: EvaluationConfig) -> list[Chunk]:
     """All chunks of a run, ordered level, subjects, controller (a partial run stays
     paired across controllers)."""
-    chunks = []
+    chunks: list[Chunk] = []
     for level in config.levels:
         for start in range(0, config.subjects, config.chunk_size):
             stop = min(start + config.chunk_size, config.subjects)

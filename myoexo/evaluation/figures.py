@@ -44,7 +44,8 @@ def _is_pid(label: str) -> bool:
 
 def controller_styles(labels: Sequence[str]) -> dict[str, tuple[str, str]]:
     """Label -> (colour, marker): PID-like labels dark with triangles, others coloured."""
-    styles, k = {}, 0
+    styles: dict[str, tuple[str, str]] = {}
+    k = 0
     for label in labels:
         if _is_pid(label) and PID_COLOR not in {c for c, _ in styles.values()}:
             styles[label] = (PID_COLOR, PID_MARKER)

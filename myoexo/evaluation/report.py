@@ -354,7 +354,7 @@ def write_report(out_dir: str | Path, report_dir: str | Path | None = None) -> P
         _paper_section(summary, red, reference),
         "",
     ]
-    if red:
+    if red and reference is not None:
         lines += [
             "## Reductions against the PID, per level",
             "",

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -34,10 +34,11 @@ _ERF = np.frompyfunc(math.erf, 1, 1)
 
 def _gelu(x: np.ndarray) -> np.ndarray:
     """Exact GELU, ``x * Phi(x)`` (torch's default, not the tanh approximation)."""
-    return 0.5 * x * (1.0 + _ERF(x / math.sqrt(2.0)).astype(np.float64))
+    erf = np.asarray(_ERF(x / math.sqrt(2.0)), dtype=np.float64)
+    return 0.5 * x * (1.0 + erf)
 
 
-_ACTIVATIONS = {
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "gelu": _gelu,
     "relu": lambda x: np.maximum(x, 0.0),
     "tanh": np.tanh,
@@ -97,8 +98,10 @@ class MLPActor:
             raise ValueError("give both obs_mean and obs_var, or neither")
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean, np.float64).ravel()
         self.obs_var = None if obs_var is None else np.asarray(obs_var, np.float64).ravel()
-        if self.obs_mean is not None and not (
-            self.obs_mean.size == self.obs_var.size == self.obs_dim
+        if (
+            self.obs_mean is not None
+            and self.obs_var is not None
+            and not (self.obs_mean.size == self.obs_var.size == self.obs_dim)
         ):
             raise ValueError(
                 f"obs_mean/obs_var sizes {self.obs_mean.size}/{self.obs_var.size} differ from "
@@ -124,7 +127,7 @@ class MLPActor:
                 f"observation of shape {x.shape}; expected (..., {self.obs_dim}) "
                 f"({self.metadata.get('env_id', 'the training env')}'s observation)"
             )
-        if self.obs_mean is None:
+        if self.obs_mean is None or self.obs_var is None:
             return x
         z = (x - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon)
         return np.clip(z, -self.clip_obs, self.clip_obs)
@@ -237,6 +240,11 @@ def _torch_actor_class() -> type:
             self.unit_range = bool(np.all(low == -1.0) and np.all(high == 1.0))
             self.clip = float(clip)
 
+        obs_mean: torch.Tensor
+        obs_std: torch.Tensor
+        act_low: torch.Tensor
+        act_half_span: torch.Tensor
+
         def forward(self, obs: torch.Tensor) -> torch.Tensor:
             z = (obs - self.obs_mean) / self.obs_std
             if math.isfinite(self.clip):
@@ -258,7 +266,7 @@ def save_actor(actor: MLPActor, path_stem: str | Path) -> tuple[Path, Path]:
     """
     stem = Path(path_stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {}
+    arrays: dict[str, Any] = {}
     for i, (w, b) in enumerate(actor.weights):
         arrays[f"layer{i}.weight"] = w.astype(np.float32)
         arrays[f"layer{i}.bias"] = b.astype(np.float32)

@@ -104,7 +104,7 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
         make_env_fn(preset.env_id, i, preset.episode_duration_s, preset.reward_weights)
         for i in range(preset.n_envs)
     ]
-    venv = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
+    venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(seed)
     if preset.normalize_obs:
         venv = VecNormalize(
@@ -221,7 +221,7 @@ def _learn(
     elapsed = time.monotonic() - t0
     last = ck.latest_checkpoint(run_dir, with_replay=True)
     if last is None:  # nothing left to do and never checkpointed
-        last = checkpointer.save(with_replay=True) if remaining == 0 else None
+        last = checkpointer.save(with_replay=True)
     steps = int(model.num_timesteps)
     record.update(
         end_step=steps,
@@ -321,7 +321,7 @@ def resume(
     model = SAC.load(last / ck.MODEL_FILE, env=venv, device="cpu")
     model.load_replay_buffer(last / ck.REPLAY_FILE)
     model.set_random_seed(seed + step)
-    if verbose:
+    if verbose and model.replay_buffer is not None:
         print(
             f"[resume] {run_dir} from {last.name}: {step} steps, "
             f"{model.replay_buffer.size() * model.n_envs} transitions in the replay buffer",
