@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.io import atomic_path, write_json_atomic
+
 #: Version of the file format written by :func:`save_actor`.
 FORMAT_VERSION = 1
 
@@ -271,7 +273,8 @@ def save_actor(actor: MLPActor, path_stem: str | Path) -> tuple[Path, Path]:
         arrays[f"layer{i}.weight"] = w.astype(np.float32)
         arrays[f"layer{i}.bias"] = b.astype(np.float32)
     npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
-    np.savez(npz, **arrays)
+    with atomic_path(npz) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
     meta = {
         "format_version": FORMAT_VERSION,
         "activation": actor.activation,
@@ -286,7 +289,7 @@ def save_actor(actor: MLPActor, path_stem: str | Path) -> tuple[Path, Path]:
         "action_high": actor.action_high.tolist(),
         **{k: v for k, v in actor.metadata.items() if k not in _STRUCTURAL},
     }
-    js.write_text(json.dumps(meta, indent=1) + "\n")
+    write_json_atomic(js, meta, indent=1)
     return npz, js
 
 
