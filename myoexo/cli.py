@@ -29,6 +29,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "select": (
+        "myoexo.training.select",
+        "pick the checkpoint of a run that best meets the acceptance criteria",
+    ),
 }
 
 #: Exceptions that report a user's mistake rather than a bug (plus the project's
