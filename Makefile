@@ -1,12 +1,13 @@
-# Two entry points: `make demo` and `make test`. Both create .venv if missing and install
-# the package with pinned dependencies (torch==2.13.0: CPU wheel, keeps CI fast).
+# Two entry points: `make demo` and `make test` (`make test-fast` skips the tests marked
+# slow: notebooks, training runs, full-length evaluations). All create .venv if missing and
+# install the package with pinned dependencies (torch==2.13.0: CPU wheel, keeps CI fast).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test install lint format clean bench
+.PHONY: demo test test-fast install lint format clean bench
 
 $(STAMP): pyproject.toml Makefile
 	@# headless rendering (notebooks, videos) uses Mesa's EGL; install it where it is missing
@@ -28,6 +29,10 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(PY) -m pytest -q tests
+
+test-fast: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest -q -m "not slow" tests
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check . && $(VENV)/bin/mypy

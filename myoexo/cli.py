@@ -3,12 +3,18 @@
 Each sub-command lives in the module that owns the concept and exposes two functions,
 ``add_arguments(parser)`` and ``run(args) -> int``; this file only routes to them, so the
 modules stay independent and importing the CLI stays cheap.
+
+A user's mistake (a bad value, a missing file or run folder, the shipped policy missing)
+is reported as one line, ``myoexo <command>: error: <message>``, with exit status 2; any
+other exception is a bug and keeps its traceback. ``myoexo --debug <command>`` (or the
+environment variable ``MYOEXO_DEBUG=1``) shows the traceback of user errors too.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -23,33 +29,78 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "select": (
+        "myoexo.training.select",
+        "pick the checkpoint of a run that best meets the acceptance criteria",
+    ),
 }
+
+#: Exceptions that report a user's mistake rather than a bug (plus the project's
+#: ``PolicyUnavailableError``, see :func:`is_user_error`).
+USER_ERRORS: tuple[type[BaseException], ...] = (
+    ValueError,
+    FileNotFoundError,
+    FileExistsError,
+    NotADirectoryError,
+    IsADirectoryError,
+    PermissionError,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Parser with one sub-parser per available command."""
+    """Parser with one sub-parser per command (an import error of a command surfaces)."""
     parser = argparse.ArgumentParser(
         prog="myoexo",
         description="myoexo: knee-exoskeleton digital twin with spastic reflexes on MyoSuite.",
     )
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the full traceback of errors (also: MYOEXO_DEBUG=1)",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:  # a command whose module is not built yet
-            if exc.name and exc.name.startswith("myoexo"):
-                continue
-            raise
+        module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=help_text, description=help_text)
         module.add_arguments(p)
         p.set_defaults(_module=module)
     return parser
 
 
+def is_user_error(exc: BaseException) -> bool:
+    """Whether ``exc`` reports a user's mistake (one line, exit 2) rather than a bug."""
+    if isinstance(exc, USER_ERRORS):
+        return True
+    from myoexo.control.specs import PolicyUnavailableError
+
+    return isinstance(exc, PolicyUnavailableError)
+
+
+def _one_line(message: str) -> str:
+    return " ".join(line.strip() for line in message.splitlines() if line.strip())
+
+
+def _fail(command: str, message: str) -> int:
+    print(f"myoexo {command}: error: {_one_line(message)}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``myoexo`` console script."""
     args = build_parser().parse_args(argv)
-    return int(args._module.run(args) or 0)
+    debug = args.debug or os.environ.get("MYOEXO_DEBUG", "") not in ("", "0")
+    try:
+        return int(args._module.run(args) or 0)
+    except SystemExit as exc:
+        # a command that stops with a message (``SystemExit("<command>: ...")``)
+        if debug or not isinstance(exc.code, str):
+            raise
+        message = exc.code.removeprefix(f"{args.command}: ")
+        return _fail(args.command, message)
+    except Exception as exc:
+        if debug or not is_user_error(exc):
+            raise
+        return _fail(args.command, str(exc) or type(exc).__name__)
 
 
 if __name__ == "__main__":

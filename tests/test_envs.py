@@ -174,9 +174,25 @@ def test_bad_constructor_arguments_raise():
 
 
 def test_episode_truncates_at_8_s():
+    """The default env runs the full 8 s: 800 steps, none truncated before the last."""
+    env = gym.make("MyoExoKnee-v0")
+    env.reset(seed=0)
+    zero = np.array([0.0], np.float32)
+    for step in range(1, 801):
+        _, _, terminated, truncated, info = env.step(zero)
+        assert not terminated
+        assert truncated == (step == 800), step
+    assert info["time_s"] == pytest.approx(8.0)
+    assert not info["unstable"]
+    env.close()
+
+
+def test_custom_episode_duration_truncates_in_the_env_itself():
+    """A shorter task ends at its own duration, before the registered 800-step limit."""
     env = gym.make("MyoExoKnee-v0", task=myoexo.envs.TaskParams(episode_duration_s=0.2))
     _, _, infos = _rollout(env, 0, 1000, action=0.0)
     assert len(infos) == 21 and infos[-1]["time_s"] == pytest.approx(0.2)
+    assert env.spec.max_episode_steps == 800
 
 
 def test_vector_envs():

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     if args.resume:
         if args.set or args.run_dir:
-            raise SystemExit("train: --resume takes the run's saved settings; drop --set/--run-dir")
+            raise ValueError("--resume takes the run's saved settings; drop --set/--run-dir")
         result = resume(args.resume, args.total_timesteps, progress, args.verbose)
     else:
         overrides = dict(parse_override(s) for s in args.set)

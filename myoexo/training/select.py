@@ -56,11 +56,12 @@ def select_checkpoint(
     top: int = 4,
     root_seed: int = 0,
     verbose: bool = True,
+    levels: Sequence[int] = LEVELS,
 ) -> tuple[Path, Any]:
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
-    score (``eval.csv``) on ``subjects`` subjects per level, and return the one with the
-    smallest :func:`shortfall` (ties: the largest mean peak torque reduction) with its
-    comparison table."""
+    score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
+    with the smallest :func:`shortfall` (ties: the largest mean peak torque reduction) with
+    its comparison table."""
     import csv
 
     ckpts = ck.list_checkpoints(run_dir)
@@ -75,10 +76,10 @@ def select_checkpoint(
             (c for c in ckpts if ck.step_of(c) in scores), key=lambda c: -scores[ck.step_of(c)]
         )
         candidates += [c for c in scored[:top] if c not in candidates]
-    pid = evaluate_pid(subjects, root_seed=root_seed)
+    pid = evaluate_pid(subjects, levels, root_seed=root_seed)
     results = []
     for c in candidates:
-        table = compare(evaluate_checkpoint(c, subjects, root_seed=root_seed), pid)
+        table = compare(evaluate_checkpoint(c, subjects, levels, root_seed=root_seed), pid)
         key = (shortfall(table), -table.peak_reduction_pct.mean())
         results.append((key, c, table))
         if verbose:
@@ -151,9 +152,8 @@ def markdown_table(table: Any) -> str:
     return str(pd.DataFrame(rows).to_markdown(index=False))
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m myoexo.training.select RUN``: print the chosen checkpoint and its table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo select`` (and ``python -m myoexo.training.select``)."""
     parser.add_argument("run", type=Path, help="run folder, or an evaluation folder with --table")
     parser.add_argument(
         "--table",
@@ -162,17 +162,67 @@ def main(argv: Sequence[str] | None = None) -> int:
         "evaluate --controllers pid sac` output in RUN instead",
     )
     parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
+    parser.add_argument(
+        "--levels",
+        type=int,
+        nargs="+",
+        choices=LEVELS,
+        default=list(LEVELS),
+        metavar="LEVEL",
+        help="spasticity levels to evaluate (default: 0 1 2 3)",
+    )
     parser.add_argument("--last", type=int, default=2, help="newest checkpoints to consider")
     parser.add_argument("--top", type=int, default=4, help="best-scored checkpoints to consider")
     parser.add_argument("--root-seed", type=int, default=0)
-    args = parser.parse_args(argv)
+    parser.add_argument(
+        "--out",
+        type=Path,
+        metavar="FILE",
+        help="also write the comparison table: FILE.md (Markdown, next to the paper's "
+        "numbers) or FILE.csv (with the chosen checkpoint in a column)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the chosen checkpoint and its table (or, with ``--table``, the criteria table
+    of an evaluation folder); write it to ``--out`` if given."""
+    levels = sorted(set(args.levels))
+    if args.out is not None and args.out.suffix not in (".md", ".csv"):
+        raise ValueError(f"--out {str(args.out)!r} must end in .md or .csv")
+    chosen = None
     if args.table:
-        print(markdown_table(compare_evaluation(args.run)))
-        return 0
-    chosen, table = select_checkpoint(args.run, args.subjects, args.last, args.top, args.root_seed)
-    print(f"chosen: {chosen}")
-    print(table.round(2).to_string())
+        table = compare_evaluation(args.run)
+        table = table[table.index.isin(levels)]
+        print(markdown_table(table))
+    else:
+        if args.subjects < 1:
+            raise ValueError(f"--subjects {args.subjects} must be at least 1")
+        if args.last < 0 or args.top < 0 or args.last + args.top < 1:
+            raise ValueError("--last and --top must be >= 0 and name at least one candidate")
+        if args.last == 0 and not (args.run / ck.EVAL_FILE).is_file():
+            raise ValueError(f"--top needs the run's {ck.EVAL_FILE}; {args.run} has none")
+        chosen, table = select_checkpoint(
+            args.run, args.subjects, args.last, args.top, args.root_seed, levels=levels
+        )
+        print(f"chosen: {chosen}")
+        print(table.round(2).to_string())
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        if args.out.suffix == ".md":
+            head = "" if chosen is None else f"chosen: `{chosen}`\n\n"
+            args.out.write_text(head + markdown_table(table) + "\n")
+        else:
+            table = table if chosen is None else table.assign(checkpoint=str(chosen))
+            table.to_csv(args.out)
+        print(f"wrote {args.out}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m myoexo.training.select RUN`` (same as ``myoexo select RUN``)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,234 @@
+"""The reward's values: every term recomputed by hand from the observations of consecutive
+steps of the real env, with the paper's constants written out here (not read back from the
+env's parameters), and the weighted sum under the default and overridden weights."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import myoexo  # noqa: F401  (registers the ids)
+from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
+
+SIGMA_RAD = 0.1  # width of the pose kernel (the project's documented choice)
+BONUS = 0.01
+BONUS_ERROR_RAD = 0.05
+BONUS_VEL_RAD_S = 0.05
+TORQUE_THRESHOLD_NM = 75.0
+TORQUE_SCALE_NM = 100.0
+
+TERMS = ("pose", "bonus", "inter", "vel", "act")
+
+
+def approx(x: float):
+    return pytest.approx(x, rel=1e-12, abs=1e-12)
+
+
+def _run(env: gym.Env, actions, seed: int = 0):
+    """Reset, then one step per action: the reset info and, per step, (reward, info)."""
+    _, reset_info = env.reset(seed=seed)
+    steps = []
+    for a in actions:
+        _, reward, terminated, truncated, info = env.step(np.array([a], np.float32))
+        assert not (terminated or truncated)
+        steps.append((reward, info))
+    return reset_info, steps
+
+
+def _expected_terms(actions, reset_info, steps, target_deg: float) -> list[dict[str, float]]:
+    """The reward terms of each step from the definitions.
+
+    The previous step of the first one is the reset state (command 0, the reset's torque
+    and knee velocity)."""
+    # the leg starts at rest: the velocity term of the first step is against 0
+    assert reset_info["knee_vel_rad_s"] == 0.0
+    prev_tau = reset_info["interaction_torque_nm"]
+    prev_vel = reset_info["knee_vel_rad_s"]
+    prev_u = 0.0
+    expected = []
+    for a, (_, info) in zip(actions, steps, strict=True):
+        od = info["obs_dict"]
+        u = min(1.0, max(-1.0, float(np.float32(a))))  # the motor driver clips the command
+        assert info["command"] == u
+        e = float(od["knee_angle_rad"][0]) - math.radians(target_deg)
+        assert float(od["error_rad"][0]) == approx(e)
+        vel = float(od["knee_vel_rad_s"][0])
+        tau = float(od["interaction_torque_nm"][0])
+        assert tau == approx(abs(info["exo_torque_nm"]) + abs(info["muscle_knee_torque_nm"]))
+        inter = ((tau - prev_tau) / TORQUE_SCALE_NM) ** 2
+        if tau > TORQUE_THRESHOLD_NM:
+            inter += (tau / TORQUE_SCALE_NM) ** 2
+        on_target = abs(e) < BONUS_ERROR_RAD and abs(vel) < BONUS_VEL_RAD_S
+        expected.append(
+            {
+                "pose": math.exp(-(e**2) / (2 * SIGMA_RAD**2)) - abs(e),
+                "bonus": BONUS if on_target else 0.0,
+                "inter": inter,
+                "vel": abs(vel - prev_vel),
+                "act": (u - prev_u) ** 2,
+                # what the hand computation depends on, for the branch-coverage checks
+                "_e": e,
+                "_vel": vel,
+                "_tau": tau,
+            }
+        )
+        prev_tau, prev_vel, prev_u = tau, vel, u
+    return expected
+
+
+def _check_terms(steps, expected, weights: dict[str, float]) -> None:
+    for i, ((reward, info), exp) in enumerate(zip(steps, expected, strict=True)):
+        for key in TERMS:
+            assert info["rwd_dict"][key] == approx(exp[key]), (i, key)
+            assert info[key] == info["rwd_dict"][key]
+        dense = sum(w * exp[k] for k, w in weights.items())
+        assert reward == approx(dense), i
+        assert info["rwd_dict"]["dense"] == reward
+
+
+#: Extension commands of several sizes, a repeat (no command change), a clipped one and a
+#: full reversal: covers both sides of the 75 Nm threshold and non-zero command changes.
+ACTIONS = (0.0, -0.3, -0.3, -0.6, 0.5, -2.0, -1.0, 1.0, 0.25, 0.0)
+
+
+@pytest.fixture(scope="module")
+def default_run():
+    env = gym.make("MyoExoKnee-v1")
+    reset_info, steps = _run(env, ACTIONS, seed=4)
+    env.close()
+    return reset_info, steps
+
+
+def test_each_term_and_the_weighted_sum_match_their_definitions(default_run):
+    reset_info, steps = default_run
+    expected = _expected_terms(ACTIONS, reset_info, steps, TaskParams().target_angle_deg)
+    _check_terms(steps, expected, DEFAULT_REWARD_WEIGHTS)
+    assert DEFAULT_REWARD_WEIGHTS == {
+        "pose": 1.0,
+        "bonus": 1.0,
+        "inter": -1.0,
+        "vel": -0.05,
+        "act": -0.5,
+    }
+    # the run exercised both sides of the torque threshold and moved the knee
+    taus = [x["_tau"] for x in expected]
+    assert max(taus) > TORQUE_THRESHOLD_NM > min(taus)
+    assert all(x["bonus"] == 0.0 for x in expected)  # far from the target: no bonus
+    assert min(x["vel"] for x in expected) > 0.0 and max(x["act"] for x in expected) == 4.0
+
+
+def test_torque_penalty_switches_on_above_75_nm():
+    """Level 0 (a small muscle torque): the full command puts 100 Nm on the knee, 0.70
+    puts it a few Nm below the threshold and 0.77 a few Nm above."""
+    env = gym.make("MyoExoKnee-v0")
+    actions = (1.0, 1.0, -1.0, -0.70, -0.70, -0.77, -0.77)
+    reset_info, steps = _run(env, actions, seed=0)
+    env.close()
+    expected = _expected_terms(actions, reset_info, steps, TaskParams().target_angle_deg)
+    _check_terms(steps, expected, DEFAULT_REWARD_WEIGHTS)
+    taus = [x["_tau"] for x in expected]
+    inters = [info["rwd_dict"]["inter"] for _, info in steps]
+    # the first step's rate term is measured from the reset's torque
+    tau0 = reset_info["interaction_torque_nm"]
+    assert inters[0] == approx(
+        ((taus[0] - tau0) / TORQUE_SCALE_NM) ** 2 + (taus[0] / TORQUE_SCALE_NM) ** 2
+    )
+    for (_, info), tau, inter in zip(steps[:3], taus[:3], inters[:3], strict=True):
+        assert abs(info["exo_torque_nm"]) == pytest.approx(100.0, rel=1e-6)
+        assert inter >= (tau / TORQUE_SCALE_NM) ** 2 > 1.0
+    # just below the threshold only the rate term counts; just above the level term adds
+    below = [i for i, t in enumerate(taus) if TORQUE_THRESHOLD_NM - 5 < t < TORQUE_THRESHOLD_NM]
+    above = [i for i, t in enumerate(taus) if TORQUE_THRESHOLD_NM < t < TORQUE_THRESHOLD_NM + 5]
+    assert below and above
+    for i in below:
+        assert inters[i] == approx(((taus[i] - taus[i - 1]) / TORQUE_SCALE_NM) ** 2)
+        assert inters[i] < (TORQUE_THRESHOLD_NM / TORQUE_SCALE_NM) ** 2
+    for i in above:
+        assert inters[i] > (TORQUE_THRESHOLD_NM / TORQUE_SCALE_NM) ** 2
+    # reversing from +1 to -1 costs (d u)^2 = 4
+    assert steps[2][1]["rwd_dict"]["act"] == 4.0
+
+
+def test_a_new_episode_takes_the_differences_from_its_own_reset():
+    """The rate terms of an episode's first step are not against the last step of the
+    previous episode (command -0.6, a moving knee, a loaded joint)."""
+    env = gym.make("MyoExoKnee-v1")
+    _run(env, (0.0, -0.3, -0.6), seed=1)
+    actions = (0.4, 0.4)
+    reset_info, steps = _run(env, actions, seed=2)
+    env.close()
+    expected = _expected_terms(actions, reset_info, steps, TaskParams().target_angle_deg)
+    _check_terms(steps, expected, DEFAULT_REWARD_WEIGHTS)
+    assert steps[0][1]["rwd_dict"]["act"] == pytest.approx(0.4**2, rel=1e-6)
+
+
+def _still_knee_run(offset_rad: float, n: int):
+    """Start at 85 deg with no perturbation (near the passive equilibrium of the hanging
+    leg, level 0, motor off: the knee barely moves at first) and the target ``offset_rad``
+    below the start."""
+    target_deg = 85.0 - math.degrees(offset_rad)
+    task = TaskParams(start_angle_deg=85.0, target_angle_deg=target_deg, start_angle_noise_deg=0)
+    env = gym.make("MyoExoKnee-v0", task=task)
+    actions = (0.0,) * n
+    reset_info, steps = _run(env, actions, seed=0)
+    env.close()
+    assert reset_info["knee_angle_deg"] == pytest.approx(85.0, abs=1e-9)
+    expected = _expected_terms(actions, reset_info, steps, task.target_angle_deg)
+    _check_terms(steps, expected, DEFAULT_REWARD_WEIGHTS)
+    return steps, expected
+
+
+def test_bonus_while_the_knee_is_held_at_the_target():
+    """On the target the knee first stays still (bonus on), then drifts with a speed above
+    the 0.05 rad/s bound while still within 0.05 rad of the target (bonus off through the
+    velocity bound alone)."""
+    steps, expected = _still_knee_run(0.0, 20)
+    bonus = [info["rwd_dict"]["bonus"] for _, info in steps]
+    assert bonus[0] == BONUS and sum(b == BONUS for b in bonus) >= 3
+    vel_gated = [
+        x for x in expected if abs(x["_e"]) < BONUS_ERROR_RAD and abs(x["_vel"]) >= BONUS_VEL_RAD_S
+    ]
+    assert vel_gated and all(x["bonus"] == 0.0 for x in vel_gated)
+    # the bonus enters the dense reward with weight 1 next to a pose term near 1
+    reward0, _ = steps[0]
+    assert reward0 > 1.0
+
+
+@pytest.mark.parametrize(
+    ("offset_rad", "bonus"),
+    [(0.045, BONUS), (-0.045, BONUS), (0.055, 0.0), (-0.055, 0.0)],
+)
+def test_bonus_error_bound_is_005_rad(offset_rad, bonus):
+    """A still knee just inside / just outside 0.05 rad of the target, on either side."""
+    _, expected = _still_knee_run(offset_rad, 3)
+    for x in expected:
+        assert abs(x["_vel"]) < BONUS_VEL_RAD_S
+        assert abs(x["_e"]) == pytest.approx(abs(offset_rad), abs=2e-3)
+        assert x["bonus"] == bonus
+
+
+@pytest.mark.parametrize(
+    "weights",
+    [
+        {"pose": 2.0, "bonus": 0.0, "inter": -0.25, "vel": -1.0, "act": -3.0},
+        {"pose": 1.0, "act": -10.0},  # keys left out do not count
+    ],
+    ids=["all-keys", "subset"],
+)
+def test_weighted_reward_keys_override_the_weights(default_run, weights):
+    env = gym.make("MyoExoKnee-v1", weighted_reward_keys=weights)
+    assert env.unwrapped.rwd_keys_wt == weights
+    reset_info, steps = _run(env, ACTIONS, seed=4)
+    env.close()
+    expected = _expected_terms(ACTIONS, reset_info, steps, TaskParams().target_angle_deg)
+    _check_terms(steps, expected, weights)
+    # the weights change the sum only: the same seed and actions give the same terms
+    _, default_steps = default_run
+    for (_, info), (_, info_default) in zip(steps, default_steps, strict=True):
+        for key in TERMS:
+            assert info["rwd_dict"][key] == info_default["rwd_dict"][key]
+    rewards = [r for r, _ in steps]
+    assert rewards != [r for r, _ in default_steps]

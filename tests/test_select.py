@@ -1,0 +1,299 @@
+"""Checkpoint selection against the acceptance criteria: the criterion logic on crafted
+tables, the candidate choice on a run folder written the way training writes it (with
+policies whose actions are known), ``myoexo select`` and its ``--table`` mode, and a tiny
+real training run."""
+
+from __future__ import annotations
+
+import csv
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from myoexo.cli import main
+from myoexo.training import checkpoints as ck
+from myoexo.training.select import (
+    Criteria,
+    compare,
+    compare_evaluation,
+    evaluate_checkpoint,
+    evaluate_pid,
+    level_means,
+    markdown_table,
+    select_checkpoint,
+    shortfall,
+)
+
+METRICS = (
+    "abs_final_error_deg",
+    "final_error_deg",
+    "settling_time_s",
+    "rms_interaction_torque_nm",
+    "peak_interaction_torque_nm",
+)
+
+
+# ---------------------------------------------------------------------------- crafted tables
+def _means(rows: dict[int, tuple[float, float, float]]) -> pd.DataFrame:
+    """Per-level means from ``level -> (abs final error, RMS, peak)`` (signed error = abs,
+    settling 1 s), through :func:`level_means` of a two-subject episode table whose two
+    subjects lie symmetrically around those values."""
+    episodes = []
+    for level, (err, rms, peak) in rows.items():
+        for sign in (-1.0, 1.0):
+            episodes.append(
+                {
+                    "level": level,
+                    "subject": int(sign > 0),
+                    "abs_final_error_deg": err + 0.25 * sign,
+                    "final_error_deg": err + 0.25 * sign,
+                    "settling_time_s": 1.0 + 0.5 * sign,
+                    "rms_interaction_torque_nm": rms + sign,
+                    "peak_interaction_torque_nm": peak - 2 * sign,
+                    "controller": "x",
+                }
+            )
+    return level_means(pd.DataFrame(episodes))
+
+
+PID = _means({lv: (0.5, 50.0, 100.0) for lv in range(4)})
+
+
+def test_level_means_average_each_metric_per_level():
+    assert list(PID.columns) == list(METRICS)
+    assert PID.index.tolist() == [0, 1, 2, 3]
+    expected = [0.5, 0.5, 1.0, 50.0, 100.0]
+    for level in range(4):
+        assert PID.loc[level].tolist() == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_acceptance_bounds_are_the_papers():
+    c = Criteria()
+    assert c.final_error_deg == (1.0, 1.0, 1.0, 11.45)
+    assert c.rms_levels == (0, 1, 2)
+    assert c.peak_levels == (0, 1, 2, 3)
+
+
+def test_compare_reductions_and_per_level_flags():
+    bound = Criteria().final_error_deg
+    sac = _means(
+        {
+            0: (0.5 * bound[0], 40.0, 80.0),  # everything better: passes
+            1: (bound[1] + 0.5, 40.0, 80.0),  # final error above the 1 deg bound
+            2: (0.5 * bound[2], 60.0, 120.0),  # more torque than the PID
+            3: (bound[3] - 0.45, 60.0, 90.0),  # level 3: 11 deg is fine, RMS is not judged
+        }
+    )
+    table = compare(sac, PID)
+    assert table.index.tolist() == [0, 1, 2, 3]
+    # reductions in % of the PID, positive = less torque than the PID
+    assert table.peak_reduction_pct.tolist() == pytest.approx([20.0, 20.0, -20.0, 10.0])
+    assert table.rms_reduction_pct.tolist() == pytest.approx([20.0, 20.0, -20.0, -20.0])
+    assert table.sac_abs_final_error_deg.tolist() == pytest.approx(
+        [0.5 * bound[0], bound[1] + 0.5, 0.5 * bound[2], bound[3] - 0.45]
+    )
+    assert table.pid_peak_nm.tolist() == pytest.approx([100.0] * 4)
+    assert table.final_error_ok.tolist() == [True, False, True, True]
+    assert table.peak_ok.tolist() == [True, True, False, True]
+    assert table.rms_ok.tolist() == [True, True, False, True]
+    assert table["pass"].tolist() == [True, False, False, True]
+    # shortfall: relative excess of the final error + relative torque increases
+    assert shortfall(table) == pytest.approx(0.5 / bound[1] + 0.2 + 0.2)
+    assert shortfall(table.loc[[0, 3]]) == 0.0
+
+
+def test_final_error_bounds_are_per_level_and_strict():
+    bound = Criteria().final_error_deg
+    # 5 deg passes at level 3 only; exactly on a bound fails; above 11.45 fails at level 3
+    sac = _means({0: (5.0, 40.0, 80.0), 1: (bound[1], 40.0, 80.0), 3: (5.0, 40.0, 80.0)})
+    table = compare(sac, PID.loc[[0, 1, 3]])
+    assert table.final_error_ok.tolist() == [False, False, True]
+    table = compare(_means({3: (bound[3] + 0.5, 40.0, 80.0)}), PID.loc[[3]])
+    assert not table.loc[3, "final_error_ok"] and not table.loc[3, "pass"]
+    assert shortfall(table) == pytest.approx(0.5 / bound[3])
+
+
+def test_other_criteria_change_the_flags():
+    sac = _means({0: (1.5, 60.0, 120.0), 3: (1.5, 60.0, 120.0)})
+    pid = PID.loc[[0, 3]]
+    assert not compare(sac, pid)["pass"].any()
+    lenient = Criteria(final_error_deg=(2.0, 2.0, 2.0, 2.0), rms_levels=(), peak_levels=(3,))
+    table = compare(sac, pid, lenient)
+    assert table["pass"].tolist() == [True, False]
+    assert shortfall(table, lenient) == pytest.approx(0.2)
+
+
+def test_markdown_table_names_the_failed_criteria():
+    sac = _means({0: (0.5, 40.0, 80.0), 2: (3.0, 60.0, 120.0)})
+    text = markdown_table(compare(sac, PID.loc[[0, 2]]))
+    lines = text.splitlines()
+    assert len(lines) == 2 + 2
+    assert lines[2].startswith("| 0 |") and lines[2].endswith("| pass |")
+    assert lines[3].startswith("| 2 |") and lines[3].endswith("| fails: final error, peak, RMS |")
+
+
+# ---------------------------------------------------------------------------- a crafted run
+#: checkpoint step -> (constant action of its policy, small-evaluation score in eval.csv)
+CRAFTED = {100: (-0.5, -10.0), 200: (0.0, -50.0), 300: (0.0, -60.0)}
+
+
+@pytest.fixture(scope="module")
+def crafted_run(tmp_path_factory):
+    """A run folder written with the training code (vector env, SB3 SAC, checkpoints), the
+    policies set to constant actions: step 100 extends the knee with a -0.5 command, steps
+    200 and 300 do nothing. eval.csv ranks step 100 best."""
+    import torch
+
+    from myoexo.training import get_preset
+    from myoexo.training.train import build_sac, make_vec_env
+
+    run_dir = tmp_path_factory.mktemp("select") / "run"
+    run_dir.mkdir()
+    preset = get_preset("cpu", n_envs=1, buffer_size=1_000, batch_size=16, learning_starts=10)
+    venv = make_vec_env(preset, seed=0)
+    model = build_sac(preset, venv, seed=0)
+    ck.write_json_atomic(run_dir / ck.CONFIG_FILE, {"seed": 0, "env_id": preset.env_id})
+    mu = model.policy.actor.mu
+    for step, (action, _) in CRAFTED.items():
+        with torch.no_grad():
+            mu.weight.zero_()
+            mu.bias.fill_(float(np.arctanh(action)))  # deterministic action = tanh(mu)
+        model.num_timesteps = step
+        ck.save_checkpoint(model, run_dir, {"num_timesteps": step}, with_replay=False)
+    venv.close()
+    with open(run_dir / ck.EVAL_FILE, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["step", "level", "score"])
+        for step, (_, score) in CRAFTED.items():
+            writer.writerows([[step, 0, score], [step, 3, score]])
+    return run_dir
+
+
+def _printed_candidates(text: str) -> list[str]:
+    return re.findall(r"^(step_\d+): shortfall", text, flags=re.MULTILINE)
+
+
+def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_shortfall(
+    crafted_run, capsys
+):
+    chosen, table = select_checkpoint(crafted_run, subjects=1, last=1, top=1, levels=(0,))
+    candidates = _printed_candidates(capsys.readouterr().out)
+    assert candidates == ["step_0000000300", "step_0000000100"]  # newest, then best score
+    assert chosen == crafted_run / ck.CHECKPOINTS_DIR / "step_0000000100"
+    assert table.index.tolist() == [0]
+    assert {"final_error_ok", "peak_ok", "rms_ok", "pass", "peak_reduction_pct"} <= set(table)
+    # the table is the comparison of the chosen checkpoint with the PID on the same subject
+    pid = evaluate_pid(1, (0,))
+    expected = compare(evaluate_checkpoint(chosen, 1, (0,)), pid)
+    pd.testing.assert_frame_equal(table, expected)
+    idle = compare(
+        evaluate_checkpoint(crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300", 1, (0,)), pid
+    )
+    assert shortfall(table) < shortfall(idle)
+    # a knee left hanging is far from the target: the final-error criterion fails
+    assert idle.loc[0, "sac_abs_final_error_deg"] > 30.0
+    assert not idle.loc[0, "final_error_ok"] and not idle.loc[0, "pass"]
+
+
+def test_select_cli_writes_the_chosen_checkpoint_and_its_table(crafted_run, tmp_path, capsys):
+    out = tmp_path / "sel" / "selection.csv"
+    argv = ["select", str(crafted_run), "--subjects", "1", "--levels", "3", "--last", "1"]
+    assert main([*argv, "--top", "0", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert _printed_candidates(printed) == ["step_0000000300"]
+    newest = crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300"
+    assert f"chosen: {newest}" in printed
+    written = pd.read_csv(out, index_col="level")
+    assert written.index.tolist() == [3]
+    assert written.checkpoint.tolist() == [str(newest)]
+    assert written.loc[3, "final_error_ok"] == (
+        written.loc[3, "sac_abs_final_error_deg"] < Criteria().final_error_deg[3]
+    )
+    md = tmp_path / "selection.md"
+    assert main([*argv, "--top", "0", "--out", str(md)]) == 0
+    text = md.read_text()
+    assert text.startswith(f"chosen: `{newest}`") and "\n| 3 |" in text
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--subjects", "0"], "--subjects 0"),
+        (["--last", "0", "--top", "0"], "at least one candidate"),
+        (["--out", "table.txt"], "must end in .md or .csv"),
+    ],
+)
+def test_select_cli_refuses_bad_arguments(crafted_run, args, message, capsys):
+    assert main(["select", str(crafted_run), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("myoexo select: error: ") and message in err
+
+
+def test_select_cli_on_a_folder_without_checkpoints(tmp_path, capsys):
+    assert main(["select", str(tmp_path), "--levels", "0"]) == 2
+    assert "holds no checkpoint" in capsys.readouterr().err
+    assert main(["select", str(tmp_path), "--last", "0"]) == 2  # --top alone needs eval.csv
+    assert "eval.csv" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse: not a level
+        main(["select", str(tmp_path), "--levels", "4"])
+
+
+def test_table_mode_on_an_evaluation_folder(tmp_path, capsys):
+    from myoexo.evaluation import EvaluationConfig, evaluate
+
+    out = tmp_path / "eval"
+    config = EvaluationConfig(
+        controllers=("pid", "sac"), levels=(0, 3), subjects=1, episode_duration_s=0.5
+    )
+    run = evaluate(config, out, workers=1, progress=False)
+    table = compare_evaluation(out)
+    t = run.table
+    expected = compare(level_means(t[t.controller == "sac"]), level_means(t[t.controller == "pid"]))
+    pd.testing.assert_frame_equal(table, expected)
+    with pytest.raises(ValueError, match="no episodes of"):
+        compare_evaluation(out, sac="nope")
+
+    md = tmp_path / "criteria.md"
+    assert main(["select", str(out), "--table", "--levels", "3", "--out", str(md)]) == 0
+    printed = capsys.readouterr().out
+    assert "| 3 |" in printed and "| 0 |" not in printed
+    assert md.read_text() == markdown_table(table.loc[[3]]) + "\n"
+
+
+# ---------------------------------------------------------------------------- a real run
+@pytest.mark.slow
+def test_selection_on_a_tiny_training_run(tmp_path, capsys):
+    from myoexo.training import get_preset, train
+
+    preset = get_preset(
+        "cpu",
+        episode_duration_s=0.5,
+        total_timesteps=200,
+        n_envs=1,
+        buffer_size=1_000,
+        batch_size=16,
+        learning_starts=100,
+        checkpoint_every_s=0.0,
+        checkpoint_every_steps=100,
+        eval_every_steps=100,
+        eval_subjects=1,
+        eval_levels=(0,),
+    )
+    run_dir = tmp_path / "run"
+    train(preset, run_dir, seed=0, verbose=0)
+    ckpts = ck.list_checkpoints(run_dir)
+    assert [c.name for c in ckpts] == ["step_0000000100", "step_0000000200"]
+    evals = pd.read_csv(run_dir / ck.EVAL_FILE)
+    best = ck.checkpoint_name(int(evals.loc[evals.score.idxmax(), "step"]))
+    capsys.readouterr()
+
+    chosen, table = select_checkpoint(run_dir, subjects=1, last=1, top=1, levels=(3,))
+    candidates = _printed_candidates(capsys.readouterr().out)
+    assert candidates == list(dict.fromkeys(["step_0000000200", best]))
+    assert chosen.name in candidates
+    assert table.index.tolist() == [3]
+    row = table.loc[3]
+    assert row["pass"] == (row.final_error_ok and row.peak_ok and row.rms_ok)
+    assert row.final_error_ok == (row.sac_abs_final_error_deg < 11.45)
