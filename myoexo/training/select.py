@@ -1,8 +1,8 @@
 """Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
 harness and check the acceptance criteria (:mod:`myoexo.evaluation.criteria`).
 
-    python -m myoexo.training.select runs/cpu_main --subjects 10 --last 2 --top 4
-    python -m myoexo.training.select results/eval --table    # after `myoexo evaluate`
+    myoexo select runs/cpu_main --subjects 10 --last 2 --top 4
+    myoexo select results/eval --table    # after `myoexo evaluate`
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def select_checkpoint(
     top: int = 4,
     root_seed: int = 0,
     verbose: bool = True,
-    levels: Sequence[int] = LEVELS,
+    levels: Sequence[int] = VALID_LEVELS,
 ) -> tuple[Path, Any]:
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
     score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
@@ -166,8 +166,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--levels",
         type=int,
         nargs="+",
-        choices=LEVELS,
-        default=list(LEVELS),
+        choices=VALID_LEVELS,
+        default=list(VALID_LEVELS),
         metavar="LEVEL",
         help="spasticity levels to evaluate (default: 0 1 2 3)",
     )
