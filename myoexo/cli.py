@@ -24,6 +24,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export-model": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
     "plot-spasticity": ("myoexo.spasticity_plots", "draw Fig. 2b and the stretch-test curves"),
     "stretch-test": ("myoexo.stretch_test", "simulate the passive Tardieu stretch per level"),
+    "calibrate": (
+        "myoexo.calibration",
+        "fit the stretch reflex so that the paper's PID behaves as in the study",
+    ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),

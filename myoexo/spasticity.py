@@ -53,6 +53,7 @@ import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
 from myoexo.model.leg import KNEE_JOINT  # the joint whose angle and velocity drive the reflex
+from myoexo.reflex import DelayLine, LevelCalibration, ReflexConfig, reflex_config
 
 if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
     import torch
@@ -411,16 +412,21 @@ def sc_total_torch(theta_deg: Any, vel_rad_s: Any, params: _TorchParams) -> torc
 
 
 class _StepCoefficients(NamedTuple):
-    """A subject's constants of :meth:`SpasticityStage.sc_now` (halved slope and gains:
-    ``1 - (phi(a) - phi(b))`` is written with tanh, ``phi(x) = (1 - tanh(k x / 2)) / 2``)."""
+    """A subject's constants of the per-step reflex (python floats: scalar math is fastest).
+
+    ``phi(k, x, lim) = (1 - tanh(k (x - lim) / 2)) / 2``, so every window is written with
+    the halved slope; the gains are multiplied in once per subject."""
 
     half_k: float
-    theta_ext_deg: float
+    flex_theta_deg: float  # flexors' angle threshold (Table I's theta_ext + calibration shift)
+    theta_ext_deg: float  # Table I's extension-side limit (the uniform model's)
     theta_flex_deg: float
     v_lower_rad_s: float
     v_upper_rad_s: float
-    half_s_theta: float
-    half_s_v: float
+    flex_s_theta: float  # gain x s_theta of the flexors' angle term
+    flex_s_v: float
+    ext_s_theta: float
+    ext_s_v: float
 
 
 class SpasticityStage:
@@ -432,11 +438,15 @@ class SpasticityStage:
         env.unwrapped.add_ctrl_stage(STAGE_NAME, stage.apply, stage.reset)
 
     or use :class:`SpasticityWrapper`. Each control step :meth:`apply` reads the angle (deg)
-    and velocity (rad/s) of ``knee_angle_r`` from ``env.data``, computes ``SC_total`` of the
-    current subject and adds it to the excitation of the 11 spastic muscles, clipped to
-    ``[0, 1]``; every other entry of ``ctrl`` is left as it is. MyoSuite's (MuJoCo's)
-    activation dynamics then act on the excitation. :meth:`reset` draws the next subject
-    (and, with ``level="random"``, the next level, uniformly) from ``env.np_random``.
+    and velocity (rad/s) of ``knee_angle_r`` from ``env.data``, passes them through the
+    reflex's transmission delay (:class:`~myoexo.reflex.DelayLine`, whole control periods of
+    the host's ``env.dt``), computes the current subject's reflex excitation with the chosen
+    model (:mod:`myoexo.reflex`: ``"stretch"``, each muscle group answering its own stretch,
+    or ``"uniform"``, the paper's ``SC_total`` on all 11 muscles) and adds it to the spastic
+    muscles' entries of ``ctrl``, clipped to ``[0, 1]``; every other entry is left as it is.
+    MyoSuite's (MuJoCo's) activation dynamics then act on the excitation. :meth:`reset` draws
+    the next subject (and, with ``level="random"``, the next level, uniformly) from
+    ``env.np_random`` and clears the delay line.
 
     The joint and actuator addresses are resolved once per model, so a step costs a few
     scalar operations and one fancy-indexed update of 11 entries.
@@ -446,7 +456,11 @@ class SpasticityStage:
         subject_noise: Draw individual subjects (10 % noise, :func:`sample_subject`) at
             reset; ``False`` keeps the level's nominal Table I parameters.
         rel_std: Relative standard deviation of the subject parameters.
-        muscles: Actuators that receive ``SC_total`` (default: the paper's 11).
+        reflex: Reflex model: a preset name of :data:`~myoexo.reflex.REFLEX_PRESETS`
+            (``"stretch"``, the calibrated default, or ``"uniform"``) or a
+            :class:`~myoexo.reflex.ReflexConfig`.
+        flexors: Actuators stretched by knee extension (default: the paper's 6).
+        extensors: Actuators stretched by knee flexion (default: the paper's 5).
         joint: Hinge joint whose angle and velocity drive the reflex.
 
     Attributes:
@@ -455,10 +469,14 @@ class SpasticityStage:
         level: Level of the current subject. Until the first :meth:`reset` the stage uses the
             nominal parameters of its level (level 0 for ``"random"``).
         subject: :class:`SpasticityParams` of the current subject.
-        last_sc_total: ``SC_total`` applied at the last step (0 before any step).
+        reflex: The :class:`~myoexo.reflex.ReflexConfig` in use.
+        last_flexor_excitation: Reflex excitation added to the flexors at the last step.
+        last_extensor_excitation: Reflex excitation added to the extensors at the last step.
+        last_sc_total: Their sum (for ``"uniform"``: ``SC_total``, which both groups get);
+            0 before any step.
 
     Raises:
-        ValueError: If *level* is unknown, *rel_std* invalid or *muscles* empty.
+        ValueError: If *level* or *reflex* is unknown, *rel_std* invalid or a group empty.
     """
 
     name = STAGE_NAME
@@ -469,21 +487,30 @@ class SpasticityStage:
         *,
         subject_noise: bool = True,
         rel_std: float = SUBJECT_REL_STD,
-        muscles: Sequence[str] = SPASTIC_MUSCLES,
+        reflex: str | ReflexConfig = "stretch",
+        flexors: Sequence[str] = SPASTIC_FLEXORS,
+        extensors: Sequence[str] = SPASTIC_EXTENSORS,
         joint: str = KNEE_JOINT,
     ) -> None:
         self.level_setting: int | str = _check_level_setting(level)
         initial = min(LEVELS) if self.level_setting == RANDOM_LEVEL else int(self.level_setting)
         if not (math.isfinite(rel_std) and rel_std >= 0.0):
             raise ValueError(f"rel_std must be a finite value >= 0, got {rel_std!r}.")
-        if len(muscles) == 0:
-            raise ValueError("muscles must name at least one actuator.")
+        if len(flexors) == 0 or len(extensors) == 0:
+            raise ValueError("flexors and extensors must each name at least one actuator.")
         self.subject_noise = bool(subject_noise)
         self.rel_std = float(rel_std)
-        self.muscles = tuple(muscles)
+        self.reflex = reflex_config(reflex)
+        self._uniform = self.reflex.model == "uniform"
+        self.flexors = tuple(flexors)
+        self.extensors = tuple(extensors)
+        self.muscles = self.flexors + self.extensors
         self.joint = joint
         self.last_sc_total = 0.0
+        self.last_flexor_excitation = 0.0
+        self.last_extensor_excitation = 0.0
         self._model: Any = None
+        self._delay = DelayLine(0)
         self._set_subject(initial, LEVELS[initial])
 
     # -- subject --------------------------------------------------------------------------
@@ -491,15 +518,21 @@ class SpasticityStage:
         self.level = level
         self.subject = subject
         p = subject
-        # constants of the per-step formula (python floats: scalar math is fastest)
+        if self._uniform:
+            cal = LevelCalibration()
+        else:
+            cal = self.reflex.calibration[level]
         self._coef = _StepCoefficients(
             half_k=0.5 * p.k,
+            flex_theta_deg=p.theta_ext_deg + cal.flexor_threshold_shift_deg,
             theta_ext_deg=p.theta_ext_deg,
             theta_flex_deg=p.theta_flex_deg,
             v_lower_rad_s=p.v_lower_rad_s,
             v_upper_rad_s=p.v_upper_rad_s,
-            half_s_theta=0.5 * p.s_theta,
-            half_s_v=0.5 * p.s_v,
+            flex_s_theta=cal.flexor_gain * p.s_theta,
+            flex_s_v=cal.flexor_gain * p.s_v,
+            ext_s_theta=cal.extensor_gain * p.s_theta,
+            ext_s_v=cal.extensor_gain * p.s_v,
         )
 
     def set_subject(self, subject: SpasticityParams, level: int | None = None) -> None:
@@ -507,7 +540,8 @@ class SpasticityStage:
 
         Args:
             subject: Reflex parameters.
-            level: Level to report in :attr:`level` (default: unchanged).
+            level: Level to report in :attr:`level` and whose calibration applies
+                (default: unchanged).
         """
         if not isinstance(subject, SpasticityParams):
             raise ValueError(f"subject must be SpasticityParams, got {type(subject).__name__}.")
@@ -518,7 +552,8 @@ class SpasticityStage:
         self.level_setting = _check_level_setting(level)
 
     def reset(self, env: Any) -> None:
-        """Draw the next level (``"random"`` only) and subject from ``env.np_random``."""
+        """Draw the next level (``"random"`` only) and subject from ``env.np_random``; clear
+        the delay line."""
         rng = env.np_random
         if self.level_setting == RANDOM_LEVEL:
             level = VALID_LEVELS[int(rng.integers(len(VALID_LEVELS)))]
@@ -526,11 +561,24 @@ class SpasticityStage:
             level = int(self.level_setting)
         subject = sample_subject(level, rng, self.rel_std) if self.subject_noise else LEVELS[level]
         self._set_subject(level, subject)
+        self.clear_history()
+
+    def clear_history(self) -> None:
+        """Forget the delayed knee states and the last excitations (a new motion starts)."""
+        self._delay.clear()
         self.last_sc_total = 0.0
+        self.last_flexor_excitation = 0.0
+        self.last_extensor_excitation = 0.0
 
     # -- model binding ----------------------------------------------------------------------
-    def bind(self, model: Any) -> None:
-        """Resolve the joint address and muscle actuator ids of *model* (done once per model).
+    def bind(self, model: Any, control_period_s: float | None = None) -> None:
+        """Resolve the joint address and muscle actuator ids of *model* (done once per model)
+        and size the delay line for the host's control period.
+
+        Args:
+            model: The MuJoCo model.
+            control_period_s: Time between two :meth:`apply` calls (default: the model's
+                timestep).
 
         Raises:
             ValueError: If the joint is missing or not a hinge, or a muscle is missing.
@@ -551,7 +599,10 @@ class SpasticityStage:
         self._qpos_adr = int(model.jnt_qposadr[jid])
         self._dof_adr = int(model.jnt_dofadr[jid])
         self._act_ids = np.asarray(ids, dtype=np.intp)
+        self._n_flex = len(self.flexors)
         self._nu = int(model.nu)
+        period = float(control_period_s or model.opt.timestep)
+        self._delay = DelayLine(round(self.reflex.delay_s / period))
         self._model = model
 
     @property
@@ -561,33 +612,70 @@ class SpasticityStage:
             raise RuntimeError("The stage is not bound to a model yet (call bind or apply).")
         return self._act_ids
 
+    @property
+    def delay_steps(self) -> int:
+        """Delay of the knee state the reflex reads, in control steps."""
+        return self._delay.delay_steps
+
     # -- the stage ----------------------------------------------------------------------------
     def sc_now(self, theta_deg: float, vel_rad_s: float) -> float:
-        """``SC_total`` of the current subject at one state (scalar fast path of :func:`sc_total`).
+        """``SC_total`` of the current subject at one state (scalar fast path of
+        :func:`sc_total`; the ``"uniform"`` model's excitation of every muscle).
 
         Raises:
             ValueError: If the angle or the velocity is NaN or infinite.
         """
+        return self._excitations(theta_deg, vel_rad_s, uniform=True)[0]
+
+    def excitations_now(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
+        """``(flexor, extensor)`` reflex excitation of the current subject at one (already
+        delayed) knee state, with the stage's model.
+
+        Raises:
+            ValueError: If the angle or the velocity is NaN or infinite.
+        """
+        return self._excitations(theta_deg, vel_rad_s, uniform=self._uniform)
+
+    def _excitations(
+        self, theta_deg: float, vel_rad_s: float, uniform: bool
+    ) -> tuple[float, float]:
         if not (math.isfinite(theta_deg) and math.isfinite(vel_rad_s)):
             raise ValueError(
                 f"Knee state must be finite, got theta_deg={theta_deg!r}, vel_rad_s={vel_rad_s!r}."
             )
-        half_k, t_ext, t_flex, v_lo, v_hi, half_st, half_sv = self._coef
+        c = self._coef
         tanh = math.tanh
-        # 1 - (phi(b, hi) - phi(b, lo)) = 1 - (tanh(k(b-lo)/2) - tanh(k(b-hi)/2)) / 2
-        sc_a = half_st * (
-            2.0 - tanh(half_k * (theta_deg - t_ext)) + tanh(half_k * (theta_deg - t_flex))
+        hk = c.half_k
+        # below(x; lim) = (1 - tanh(hk (x - lim))) / 2, above(x; lim) = (1 + tanh(...)) / 2
+        if uniform:
+            p = self.subject
+            sc = 0.5 * p.s_theta * (
+                2.0
+                - tanh(hk * (theta_deg - c.theta_ext_deg))
+                + tanh(hk * (theta_deg - c.theta_flex_deg))
+            ) + 0.5 * p.s_v * (
+                2.0
+                - tanh(hk * (vel_rad_s - c.v_lower_rad_s))
+                + tanh(hk * (vel_rad_s - c.v_upper_rad_s))
+            )
+            return sc, sc
+        flex = 0.5 * (
+            c.flex_s_theta * (1.0 - tanh(hk * (theta_deg - c.flex_theta_deg)))
+            + c.flex_s_v * (1.0 - tanh(hk * (vel_rad_s - c.v_lower_rad_s)))
         )
-        sc_v = half_sv * (
-            2.0 - tanh(half_k * (vel_rad_s - v_lo)) + tanh(half_k * (vel_rad_s - v_hi))
+        ext = 0.5 * (
+            c.ext_s_theta * (1.0 + tanh(hk * (theta_deg - c.theta_flex_deg)))
+            + c.ext_s_v * (1.0 + tanh(hk * (vel_rad_s - c.v_upper_rad_s)))
         )
-        return sc_a + sc_v
+        return flex, ext
 
     def apply(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
-        """Add ``SC_total`` to the spastic muscles' excitation in *ctrl* (in place; returned).
+        """Add the reflex excitation to the spastic muscles' entries of *ctrl* (in place;
+        returned).
 
         Args:
-            env: Host with ``model`` and ``data`` (a MyoSuite env, or any such object).
+            env: Host with ``model`` and ``data`` (a MyoSuite env, or any such object); its
+                ``dt`` (if any) is the control period of the delay line.
             ctrl: The full control vector (``model.nu`` entries), excitations in ``[0, 1]``.
 
         Raises:
@@ -595,20 +683,25 @@ class SpasticityStage:
         """
         model = env.model
         if model is not self._model:
-            self.bind(model)
+            self.bind(model, getattr(env, "dt", None))
         if ctrl.shape[0] != self._nu:
             raise ValueError(f"ctrl has {ctrl.shape[0]} entries, the model {self._nu} actuators.")
         data = env.data
-        sc = self.sc_now(
+        theta_deg, vel_rad_s = self._delay.push(
             float(data.qpos[self._qpos_adr]) * _RAD_TO_DEG, float(data.qvel[self._dof_adr])
         )
+        flex, ext = self._excitations(theta_deg, vel_rad_s, self._uniform)
         ids = self._act_ids
         u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
-        u += sc
+        nf = self._n_flex
+        u[:nf] += flex
+        u[nf:] += ext
         np.minimum(u, 1.0, out=u)
         np.maximum(u, 0.0, out=u)
         ctrl[ids] = u
-        self.last_sc_total = sc
+        self.last_flexor_excitation = flex
+        self.last_extensor_excitation = ext
+        self.last_sc_total = flex if self._uniform else flex + ext
         return ctrl
 
     def __call__(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
@@ -618,13 +711,14 @@ class SpasticityStage:
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state["_model"] = None  # re-bound on the first step after unpickling
-        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu"):
+        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu", "_n_flex"):
             state.pop(key, None)
         return state
 
     def __repr__(self) -> str:
         return (
             f"SpasticityStage(level_setting={self.level_setting!r}, level={self.level}, "
+            f"reflex={self.reflex.model!r}, delay_s={self.reflex.delay_s}, "
             f"subject_noise={self.subject_noise}, subject={self.subject})"
         )
 
@@ -643,6 +737,8 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
             spastic muscles and ``knee_angle_r`` (e.g. ``myoLegWalk-v0``).
         level: Spasticity level 0..3 or ``"random"``.
         subject_noise: Draw individual subjects at reset (see :class:`SpasticityStage`).
+        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
+            :class:`~myoexo.reflex.ReflexConfig` (see :class:`SpasticityStage`).
         order: MyoSuite stage order (``None``: after the built-in stages).
 
     Raises:
@@ -655,9 +751,12 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
         env: gym.Env,
         level: int | str = 2,
         subject_noise: bool = True,
+        reflex: str | ReflexConfig = "stretch",
         order: float | None = None,
     ) -> None:
-        RecordConstructorArgs.__init__(self, level=level, subject_noise=subject_noise, order=order)
+        RecordConstructorArgs.__init__(
+            self, level=level, subject_noise=subject_noise, reflex=reflex, order=order
+        )
         gym.Wrapper.__init__(self, env)
         host: Any = env.unwrapped
         if not getattr(host, "supports_ctrl_stages", False):
@@ -665,14 +764,19 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
                 f"SpasticityWrapper needs an env whose action pipeline runs muscle stages; "
                 f"{type(host).__name__} does not."
             )
-        self._level, self._subject_noise, self._order = level, subject_noise, order
-        self.spasticity = SpasticityStage(level, subject_noise=subject_noise)
-        self.spasticity.bind(host.model)  # fail now, not at the first step
+        self._kwargs = {
+            "level": level,
+            "subject_noise": subject_noise,
+            "reflex": reflex,
+            "order": order,
+        }
+        self.spasticity = SpasticityStage(level, subject_noise=subject_noise, reflex=reflex)
+        # fail now, not at the first step
+        self.spasticity.bind(host.model, getattr(host, "dt", None))
         host.add_ctrl_stage(STAGE_NAME, self.spasticity.apply, self.spasticity.reset, order=order)
 
     def __getstate__(self) -> dict[str, Any]:
-        kwargs = {"level": self._level, "subject_noise": self._subject_noise, "order": self._order}
-        return {"env": self.env, "kwargs": kwargs}
+        return {"env": self.env, "kwargs": dict(self._kwargs)}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         SpasticityWrapper.__init__(self, state["env"], **state["kwargs"])

@@ -301,7 +301,9 @@ def walk_env_factory():
 
 
 def test_stage_in_simulation_raises_only_the_spastic_muscles(walk_env_factory) -> None:
-    env = walk_env_factory(level=3)
+    """The paper's reading ("uniform", no delay): every spastic muscle gets SC_total of the
+    present knee state; no other actuator is touched."""
+    env = walk_env_factory(level=3, reflex="uniform")
     host = env.unwrapped
     model = host.model
     assert host.ctrl_stages[-1] == "spasticity"

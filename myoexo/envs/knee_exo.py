@@ -80,6 +80,7 @@ from myoexo.model import (
     pose_twin,
 )
 from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.reflex import ReflexConfig
 from myoexo.spasticity import SPASTIC_MUSCLES, SpasticityStage
 
 #: Cuff sensors of the twin: obs key (sensor name + unit) -> sensor name.
@@ -158,6 +159,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         weighted_reward_keys: Shortcut overriding ``reward.weights``.
         subject_noise: Draw an individual subject (10 % variability) at every reset;
             ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
+        reflex: Reflex model (:mod:`myoexo.reflex`): ``"stretch"`` (the calibrated stretch
+            reflex with a 20 ms delay, default), ``"uniform"`` (the paper's ``SC_total`` on
+            all 11 muscles, no delay: the first reading) or a ``ReflexConfig``.
         seed: Seed of the env's RNG (``reset(seed=...)`` reseeds it).
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
     """
@@ -173,6 +177,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         obs_keys: list[str] | tuple[str, ...] | None = None,
         weighted_reward_keys: dict[str, float] | None = None,
         subject_noise: bool = True,
+        reflex: str | ReflexConfig = "stretch",
         seed: int | None = None,
         render_mode: str | None = None,
         **kwargs: Any,
@@ -205,6 +210,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             obs_keys=obs_keys,
             weighted_reward_keys=weighted_reward_keys,
             subject_noise=subject_noise,
+            reflex=reflex,
             seed=seed,
             render_mode=render_mode,
         )
@@ -217,7 +223,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.rwd_keys_wt = dict(self.reward_params.weights)
         self._resolve_indices()
 
-        self.spasticity = SpasticityStage(level=spasticity_level, subject_noise=subject_noise)
+        self.spasticity = SpasticityStage(
+            level=spasticity_level, subject_noise=subject_noise, reflex=reflex
+        )
         self.add_ctrl_stage("spasticity", self.spasticity.apply, self.spasticity.reset)
 
         self._input_seed = seed

@@ -120,7 +120,7 @@ class EvaluationConfig:
 def env_fingerprint(env_id: str) -> str:
     """SHA-256 (16 hex digits) of what defines an env's episodes: the compiled MuJoCo model
     (MJB bytes: geometry, masses, muscles, couplings, timestep), the task and reward
-    parameters and the observation layout."""
+    parameters, the observation layout and the reflex model."""
     import mujoco
 
     from myoexo.envs import make_env
@@ -131,8 +131,10 @@ def env_fingerprint(env_id: str) -> str:
         mjb = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
         mujoco.mj_saveModel(model, None, mjb)
         h = hashlib.sha256(mjb.tobytes())
+        stage = getattr(env, "spasticity", None)
         for part in ("task", "reward_params", "obs_keys"):
             h.update(repr(getattr(env, part, None)).encode())
+        h.update(repr(getattr(stage, "reflex", None)).encode())
     finally:
         env.close()
     return h.hexdigest()[:16]

@@ -1,0 +1,284 @@
+"""Reflex models: which knee muscles receive which part of the spastic reflex, and when.
+
+The paper's reflex (:mod:`myoexo.spasticity`, Table I) is a sum of four one-sided terms,
+each a sigmoid "beyond a limit" of Table I's windows::
+
+    SC_total = s_theta [ above(theta; theta_flex) + below(theta; theta_ext) ]
+             + s_v     [ above(v; v_upper)        + below(v; v_lower)       ]
+
+with ``below(x; lim) = phi(k, x, lim) = 1 / (1 + exp(k (x - lim)))`` (-> 1 below ``lim``)
+and ``above = 1 - below``. Two readings of who receives it (docs/reference.md section 2):
+
+``"uniform"`` (the paper read literally, myoexo's first reading)
+    all 11 spastic muscles receive the whole ``SC_total``: flexors and the stronger
+    extensors co-contract at every state.
+``"stretch"`` (the clinical stretch reflex, Lance 1980; the default)
+    each group answers its own stretch. Knee extension (``theta`` falling, ``v < 0``)
+    stretches the flexors (hamstrings, gastrocnemii), flexion stretches the extensors
+    (vasti, rectus femoris; gracilis as the paper groups it)::
+
+        e_flex = g_flex [ s_theta below(theta; theta_ext + shift) + s_v below(v; v_lower) ]
+        e_ext  = g_ext  [ s_theta above(theta; theta_flex)        + s_v above(v; v_upper) ]
+
+    With unit gains and no shift, ``e_flex + e_ext`` is exactly the paper's ``SC_total``.
+    Table I's extension-side limits (-35, -30, -15 deg) lie outside the knee's motion
+    (7-90 deg), so read literally the flexors' angle term never fires during the task; the
+    calibration (:data:`CALIBRATION`, ``myoexo calibrate``) moves that threshold into the
+    range, as the tonic-stretch-reflex-threshold account of spasticity has it (a reflex
+    threshold shifted inside the joint's range; Levin and Feldman; Calota and Levin 2009),
+    and sets one gain per muscle group and level.
+
+Both models read the knee state through a transmission delay (:data:`STRETCH_DELAY_S`, 20 ms
+for the stretch reflex as SCONE uses at the knee; Falisse et al. 2018 and SpasticMyoElbow use
+30 ms, which made the paper's PID oscillate at level 1 on this twin),
+kept in a fixed ring buffer of past control-step states (:class:`DelayLine`, no allocation per
+step). The functions here are the numpy model and its torch twin (autograd through the inputs
+and every parameter); :class:`~myoexo.spasticity.SpasticityStage` runs them in MyoSuite's
+muscle-command pipeline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # torch is imported lazily
+    import torch
+
+#: Names of the reflex models.
+REFLEX_MODELS: tuple[str, ...] = ("uniform", "stretch")
+
+#: Transmission delay of the stretch reflex, s. 20 ms is SCONE's knee reflex delay; the
+#: 30 ms of Falisse et al. 2018 and SpasticMyoElbow drove the paper's PID at level 1
+#: into a sustained oscillation on this twin (8.75 deg peak to peak over the last second,
+#: 6 subjects; 1.07 deg at 20 ms, 0 at 10 ms), which the study's PID does not show.
+STRETCH_DELAY_S = 0.02
+
+
+@dataclass(frozen=True)
+class LevelCalibration:
+    """The fitted parameters of the stretch reflex at one level.
+
+    Attributes:
+        flexor_gain: Gain of the flexors' excitation (-).
+        extensor_gain: Gain of the extensors' excitation (-).
+        flexor_threshold_shift_deg: Added to Table I's extension-side limit ``theta_ext`` for
+            the flexors' angle term, deg (> 0 moves the threshold into the motion).
+    """
+
+    flexor_gain: float = 1.0
+    extensor_gain: float = 1.0
+    flexor_threshold_shift_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not math.isfinite(value):
+                raise ValueError(f"LevelCalibration.{f.name} = {value!r} must be finite")
+        for name in ("flexor_gain", "extensor_gain"):
+            if not 0.0 <= getattr(self, name) <= 20.0:
+                raise ValueError(
+                    f"LevelCalibration.{name} = {getattr(self, name)!r} is outside [0, 20]"
+                )
+        if not -50.0 <= self.flexor_threshold_shift_deg <= 150.0:
+            raise ValueError(
+                f"LevelCalibration.flexor_threshold_shift_deg = "
+                f"{self.flexor_threshold_shift_deg!r} is outside [-50, 150] deg"
+            )
+
+
+def _identity_levels() -> Mapping[int, LevelCalibration]:
+    return MappingProxyType({lv: LevelCalibration() for lv in range(4)})
+
+
+@dataclass(frozen=True)
+class StretchCalibration:
+    """Per-level parameters of the stretch reflex (level -> :class:`LevelCalibration`).
+
+    Attributes:
+        levels: Calibration of each level; a level not listed uses unit gains, no shift.
+        note: Provenance: the command and the numbers the fit gave.
+    """
+
+    levels: Mapping[int, LevelCalibration] = field(default_factory=_identity_levels)
+    note: str = ""
+
+    def __getitem__(self, level: int) -> LevelCalibration:
+        return self.levels.get(int(level), LevelCalibration())
+
+
+#: The stretch reflex with Table I read literally: unit gains, Table I's thresholds.
+UNCALIBRATED = StretchCalibration(note="Table I read literally (no fit)")
+
+#: Fitted with ``myoexo calibrate`` (see :mod:`myoexo.calibration`): the paper's PID gains
+#: on the calibrated twin stop short of the 7 deg target by the paper's 6.3 deg at level 2 and
+#: 9.3 deg at level 3 and overshoot it at levels 0-1.
+CALIBRATION = StretchCalibration(
+    levels=MappingProxyType(
+        {
+            1: LevelCalibration(flexor_gain=1.0, extensor_gain=1.0),
+            2: LevelCalibration(
+                flexor_gain=1.0, extensor_gain=1.0, flexor_threshold_shift_deg=50.0
+            ),
+            3: LevelCalibration(
+                flexor_gain=1.0, extensor_gain=1.0, flexor_threshold_shift_deg=40.0
+            ),
+        }
+    ),
+    note="placeholder before the first fit",
+)
+
+
+@dataclass(frozen=True)
+class ReflexConfig:
+    """Which reflex model a stage runs.
+
+    Attributes:
+        model: ``"uniform"`` or ``"stretch"`` (:data:`REFLEX_MODELS`).
+        delay_s: Transmission delay of the knee state the reflex reads, s (rounded to whole
+            control periods of the host env; 0 = the present state).
+        calibration: Per-level parameters of the stretch model (ignored by ``uniform``).
+    """
+
+    model: str = "stretch"
+    delay_s: float = STRETCH_DELAY_S
+    calibration: StretchCalibration = CALIBRATION
+
+    def __post_init__(self) -> None:
+        if self.model not in REFLEX_MODELS:
+            raise ValueError(f"reflex model {self.model!r} is unknown; accepted: {REFLEX_MODELS}")
+        if not (math.isfinite(self.delay_s) and 0.0 <= self.delay_s <= 0.2):
+            raise ValueError(f"reflex delay_s = {self.delay_s!r} is outside [0, 0.2] s")
+
+
+#: The named reflex presets: ``"stretch"`` (calibrated stretch reflex, 20 ms delay; the envs'
+#: default) and ``"uniform"`` (the paper's SC_total on all 11 muscles, no delay: myoexo's
+#: first reading, kept for comparison).
+REFLEX_PRESETS: Mapping[str, ReflexConfig] = MappingProxyType(
+    {
+        "stretch": ReflexConfig(),
+        "uniform": ReflexConfig(model="uniform", delay_s=0.0),
+    }
+)
+
+
+def reflex_config(reflex: str | ReflexConfig) -> ReflexConfig:
+    """A :class:`ReflexConfig` from a preset name or a config (``ValueError`` otherwise)."""
+    if isinstance(reflex, ReflexConfig):
+        return reflex
+    if isinstance(reflex, str) and reflex in REFLEX_PRESETS:
+        return REFLEX_PRESETS[reflex]
+    raise ValueError(
+        f"reflex = {reflex!r}: expected one of {sorted(REFLEX_PRESETS)} or a ReflexConfig"
+    )
+
+
+# ----------------------------------------------------------------------------- numpy model
+def below(x: Any, limit: float, k: float) -> Any:
+    """``1 / (1 + exp(k (x - limit)))``: -> 1 below ``limit``, 1/2 at it, -> 0 above
+    (eq. 1's ``phi``, evaluated with tanh: no overflow)."""
+    return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(x, dtype=np.float64) - limit)))
+
+
+def above(x: Any, limit: float, k: float) -> Any:
+    """``1 - below(x, limit, k)``: -> 1 above ``limit``."""
+    return 0.5 * (1.0 + np.tanh(0.5 * k * (np.asarray(x, dtype=np.float64) - limit)))
+
+
+def group_excitations(
+    theta_deg: Any, vel_rad_s: Any, params: Any, calibration: LevelCalibration | None = None
+) -> tuple[Any, Any]:
+    """The stretch reflex's ``(e_flex, e_ext)`` at knee states (broadcast over inputs).
+
+    Args:
+        theta_deg: Knee angle(s), deg, flexion positive.
+        vel_rad_s: Knee velocity(ies), rad/s, flexion positive.
+        params: A :class:`~myoexo.spasticity.SpasticityParams` (level or subject).
+        calibration: The level's fitted gains and shift (default: none; then
+            ``e_flex + e_ext`` equals the paper's ``SC_total``).
+    """
+    c = calibration or LevelCalibration()
+    p = params
+    flex = c.flexor_gain * (
+        p.s_theta * below(theta_deg, p.theta_ext_deg + c.flexor_threshold_shift_deg, p.k)
+        + p.s_v * below(vel_rad_s, p.v_lower_rad_s, p.k)
+    )
+    ext = c.extensor_gain * (
+        p.s_theta * above(theta_deg, p.theta_flex_deg, p.k)
+        + p.s_v * above(vel_rad_s, p.v_upper_rad_s, p.k)
+    )
+    return flex, ext
+
+
+# ----------------------------------------------------------------------------- torch twin
+def group_excitations_torch(
+    theta_deg: torch.Tensor,
+    vel_rad_s: torch.Tensor,
+    params: Mapping[str, Any],
+    calibration: Mapping[str, Any] | LevelCalibration | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Torch twin of :func:`group_excitations`, differentiable in the inputs, in every
+    subject parameter (a mapping from :class:`~myoexo.spasticity.SpasticityParams` field
+    names to tensors or floats) and in every calibration parameter given as a tensor."""
+    import torch
+
+    def get(source: Any, name: str) -> torch.Tensor:
+        value = source[name] if isinstance(source, Mapping) else getattr(source, name)
+        return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=x.dtype)
+
+    x = theta_deg if isinstance(theta_deg, torch.Tensor) else torch.as_tensor(theta_deg)
+    v = vel_rad_s if isinstance(vel_rad_s, torch.Tensor) else torch.as_tensor(vel_rad_s)
+    cal = calibration if calibration is not None else LevelCalibration()
+    k = get(params, "k")
+
+    def below_t(z: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
+        return 0.5 * (1.0 - torch.tanh(0.5 * k * (z - limit)))
+
+    theta_thr = get(params, "theta_ext_deg") + get(cal, "flexor_threshold_shift_deg")
+    flex = get(cal, "flexor_gain") * (
+        get(params, "s_theta") * below_t(x, theta_thr)
+        + get(params, "s_v") * below_t(v, get(params, "v_lower_rad_s"))
+    )
+    ext = get(cal, "extensor_gain") * (
+        get(params, "s_theta") * (1.0 - below_t(x, get(params, "theta_flex_deg")))
+        + get(params, "s_v") * (1.0 - below_t(v, get(params, "v_upper_rad_s")))
+    )
+    return flex, ext
+
+
+# ----------------------------------------------------------------------------- delay
+class DelayLine:
+    """Fixed-size ring buffer of the knee state, read ``delay_steps`` samples late.
+
+    ``push(theta_deg, vel_rad_s)`` stores the present sample and returns the one
+    ``delay_steps`` pushes ago (before enough history exists: the oldest sample, i.e. the
+    state is held at its start value). No allocation per step.
+    """
+
+    def __init__(self, delay_steps: int) -> None:
+        if delay_steps < 0:
+            raise ValueError(f"delay_steps = {delay_steps} must be >= 0")
+        self.delay_steps = int(delay_steps)
+        self._buf = np.zeros((self.delay_steps + 1, 2))
+        self._count = 0
+
+    def clear(self) -> None:
+        """Forget the history (start of an episode)."""
+        self._count = 0
+
+    def push(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
+        """Store the present state; return the delayed one ``(theta_deg, vel_rad_s)``."""
+        n = self.delay_steps + 1
+        buf = self._buf
+        i = self._count % n
+        buf[i, 0] = theta_deg
+        buf[i, 1] = vel_rad_s
+        self._count += 1
+        j = (self._count - n) % n if self._count >= n else 0
+        return float(buf[j, 0]), float(buf[j, 1])
