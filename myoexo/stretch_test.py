@@ -221,10 +221,13 @@ def _motion_duration_s(vel_rad_s: float, params: StretchTestParams) -> float:
 
 
 class _Host:
-    """What :meth:`SpasticityStage.apply` needs of an env: model, data and an RNG."""
+    """What :meth:`SpasticityStage.apply` needs of an env: model, data, an RNG and the control
+    period ``dt`` (s) of the apply calls (it sizes the reflex's delay line)."""
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, seed: int = 0) -> None:
-        self.model, self.data = model, data
+    def __init__(
+        self, model: mujoco.MjModel, data: mujoco.MjData, dt: float, seed: int = 0
+    ) -> None:
+        self.model, self.data, self.dt = model, data, float(dt)
         self.np_random = np.random.default_rng(seed)
 
 
@@ -295,7 +298,7 @@ def simulate_stretch(
 
     data = mujoco.MjData(model)
     pose(model, data, knee_angle_deg=params.start_deg)
-    host = _Host(model, data)
+    host = _Host(model, data, dt)
     stage = SpasticityStage(level, subject_noise=False)
     if subject is not None:
         stage.set_subject(subject)
