@@ -196,10 +196,11 @@ def test_pid_on_the_twin_follows_the_papers_pattern():
     """Full 8 s episodes, 3 subjects per level. Paper: overshoot at levels 0 and 1, final
     error 6.3 deg at level 2 and 9.3 deg at level 3.
 
-    The twin reproduces the overshoot at low levels, shrinking as the reflex stiffens the
-    knee, and the load growing with the level; its PID (integral action, 100 Nm motor)
-    overpowers the level 2-3 reflexes and ends on target, unlike the paper's 6.3 / 9.3 deg
-    (see the README's comparison with the paper). These assertions pin what the twin does.
+    The calibrated stretch reflex (``myoexo calibrate``, fitted on 40 subjects per level
+    and checked on 200) reproduces it: the PID overshoots and reaches the target at levels 0-1;
+    at levels 2-3 the flexors' reflex, whose threshold lies inside the motion, stops the knee
+    short of the target against the saturated 100 Nm motor, further at level 3. The bounds
+    are loose (3 subjects; the subject spread of the final error is ~3-4 deg).
     """
     from myoexo.control import PID
     from myoexo.evaluation import evaluate_controller
@@ -220,10 +221,12 @@ def test_pid_on_the_twin_follows_the_papers_pattern():
             ]
         ].mean()
     print("\nPID on the twin, mean of 3 subjects:\n" + pd.DataFrame(stats).T.to_string())
-    assert abs(stats[0].final_error_deg) < 1.0  # level 0: reaches the target
-    assert stats[0].target_overshoot_deg > 1.0  # ... with an overshoot, as at level 1
-    assert stats[1].target_overshoot_deg > 1.0
+    for level in (0, 1):  # reaches the target, after an overshoot
+        assert abs(stats[level].final_error_deg) < 1.0
+        assert stats[level].target_overshoot_deg > 1.0
+    assert stats[2].final_error_deg > 2.0  # stops short (paper 6.3 deg)
+    assert stats[3].final_error_deg > stats[2].final_error_deg  # further short (paper 9.3)
     overshoot = [stats[lvl].target_overshoot_deg for lvl in range(4)]
-    assert overshoot == sorted(overshoot, reverse=True)  # the reflex damps the overshoot
+    assert overshoot[0] > overshoot[3]  # the reflex damps the overshoot
     peak = [stats[lvl].peak_interaction_torque_nm for lvl in range(4)]
     assert peak[3] > peak[0] + 20.0  # ... and loads the knee more

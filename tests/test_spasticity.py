@@ -18,7 +18,6 @@ from myoexo.spasticity import (
     SUBJECT_REL_STD,
     SpasticityParams,
     SpasticityStage,
-    SpasticityWrapper,
     phi,
     sample_subject,
     sc_angle,
@@ -287,17 +286,6 @@ def test_stage_reset_draws_from_env_rng() -> None:
     fixed.set_level(1)
     fixed.reset(host)
     assert (fixed.level, fixed.subject) == (1, LEVELS[1])
-
-
-@pytest.fixture(scope="module")
-def walk_env_factory():
-    """MyoSuite's own leg env (both legs, 80 muscles): the stage is not tied to our twin."""
-    gym = pytest.importorskip("myosuite.utils").gym
-
-    def make(**kwargs):
-        return SpasticityWrapper(gym.make("myoLegWalk-v0"), **kwargs)
-
-    return make
 
 
 def test_stage_in_simulation_raises_only_the_spastic_muscles(walk_env_factory) -> None:

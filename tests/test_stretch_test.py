@@ -58,11 +58,12 @@ def result():
 
 def test_exo_imposes_the_stretch(result) -> None:
     s = result.summary.set_index(["level", "vel_rad_s"])
-    # the stiff controller imposes the speed: the human knee follows within 20 % (the
+    # the stiff controller imposes the speed: the human knee follows within 30 % (the
     # PD lags by resisting torque / Kp and the soft straps add their compliance: measured
-    # 2.51 rad/s for 3 rad/s at level 3)
+    # 2.30 rad/s for 3 rad/s and 0.15 for 0.2 rad/s at level 3 with the calibrated stretch
+    # reflex, whose flexors resist the extension)
     np.testing.assert_allclose(
-        s["mean_knee_vel_rad_s"], s.index.get_level_values("vel_rad_s"), rtol=0.2
+        s["mean_knee_vel_rad_s"], s.index.get_level_values("vel_rad_s"), rtol=0.3
     )
     assert (s["max_tracking_error_deg"] < 15.0).all()
     assert (s["saturated_fraction"] == 0.0).all()

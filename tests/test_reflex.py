@@ -1,0 +1,163 @@
+"""Tests of the reflex models (myoexo.reflex) and their stage in MyoSuite's pipeline: the
+stretch reflex decomposes the paper's SC_total by muscle group, the torch twin agrees and
+differentiates, the delay line delays, and the stage drives each group with its own part."""
+
+from __future__ import annotations
+
+import dataclasses
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+from myoexo.reflex import (
+    CALIBRATION,
+    REFLEX_PRESETS,
+    UNCALIBRATED,
+    DelayLine,
+    LevelCalibration,
+    ReflexConfig,
+    group_excitations,
+    group_excitations_torch,
+    reflex_config,
+)
+from myoexo.spasticity import (
+    LEVELS,
+    SPASTIC_EXTENSORS,
+    SPASTIC_FLEXORS,
+    SpasticityParams,
+    sc_total,
+)
+
+THETA = np.linspace(-20.0, 110.0, 27)
+VEL = np.linspace(-4.0, 4.0, 17)
+
+
+@pytest.mark.parametrize("level", [0, 1, 2, 3])
+def test_uncalibrated_stretch_reflex_splits_the_papers_sc_total(level: int) -> None:
+    """With unit gains and Table I's thresholds, flexor + extensor parts add up to SC_total:
+    the stretch model only says which group gets which one-sided term."""
+    th, v = np.meshgrid(THETA, VEL)
+    flex, ext = group_excitations(th, v, LEVELS[level])
+    np.testing.assert_allclose(flex + ext, sc_total(th, v, LEVELS[level]), atol=1e-12)
+
+
+def test_each_group_answers_its_own_stretch() -> None:
+    """Extension (low angle, negative velocity) stretches the flexors, flexion the extensors."""
+    p = LEVELS[2]
+    cal = CALIBRATION[2]
+    f_ext_fast, e_ext_fast = group_excitations(10.0, -3.0, p, cal)  # fast extension, extended
+    f_flex_fast, e_flex_fast = group_excitations(85.0, 3.0, p, cal)  # fast flexion, flexed
+    assert f_ext_fast > 0.5 * (p.s_theta + p.s_v) > e_ext_fast
+    assert e_flex_fast > 0.5 * (p.s_theta + p.s_v) > f_flex_fast
+    # faster extension recruits the flexors more (velocity dependence, Lance 1980)
+    assert group_excitations(40.0, -2.0, p, cal)[0] > group_excitations(40.0, -0.2, p, cal)[0]
+
+
+def test_calibration_moves_the_flexor_threshold_into_the_motion() -> None:
+    """Table I's extension-side limits lie outside the 7-90 deg motion; the calibrated
+    thresholds of levels 2-3 lie inside it and fire more at the higher level's target side."""
+    for level in (2, 3):
+        p, c = LEVELS[level], CALIBRATION[level]
+        assert p.theta_ext_deg < 0.0 < p.theta_ext_deg + c.flexor_threshold_shift_deg < 90.0
+        still_near_target = group_excitations(7.0, 0.0, p, c)[0]
+        assert still_near_target > group_excitations(7.0, 0.0, p, UNCALIBRATED[level])[0]
+
+
+def test_torch_twin_matches_and_differentiates() -> None:
+    p = LEVELS[3]
+    params = {
+        n: torch.tensor(v, dtype=torch.float64, requires_grad=True)
+        for n, v in zip(SpasticityParams.field_names(), p.as_array(), strict=True)
+    }
+    shift = torch.tensor(CALIBRATION[3].flexor_threshold_shift_deg, requires_grad=True)
+    cal = {"flexor_gain": 1.0, "extensor_gain": 1.0, "flexor_threshold_shift_deg": shift}
+    th = torch.tensor(THETA, dtype=torch.float64, requires_grad=True)
+    v = torch.tensor(np.linspace(-3, 3, THETA.size), dtype=torch.float64)
+    flex, ext = group_excitations_torch(th, v, params, cal)
+    ref = group_excitations(THETA, v.numpy(), p, CALIBRATION[3])
+    np.testing.assert_allclose(flex.detach().numpy(), ref[0], atol=1e-12)
+    np.testing.assert_allclose(ext.detach().numpy(), ref[1], atol=1e-12)
+    (flex.sum() + ext.sum()).backward()
+    assert shift.grad is not None and float(shift.grad) > 0.0  # a higher threshold fires more
+    assert th.grad is not None and bool(torch.isfinite(th.grad).all())
+    assert params["s_theta"].grad is not None and float(params["s_theta"].grad) > 0.0
+
+
+def test_delay_line_returns_the_state_delay_steps_ago() -> None:
+    line = DelayLine(3)
+    out = [line.push(float(i), -float(i)) for i in range(8)]
+    # held at the first sample until 3 steps of history exist, then 3 steps late
+    assert [o[0] for o in out] == [0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0]
+    assert out[-1] == (4.0, -4.0)
+    line.clear()
+    assert line.push(9.0, 1.0) == (9.0, 1.0)
+    assert DelayLine(0).push(5.0, 2.0) == (5.0, 2.0)
+    with pytest.raises(ValueError):
+        DelayLine(-1)
+
+
+def test_bad_reflex_settings_are_rejected() -> None:
+    with pytest.raises(ValueError, match="unknown"):
+        ReflexConfig(model="clonus")
+    with pytest.raises(ValueError, match=r"outside \[0, 0.2\]"):
+        ReflexConfig(delay_s=0.5)
+    with pytest.raises(ValueError, match="outside"):
+        LevelCalibration(flexor_gain=-1.0)
+    with pytest.raises(ValueError, match="expected one of"):
+        reflex_config("spastic")
+    assert reflex_config("uniform") is REFLEX_PRESETS["uniform"]
+
+
+# ------------------------------------------------------------------------------ the stage
+def test_stretch_stage_drives_each_group_with_its_delayed_part(walk_env_factory) -> None:
+    env = walk_env_factory(level=3, reflex="stretch")
+    host = env.unwrapped
+    model = host.model
+    env.reset(seed=0)
+    stage = env.spasticity
+    assert stage.delay_steps == round(REFLEX_PRESETS["stretch"].delay_s / host.dt)
+    flex_ids = np.array([model.actuator(n).id for n in SPASTIC_FLEXORS])
+    ext_ids = np.array([model.actuator(n).id for n in SPASTIC_EXTENSORS])
+    others = np.setdiff1d(np.arange(model.nu), np.concatenate([flex_ids, ext_ids]))
+    knee = model.joint("knee_angle_r")
+    history = []
+    rng = np.random.default_rng(0)
+    for step in range(8):
+        history.append(
+            (np.degrees(host.data.qpos[knee.qposadr[0]]), host.data.qvel[knee.dofadr[0]])
+        )
+        delayed = history[max(0, step - stage.delay_steps)]
+        flex, ext = group_excitations(*delayed, stage.subject, CALIBRATION[3])
+        action = rng.uniform(0.0, 0.5, model.nu).astype(np.float32)
+        env.step(action)
+        ctrl = host.data.ctrl
+        np.testing.assert_allclose(
+            ctrl[flex_ids], np.clip(action[flex_ids] + flex, 0, 1), atol=1e-7
+        )
+        np.testing.assert_allclose(ctrl[ext_ids], np.clip(action[ext_ids] + ext, 0, 1), atol=1e-7)
+        np.testing.assert_array_equal(ctrl[others], action[others].astype(np.float64))
+        assert stage.last_sc_total == pytest.approx(flex + ext, abs=1e-12)
+    env.close()
+
+
+def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
+    import gymnasium as gym
+
+    import myoexo  # noqa: F401
+
+    stretch = gym.make("MyoExoKnee-v3")
+    uniform = gym.make("MyoExoKnee-v3", reflex="uniform")
+    assert stretch.unwrapped.spasticity.reflex == REFLEX_PRESETS["stretch"]
+    assert uniform.unwrapped.spasticity.reflex.model == "uniform"
+    states = []
+    for env in (stretch, uniform, pickle.loads(pickle.dumps(uniform.unwrapped))):
+        env.reset(seed=4)
+        for _ in range(30):
+            _, _, _, _, info = env.step(np.array([-0.6], np.float32))
+        states.append(info["knee_angle_deg"])
+    assert states[1] == states[2]  # the pickled env is the same uniform twin
+    assert states[0] != states[1]  # the models differ
+    custom = dataclasses.replace(REFLEX_PRESETS["stretch"], delay_s=0.0)
+    assert gym.make("MyoExoKnee-v1", reflex=custom).unwrapped.spasticity.reflex.delay_s == 0.0
