@@ -24,6 +24,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export-model": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
     "plot-spasticity": ("myoexo.spasticity_plots", "draw Fig. 2b and the stretch-test curves"),
     "stretch-test": ("myoexo.stretch_test", "simulate the passive Tardieu stretch per level"),
+    "tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
+    "pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),
+    "mas-exam": ("myoexo.clinical.mas", "Modified Ashworth examination: resistance profile"),
     "calibrate": (
         "myoexo.calibration",
         "fit the stretch reflex so that the paper's PID behaves as in the study",

@@ -31,14 +31,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from myoexo.model.joint_torque import CoupledJointTorque
-from myoexo.spasticity import KNEE_JOINT, LEVELS, SpasticityParams, SpasticityStage
+from myoexo.clinical.common import (
+    DriveParams,
+    PoseFn,
+    ReflexHost,
+    default_twin,
+    motor_nm_per_ctrl,
+    simulate_drive,
+)
+from myoexo.reflex import ReflexConfig
+from myoexo.spasticity import KNEE_JOINT, LEVELS, SpasticityParams
 
 if TYPE_CHECKING:
     import mujoco
@@ -53,9 +61,6 @@ __all__ = [
     "run_stretch_test",
     "simulate_stretch",
 ]
-
-PoseFn = Callable[..., Any]
-"""``pose(model, data, knee_angle_deg=...)``: put the twin at a knee angle (``pose_twin``)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,6 +137,20 @@ class StretchTestParams:
     def direction(self) -> float:
         """+1 for a flexion stretch, -1 for an extension stretch."""
         return 1.0 if self.end_deg > self.start_deg else -1.0
+
+    @property
+    def drive(self) -> DriveParams:
+        """The controller gains, control period and joint names as
+        :class:`~myoexo.clinical.common.DriveParams`."""
+        return DriveParams(
+            kp_nm_per_rad=self.kp_nm_per_rad,
+            kd_nm_s_per_rad=self.kd_nm_s_per_rad,
+            control_period_s=self.control_period_s,
+            feedback_joint=self.feedback_joint,
+            exo_joint=self.exo_joint,
+            exo_actuator=self.exo_actuator,
+            human_joint=self.human_joint,
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,32 +239,13 @@ def _motion_duration_s(vel_rad_s: float, params: StretchTestParams) -> float:
     return params.hold_s + span / vel_rad_s + ta + params.end_hold_s
 
 
-class _Host:
-    """What :meth:`SpasticityStage.apply` needs of an env: model, data, an RNG and the control
-    period ``dt`` (s) of the apply calls (it sizes the reflex's delay line)."""
-
-    def __init__(
-        self, model: mujoco.MjModel, data: mujoco.MjData, dt: float, seed: int = 0
-    ) -> None:
-        self.model, self.data, self.dt = model, data, float(dt)
-        self.np_random = np.random.default_rng(seed)
+# Moved to myoexo.clinical.common (shared with the clinical tests); the old names stay.
+_Host = ReflexHost
+_motor_nm_per_ctrl = motor_nm_per_ctrl
 
 
 def _default_twin() -> tuple[mujoco.MjModel, PoseFn]:
-    from myoexo.model import TwinParams, build_model, pose_twin
-
-    model, _ = build_model(TwinParams())
-    return model, pose_twin
-
-
-def _motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
-    import mujoco
-
-    if model.actuator_gaintype[actuator_id] != mujoco.mjtGain.mjGAIN_FIXED or (
-        model.actuator_biastype[actuator_id] != mujoco.mjtBias.mjBIAS_NONE
-    ):
-        raise ValueError("The exo actuator must be a torque motor (fixed gain, no bias).")
-    return float(model.actuator_gainprm[actuator_id, 0] * model.actuator_gear[actuator_id, 0])
+    return default_twin()
 
 
 def simulate_stretch(
@@ -256,6 +256,7 @@ def simulate_stretch(
     *,
     pose: PoseFn,
     subject: SpasticityParams | None = None,
+    reflex: str | ReflexConfig = "stretch",
 ) -> pd.DataFrame:
     """Simulate one stretch of the twin at one level and one speed.
 
@@ -268,6 +269,8 @@ def simulate_stretch(
         pose: ``pose(model, data, knee_angle_deg=...)`` that puts the twin at the start angle.
         subject: Individual reflex parameters (e.g. from
             :func:`~myoexo.spasticity.sample_subject`).
+        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
+            :class:`~myoexo.reflex.ReflexConfig`.
 
     Returns:
         One row per control step (see :class:`StretchTestResult`); the state columns are at
@@ -276,70 +279,29 @@ def simulate_stretch(
     Raises:
         ValueError: If the level, speed or model names are invalid.
     """
-    import mujoco
     import pandas as pd
 
     if level not in LEVELS:
         raise ValueError(f"Unknown spasticity level {level!r}; expected one of {sorted(LEVELS)}.")
     if not (math.isfinite(vel_rad_s) and vel_rad_s > 0):
         raise ValueError(f"vel_rad_s must be a positive speed, got {vel_rad_s!r}.")
-    fb_j = model.joint(params.feedback_joint)
-    exo_j = model.joint(params.exo_joint)
-    knee_j = model.joint(params.human_joint)
-    exo_a = model.actuator(params.exo_actuator).id
-    fb_q, fb_d = int(fb_j.qposadr[0]), int(fb_j.dofadr[0])
-    exo_q = int(exo_j.qposadr[0])
-    knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
-    muscle_torque = CoupledJointTorque(model, params.human_joint)
-    nm_per_ctrl = _motor_nm_per_ctrl(model, exo_a)
-    ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
-    n_sub = max(1, round(params.control_period_s / model.opt.timestep))
+    drive = params.drive
+    n_sub = max(1, round(drive.control_period_s / model.opt.timestep))
     dt = n_sub * model.opt.timestep
-
-    data = mujoco.MjData(model)
-    pose(model, data, knee_angle_deg=params.start_deg)
-    host = _Host(model, data, dt)
-    stage = SpasticityStage(level, subject_noise=False)
-    if subject is not None:
-        stage.set_subject(subject)
-
     n_steps = math.ceil(_motion_duration_s(vel_rad_s, params) / dt)
     times = np.arange(n_steps) * dt
     ref_deg, ref_vel, phase = reference_profile(times, vel_rad_s, params)
-    ref_rad = np.radians(ref_deg)
-    columns = (
-        "exo_deg",
-        "knee_deg",
-        "knee_vel_rad_s",
-        "sc_total",
-        "exo_torque_nm",
-        "muscle_torque_nm",
-        "pd_torque_nm",
-        "feedback_deg",
+    _, col = simulate_drive(
+        model,
+        level,
+        ref_deg,
+        ref_vel,
+        pose=pose,
+        start_deg=params.start_deg,
+        drive=drive,
+        reflex=reflex,
+        subject=subject,
     )
-    rec = np.empty((n_steps, len(columns)))
-    ctrl = np.zeros(model.nu)
-    for i in range(n_steps):
-        q, qd = data.qpos[fb_q], data.qvel[fb_d]
-        torque = params.kp_nm_per_rad * (ref_rad[i] - q) + params.kd_nm_s_per_rad * (
-            ref_vel[i] - qd
-        )
-        u = min(max(torque / nm_per_ctrl, ctrl_lo), ctrl_hi)
-        ctrl[:] = 0.0  # relaxed limb: the muscles get the reflex only
-        ctrl[exo_a] = u
-        data.ctrl[:] = stage.apply(host, ctrl)
-        rec[i] = (  # in the order of `columns`
-            math.degrees(data.qpos[exo_q]),
-            math.degrees(data.qpos[knee_q]),
-            data.qvel[knee_d],
-            stage.last_sc_total,
-            u * nm_per_ctrl,
-            muscle_torque(data),
-            torque,
-            math.degrees(q),
-        )
-        mujoco.mj_step(model, data, nstep=n_sub)
-    col = {name: rec[:, j] for j, name in enumerate(columns)}
     exo_torque = col["exo_torque_nm"]
     return pd.DataFrame(
         {
@@ -386,6 +348,7 @@ def run_stretch_test(
     pose: PoseFn | None = None,
     subjects: dict[int, SpasticityParams] | None = None,
     progress: bool = False,
+    reflex: str | ReflexConfig = "stretch",
 ) -> StretchTestResult:
     """Run the stretch test for every level and speed of *params*.
 
@@ -395,6 +358,8 @@ def run_stretch_test(
         pose: Posing function of the twin; default ``myoexo.model.pose_twin``.
         subjects: Optional individual reflex parameters per level (default: Table I).
         progress: Show a tqdm progress bar.
+        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
+            :class:`~myoexo.reflex.ReflexConfig`.
 
     Returns:
         Traces and summary (see :class:`StretchTestResult`).
@@ -415,7 +380,9 @@ def run_stretch_test(
     traces, rows = [], []
     for level, vel in conditions:
         subject = None if subjects is None else subjects.get(level)
-        trace = simulate_stretch(model, level, vel, params, pose=pose, subject=subject)
+        trace = simulate_stretch(
+            model, level, vel, params, pose=pose, subject=subject, reflex=reflex
+        )
         rows.append({"level": level, "vel_rad_s": vel, **_summarize(trace, params)})
         traces.append(trace.assign(level=level, vel_rad_s=vel))
     traces_df = pd.concat(traces, ignore_index=True)

@@ -1,0 +1,62 @@
+"""Clinical spasticity tests on the twin: Tardieu, Wartenberg pendulum, Modified Ashworth.
+
+Each test is a function returning a result (``table()`` per level, ``traces``), a figure
+function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
+
+* ``myoexo tardieu``: :func:`~myoexo.clinical.tardieu.run_tardieu`, catch angle R1 at a
+  fast stretch, passive range R2 at a slow one (:mod:`myoexo.clinical.tardieu`);
+* ``myoexo pendulum``: :func:`~myoexo.clinical.pendulum.run_pendulum`, Wartenberg's
+  pendulum test, relaxation index (:mod:`myoexo.clinical.pendulum`);
+* ``myoexo mas-exam``: :func:`~myoexo.clinical.mas.run_mas_exam`, the Modified Ashworth
+  examination's resistance profile (:mod:`myoexo.clinical.mas`).
+
+Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
+:class:`~myoexo.reflex.ReflexConfig`) so the reflex models can be compared side by side, and
+runs the nominal Table I subject of each level unless ``subjects`` gives individual ones.
+The shared machinery (the exo-driven knee, checks, CLI options) is
+:mod:`myoexo.clinical.common`, which :mod:`myoexo.stretch_test` uses too.
+
+The submodules are imported on first use (``myoexo.clinical.run_tardieu`` works), so
+importing this package stays cheap and free of import cycles with :mod:`myoexo.stretch_test`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__all__ = [
+    "MASExamParams",
+    "MASExamResult",
+    "PendulumParams",
+    "PendulumResult",
+    "TardieuParams",
+    "TardieuResult",
+    "plot_mas_exam",
+    "plot_pendulum",
+    "plot_tardieu",
+    "run_mas_exam",
+    "run_pendulum",
+    "run_tardieu",
+]
+
+_HOMES = {
+    "TardieuParams": "tardieu",
+    "TardieuResult": "tardieu",
+    "plot_tardieu": "tardieu",
+    "run_tardieu": "tardieu",
+    "PendulumParams": "pendulum",
+    "PendulumResult": "pendulum",
+    "plot_pendulum": "pendulum",
+    "run_pendulum": "pendulum",
+    "MASExamParams": "mas",
+    "MASExamResult": "mas",
+    "plot_mas_exam": "mas",
+    "run_mas_exam": "mas",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,359 @@
+"""Machinery shared by the clinical tests: the twin, the reflex host, an exo-driven (or
+released) knee, option checks, the CLI options and the output files.
+
+The core is :func:`simulate_drive`: the relaxed twin (muscles get the spastic reflex only,
+:class:`~myoexo.spasticity.SpasticityStage` in the muscle-command pipeline, at every 10 ms
+control step like the envs) with the exo motor either running a stiff PD that makes the
+knee follow a reference (``powered``) or commanded to zero (the exo's mass, damping, range
+stops and straps stay: it is worn, switched off). :func:`myoexo.stretch_test.simulate_stretch`
+(the Tardieu stretch and the MAS examination) and the pendulum test are built on it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import functools
+import math
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
+from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model.leg import KNEE_JOINT
+from myoexo.reflex import REFLEX_PRESETS, ReflexConfig, reflex_config
+from myoexo.spasticity import VALID_LEVELS, SpasticityParams, SpasticityStage, sample_subject
+
+if TYPE_CHECKING:
+    import mujoco
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from myoexo.model import TwinParams
+
+__all__ = [
+    "DRIVE_COLUMNS",
+    "DriveParams",
+    "PoseFn",
+    "ReflexHost",
+    "add_common_arguments",
+    "check_levels",
+    "check_positive",
+    "default_twin",
+    "draw_subjects",
+    "interp_on_angle",
+    "motor_nm_per_ctrl",
+    "reflex_name",
+    "simulate_drive",
+    "twin_model",
+    "write_outputs",
+]
+
+PoseFn = Callable[..., Any]
+"""``pose(model, data, knee_angle_deg=...)``: put the twin at a knee angle (``pose_twin``)."""
+
+#: Columns of :func:`simulate_drive`'s record, in order.
+DRIVE_COLUMNS: tuple[str, ...] = (
+    "exo_deg",
+    "knee_deg",
+    "knee_vel_rad_s",
+    "sc_total",
+    "exo_torque_nm",
+    "muscle_torque_nm",
+    "pd_torque_nm",
+    "feedback_deg",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class DriveParams:
+    """How the exo drives the knee, and which joints it reads.
+
+    Attributes:
+        kp_nm_per_rad: Proportional gain of the exo position controller, Nm/rad (400: as
+            stiff as the 10 ms control period and the exo's light link allow; the knee lags
+            the reference by resisting torque / kp, plus the straps' compliance).
+        kd_nm_s_per_rad: Derivative gain of the exo position controller, Nm s/rad.
+        control_period_s: Control period, s (the stage and the PD run once per period, as in
+            the envs: 10 ms).
+        feedback_joint: Joint whose angle the PD controls: the human knee (default: the
+            clinician imposes the limb's motion) or the exo hinge (``"exo_knee"``).
+        exo_joint: Exo knee hinge.
+        exo_actuator: Exo motor (a torque actuator).
+        human_joint: Human knee joint, read by the reflex.
+    """
+
+    kp_nm_per_rad: float = 400.0
+    kd_nm_s_per_rad: float = 5.0
+    control_period_s: float = 0.01
+    feedback_joint: str = KNEE_JOINT
+    exo_joint: str = EXO_JOINT
+    exo_actuator: str = EXO_ACTUATOR
+    human_joint: str = KNEE_JOINT
+
+    def __post_init__(self) -> None:
+        for name in ("kp_nm_per_rad", "kd_nm_s_per_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"DriveParams.{name} must be >= 0, got {value!r}.")
+        check_positive("DriveParams.control_period_s", self.control_period_s, "s")
+
+
+class ReflexHost:
+    """What :meth:`SpasticityStage.apply` needs of an env: model, data, an RNG and the control
+    period ``dt`` (s) of the apply calls (it sizes the reflex's delay line)."""
+
+    def __init__(
+        self, model: mujoco.MjModel, data: mujoco.MjData, dt: float, seed: int = 0
+    ) -> None:
+        self.model, self.data, self.dt = model, data, float(dt)
+        self.np_random = np.random.default_rng(seed)
+
+
+# ----------------------------------------------------------------------------- checks
+def check_positive(name: str, value: Any, unit: str) -> float:
+    """*value* as a float if it is a positive finite number, else a ``ValueError`` that names
+    the value and the accepted range."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not (math.isfinite(number) and number > 0.0):
+        raise ValueError(f"{name} = {value!r} is not accepted: it must lie in (0, inf) {unit}.")
+    return number
+
+
+def check_levels(levels: Iterable[Any]) -> tuple[int, ...]:
+    """The levels as a tuple of ints of :data:`~myoexo.spasticity.VALID_LEVELS`, or a
+    ``ValueError`` that names the first unknown one and the accepted levels."""
+    checked = []
+    for level in levels:
+        if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer)):
+            raise ValueError(
+                f"Unknown spasticity level {level!r}; accepted levels: {list(VALID_LEVELS)}."
+            )
+        if int(level) not in VALID_LEVELS:
+            raise ValueError(
+                f"Unknown spasticity level {level!r}; accepted levels: {list(VALID_LEVELS)}."
+            )
+        checked.append(int(level))
+    if not checked:
+        raise ValueError(f"No level given; accepted levels: {list(VALID_LEVELS)}.")
+    return tuple(checked)
+
+
+def reflex_name(reflex: str | ReflexConfig) -> str:
+    """A label for *reflex*: the preset's name, or ``"<model> (custom)"`` for a config that
+    is no preset. Raises ``ValueError`` for an unknown preset name."""
+    config = reflex_config(reflex)
+    for name, preset in REFLEX_PRESETS.items():
+        if preset == config:
+            return name
+    return f"{config.model} (custom)"
+
+
+def draw_subjects(levels: Iterable[int], seed: int) -> dict[int, SpasticityParams]:
+    """One individual subject per level (10 % noise on Table I,
+    :func:`~myoexo.spasticity.sample_subject`), drawn in the order of *levels* from one
+    generator seeded with *seed*."""
+    rng = np.random.default_rng(seed)
+    return {level: sample_subject(level, rng) for level in check_levels(levels)}
+
+
+# ----------------------------------------------------------------------------- the twin
+@functools.lru_cache(maxsize=4)
+def _cached_twin(params: TwinParams | None) -> mujoco.MjModel:
+    from myoexo.model import TwinParams, build_model
+
+    model, _ = build_model(params if params is not None else TwinParams())
+    return model
+
+
+def twin_model(params: TwinParams | None = None) -> mujoco.MjModel:
+    """The twin for *params* (default ``TwinParams()``): built once per parameter set, a
+    private copy on every call (callers may change its options, e.g. gravity)."""
+    return copy.copy(_cached_twin(params))
+
+
+def default_twin(params: TwinParams | None = None) -> tuple[mujoco.MjModel, PoseFn]:
+    """``(model, pose)``: the twin (:func:`twin_model`) and ``myoexo.model.pose_twin``."""
+    from myoexo.model import pose_twin
+
+    return twin_model(params), pose_twin
+
+
+def motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
+    """Torque (Nm) per unit command of a torque motor (fixed gain, no bias)."""
+    import mujoco
+
+    if model.actuator_gaintype[actuator_id] != mujoco.mjtGain.mjGAIN_FIXED or (
+        model.actuator_biastype[actuator_id] != mujoco.mjtBias.mjBIAS_NONE
+    ):
+        raise ValueError("The exo actuator must be a torque motor (fixed gain, no bias).")
+    return float(model.actuator_gainprm[actuator_id, 0] * model.actuator_gear[actuator_id, 0])
+
+
+def simulate_drive(
+    model: mujoco.MjModel,
+    level: int,
+    ref_deg: np.ndarray,
+    ref_vel_rad_s: np.ndarray,
+    *,
+    pose: PoseFn,
+    start_deg: float,
+    powered: np.ndarray | None = None,
+    drive: DriveParams = DriveParams(),
+    reflex: str | ReflexConfig = "stretch",
+    subject: SpasticityParams | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Run the relaxed spastic twin with the exo driving (or released from) a reference.
+
+    At every control step ``i`` (period ``drive.control_period_s``): if ``powered[i]``, the exo
+    command is the PD ``kp (ref - q) + kd (ref_vel - qd)`` on the feedback joint, clipped to
+    the motor's range; otherwise it is 0 (unpowered exo). The muscles get nothing but the
+    reflex. The model runs ``control_period_s / timestep`` physics steps per control step.
+
+    Args:
+        model: The twin (human + exo); a fresh ``MjData`` is made for the run.
+        level: Spasticity level; the reflex uses its nominal Table I parameters unless
+            *subject* is given.
+        ref_deg: Reference knee angle per control step, deg.
+        ref_vel_rad_s: Reference knee velocity per control step, rad/s.
+        pose: ``pose(model, data, knee_angle_deg=...)`` that puts the twin at *start_deg*.
+        start_deg: Knee angle of the initial (static) pose, deg.
+        powered: Per step, whether the PD drives the exo (default: every step).
+        drive: Controller gains, control period and joint names.
+        reflex: Reflex model (preset name or :class:`~myoexo.reflex.ReflexConfig`).
+        subject: Individual reflex parameters (default: the level's Table I values).
+
+    Returns:
+        ``(times_s, columns)``: the time of each step and one array per name of
+        :data:`DRIVE_COLUMNS` (state at the start of the step, torques applied during it;
+        ``pd_torque_nm`` is the unclipped PD torque, 0 while unpowered; ``muscle_torque_nm``
+        the muscles' torque along the coupled knee, flexion positive).
+
+    Raises:
+        ValueError: If the level, the reflex or a joint/actuator name is unknown.
+    """
+    import mujoco
+
+    level = check_levels([level])[0]
+    n_steps = len(ref_deg)
+    powered_steps = np.ones(n_steps, dtype=bool) if powered is None else np.asarray(powered)
+    if len(ref_vel_rad_s) != n_steps or len(powered_steps) != n_steps:
+        raise ValueError("ref_deg, ref_vel_rad_s and powered must have one entry per step.")
+    fb_j = model.joint(drive.feedback_joint)
+    exo_j = model.joint(drive.exo_joint)
+    knee_j = model.joint(drive.human_joint)
+    exo_a = model.actuator(drive.exo_actuator).id
+    fb_q, fb_d = int(fb_j.qposadr[0]), int(fb_j.dofadr[0])
+    exo_q = int(exo_j.qposadr[0])
+    knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
+    muscle_torque = CoupledJointTorque(model, drive.human_joint)
+    nm_per_ctrl = motor_nm_per_ctrl(model, exo_a)
+    ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
+    n_sub = max(1, round(drive.control_period_s / model.opt.timestep))
+    dt = n_sub * model.opt.timestep
+
+    data = mujoco.MjData(model)
+    pose(model, data, knee_angle_deg=start_deg)
+    host = ReflexHost(model, data, dt)
+    stage = SpasticityStage(level, subject_noise=False, reflex=reflex)
+    if subject is not None:
+        stage.set_subject(subject)
+
+    ref_rad = np.radians(np.asarray(ref_deg, dtype=np.float64))
+    ref_vel = np.asarray(ref_vel_rad_s, dtype=np.float64)
+    rec = np.empty((n_steps, len(DRIVE_COLUMNS)))
+    ctrl = np.zeros(model.nu)
+    for i in range(n_steps):
+        q, qd = data.qpos[fb_q], data.qvel[fb_d]
+        if powered_steps[i]:
+            torque = drive.kp_nm_per_rad * (ref_rad[i] - q) + drive.kd_nm_s_per_rad * (
+                ref_vel[i] - qd
+            )
+            u = min(max(torque / nm_per_ctrl, ctrl_lo), ctrl_hi)
+        else:
+            torque, u = 0.0, 0.0
+        ctrl[:] = 0.0  # relaxed limb: the muscles get the reflex only
+        ctrl[exo_a] = u
+        data.ctrl[:] = stage.apply(host, ctrl)
+        rec[i] = (  # in the order of DRIVE_COLUMNS
+            math.degrees(data.qpos[exo_q]),
+            math.degrees(data.qpos[knee_q]),
+            data.qvel[knee_d],
+            stage.last_sc_total,
+            u * nm_per_ctrl,
+            muscle_torque(data),
+            torque,
+            math.degrees(q),
+        )
+        mujoco.mj_step(model, data, nstep=n_sub)
+    return np.arange(n_steps) * dt, {name: rec[:, j] for j, name in enumerate(DRIVE_COLUMNS)}
+
+
+# ----------------------------------------------------------------------------- analysis
+def interp_on_angle(angle_deg: Any, values: Any, at_deg: Any) -> np.ndarray:
+    """*values* recorded at knee angles *angle_deg*, linearly interpolated at *at_deg*
+    (the samples sorted by angle; NaN outside the recorded angles)."""
+    angle = np.asarray(angle_deg, dtype=np.float64)
+    order = np.argsort(angle, kind="stable")
+    x, y = angle[order], np.asarray(values, dtype=np.float64)[order]
+    return np.interp(np.asarray(at_deg, dtype=np.float64), x, y, left=np.nan, right=np.nan)
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_common_arguments(parser: argparse.ArgumentParser, levels: Iterable[int]) -> None:
+    """``--levels``, ``--reflex``, ``--subject-seed``, ``--out`` and ``--dpi``."""
+    parser.add_argument(
+        "--levels", type=int, nargs="+", default=list(levels),
+        help=f"spasticity levels among {list(VALID_LEVELS)} (default: %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--reflex", choices=sorted(REFLEX_PRESETS), default="stretch",
+        help="reflex model (default: %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--subject-seed", type=int, default=None,
+        help="draw one individual subject per level with this seed (default: the nominal "
+        "Table I subjects)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--out", type=Path, default=None,
+        help="folder for the CSV tables and the PNG figure (default: print only)",
+    )  # fmt: skip
+    parser.add_argument("--dpi", type=int, default=120, help="resolution of the PNG figure")
+
+
+def subjects_from_args(args: argparse.Namespace) -> Mapping[int, SpasticityParams] | None:
+    """The individual subjects the CLI options ask for (``None``: nominal Table I)."""
+    if args.subject_seed is None:
+        return None
+    return draw_subjects(args.levels, args.subject_seed)
+
+
+def print_table(table: pd.DataFrame) -> None:
+    """Print a table with 3 decimals."""
+    print(table.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+
+
+def write_outputs(
+    out: Path,
+    stem: str,
+    table: pd.DataFrame,
+    traces: pd.DataFrame,
+    figure: Figure,
+    dpi: int,
+) -> list[Path]:
+    """Write ``<stem>.csv`` (the table), ``<stem>_traces.csv`` and ``<stem>.png`` into *out*
+    (created if missing); return the paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f"{stem}.csv", out / f"{stem}_traces.csv", out / f"{stem}.png"]
+    table.to_csv(paths[0], index=False)
+    traces.to_csv(paths[1], index=False)
+    figure.savefig(paths[2], dpi=dpi)
+    return paths
