@@ -250,6 +250,7 @@ def calibrate(
     subjects: int = 40,
     verify_subjects: int = 200,
     delay_s: float = STRETCH_DELAY_S,
+    extensor_gain: float = 1.0,
     targets: CalibrationTargets | None = None,
     root_seed: int = 0,
     levels: Sequence[int] = VALID_LEVELS,
@@ -261,6 +262,7 @@ def calibrate(
         subjects: Subjects per level during the fit.
         verify_subjects: Subjects per level of the verification (paper protocol: 1000).
         delay_s: Reflex delay of the fitted model, s.
+        extensor_gain: Gain of the extensors' reflex at levels 1-3 (fixed, not fitted).
         targets: What to fit (default :class:`CalibrationTargets`).
         root_seed: Root seed of the subjects.
         levels: Levels to verify.
@@ -269,7 +271,9 @@ def calibrate(
     t0 = time.perf_counter()
     tg = targets or CalibrationTargets()
     cal = StretchCalibration(
-        levels=MappingProxyType({lv: LevelCalibration() for lv in VALID_LEVELS if lv > 0})
+        levels=MappingProxyType(
+            {lv: LevelCalibration(extensor_gain=extensor_gain) for lv in VALID_LEVELS if lv > 0}
+        )
     )
     reflex = ReflexConfig(model="stretch", delay_s=delay_s, calibration=cal)
     for level, target in sorted(tg.pid_final_error_deg.items()):
@@ -284,7 +288,7 @@ def calibrate(
     elapsed = time.perf_counter() - t0
     note = (
         f"myoexo calibrate --subjects {subjects} --verify-subjects {verify_subjects} "
-        f"--delay {delay_s}: PID final error "
+        f"--delay {delay_s} --extensor-gain {extensor_gain}: PID final error "
         + ", ".join(
             f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
             for lv, o in outcomes.items()
@@ -310,6 +314,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--delay", type=float, default=STRETCH_DELAY_S, help="reflex delay, s (%(default)s)"
     )
+    parser.add_argument(
+        "--extensor-gain",
+        type=float,
+        default=1.0,
+        help="gain of the extensors' reflex at levels 1-3, fixed (default: 1)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="root seed of the subjects")
     parser.add_argument(
         "--out", type=Path, default=None, help="folder for calibration.md and .csv (optional)"
@@ -321,7 +331,13 @@ def run(args: argparse.Namespace) -> int:
     for name in ("subjects", "verify_subjects"):
         if getattr(args, name) < 2:
             raise ValueError(f"--{name.replace('_', '-')} = {getattr(args, name)} must be >= 2")
-    result = calibrate(args.subjects, args.verify_subjects, args.delay, root_seed=args.seed)
+    result = calibrate(
+        args.subjects,
+        args.verify_subjects,
+        args.delay,
+        extensor_gain=args.extensor_gain,
+        root_seed=args.seed,
+    )
     table = result.table()
     text = (
         f"# Calibration of the stretch reflex\n\n{result.calibration.note}\n\n"

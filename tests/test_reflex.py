@@ -49,8 +49,10 @@ def test_each_group_answers_its_own_stretch() -> None:
     cal = CALIBRATION[2]
     f_ext_fast, e_ext_fast = group_excitations(10.0, -3.0, p, cal)  # fast extension, extended
     f_flex_fast, e_flex_fast = group_excitations(85.0, 3.0, p, cal)  # fast flexion, flexed
-    assert f_ext_fast > 0.5 * (p.s_theta + p.s_v) > e_ext_fast
-    assert e_flex_fast > 0.5 * (p.s_theta + p.s_v) > f_flex_fast
+    half_flex = 0.5 * cal.flexor_gain * (p.s_theta + p.s_v)
+    half_ext = 0.5 * cal.extensor_gain * (p.s_theta + p.s_v)
+    assert f_ext_fast > half_flex and e_ext_fast < half_ext
+    assert e_flex_fast > half_ext and f_flex_fast < half_flex
     # faster extension recruits the flexors more (velocity dependence, Lance 1980)
     assert group_excitations(40.0, -2.0, p, cal)[0] > group_excitations(40.0, -0.2, p, cal)[0]
 
@@ -72,7 +74,11 @@ def test_torch_twin_matches_and_differentiates() -> None:
         for n, v in zip(SpasticityParams.field_names(), p.as_array(), strict=True)
     }
     shift = torch.tensor(CALIBRATION[3].flexor_threshold_shift_deg, requires_grad=True)
-    cal = {"flexor_gain": 1.0, "extensor_gain": 1.0, "flexor_threshold_shift_deg": shift}
+    cal = {
+        "flexor_gain": CALIBRATION[3].flexor_gain,
+        "extensor_gain": CALIBRATION[3].extensor_gain,
+        "flexor_threshold_shift_deg": shift,
+    }
     th = torch.tensor(THETA, dtype=torch.float64, requires_grad=True)
     v = torch.tensor(np.linspace(-3, 3, THETA.size), dtype=torch.float64)
     flex, ext = group_excitations_torch(th, v, params, cal)
