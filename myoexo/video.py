@@ -40,6 +40,7 @@ __all__ = [
     "draw_overlay",
     "overlay_lines",
     "run",
+    "video_format",
     "write_episode_video",
 ]
 
@@ -137,6 +138,17 @@ class VideoSummary:
     camera: str
 
 
+def video_format(path: str | Path) -> str:
+    """The video format of ``path`` (its lower-case suffix); ``ValueError`` if unknown."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in VIDEO_SUFFIXES:
+        raise ValueError(
+            f"unknown video format {Path(path).suffix!r} of {str(path)!r}; "
+            f"accepted: {', '.join(VIDEO_SUFFIXES)}"
+        )
+    return suffix
+
+
 def overlay_lines(info: Mapping[str, Any], label: str = "") -> list[str]:
     """Text lines of the overlay from a step's ``info`` (time, knee angle, exo torque)."""
     lines = [] if not label else [label]
@@ -207,12 +219,7 @@ class VideoWriter:
 
     def __init__(self, path: str | Path, fps: float, width_px: int, height_px: int) -> None:
         self.path = Path(path)
-        self.suffix = self.path.suffix.lower()
-        if self.suffix not in VIDEO_SUFFIXES:
-            raise ValueError(
-                f"unknown video format {self.path.suffix!r} of {str(self.path)!r}; "
-                f"accepted: {', '.join(VIDEO_SUFFIXES)}"
-            )
+        self.suffix = video_format(self.path)
         self.fps = float(fps)
         self.size = (int(width_px), int(height_px))
         self.n_frames = 0
@@ -305,6 +312,7 @@ def write_episode_video(
     from myoexo.viz import TwinRenderer, camera_name
 
     cfg = VideoConfig() if config is None else config
+    video_format(out)  # fail before building the env
     spec = parse_controller_spec(controller)
     env = make_env(cfg.level, twin=TwinParams(scene=cfg.scene))
     try:
