@@ -3,8 +3,10 @@
 Measures ``mj_step`` per second (one core, no rendering, no Python work per step beyond
 the loop) of ``build_model`` and ``build_leg_model`` from the ``seated_90`` keyframe,
 with the muscles and the exo motor driven by a fixed pseudo-random excitation pattern,
-and prints the ratio. Each model is timed ``--repeats`` times, alternating, and the best
-run counts (the least disturbed by other processes)::
+and prints the ratio; the twin without its visual scene (``TwinParams(scene=False)``: no
+floor, plinth, lights or skybox) shows what the scene costs the physics (nothing, it is
+visual only). Each model is timed ``--repeats`` times, alternating, and the best run
+counts (the least disturbed by other processes)::
 
     .venv/bin/python benchmarks/bench_physics.py [--steps 5000] [--repeats 3] [--timestep-s 0.002]
 """
@@ -12,6 +14,7 @@ run counts (the least disturbed by other processes)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import mujoco
@@ -53,6 +56,7 @@ def main() -> None:
     models = {
         "leg (no exo)": build_leg_model(params)[0],
         "twin (leg + exo)": build_model(params)[0],
+        "twin, no scene": build_model(dataclasses.replace(params, scene=False))[0],
     }
     best = {name: 0.0 for name in models}
     for _ in range(args.repeats):
@@ -66,6 +70,8 @@ def main() -> None:
         print(f"{name:<18} {model.nv:>4} {model.neq:>4} {best[name]:>11,.0f} {realtime:>12.1f}")
     ratio = best["leg (no exo)"] / best["twin (leg + exo)"]
     print(f"cost ratio twin / leg (time per step): {ratio:.2f}  (aim <= 1.3)")
+    scene = best["twin, no scene"] / best["twin (leg + exo)"]
+    print(f"cost ratio twin with / without its visual scene: {scene:.2f}  (expect 1.00)")
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "video": ("myoexo.video", "render an episode of a controller to MP4 or GIF"),
     "select": (
         "myoexo.training.select",
         "pick the checkpoint of a run that best meets the acceptance criteria",

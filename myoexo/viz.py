@@ -1,4 +1,4 @@
-"""Offscreen pictures of the twin: named camera views on the knee and episode image strips.
+"""Offscreen pictures of the twin: the model's named cameras, muscle colours, image strips.
 
 Rendering is headless with MuJoCo's :class:`mujoco.Renderer`. Pick the OpenGL backend
 *before* MuJoCo is first imported (MuJoCo reads ``MUJOCO_GL`` once, at import)::
@@ -16,11 +16,20 @@ Rendering is headless with MuJoCo's :class:`mujoco.Renderer`. Pick the OpenGL ba
     with TwinRenderer(model) as renderer:
         image = renderer.render(data, view="side")   # (height, width, 3) uint8
 
-Views (:data:`VIEWS`) look at the human knee joint (``knee_angle_r``) from a distance of about
-1 m. World frame of the twin: x anterior (the seated subject faces +x), y to the subject's
-left (the exo sits on the lateral side of the right leg, at -y), z up. With the default
-``highlight_exo=True`` the exoskeleton's geoms (bodies ``exo_*``) are drawn in blue so they
-stand out from MyoSuite's red muscle paths; ``show_muscles=False`` hides the muscle paths.
+Views are the twin's named cameras (:data:`myoexo.model.scene.DEFAULT_CAMERAS`, fixed
+cameras aimed at the knee: ``leg_three_quarter``, ``knee_side``, ``knee_front``,
+``knee_medial``), by name or by the short names of :data:`VIEWS` (``"side"`` is
+``knee_side``). A :class:`CameraView` gives a free camera around the knee instead. World
+frame of the twin: x anterior (the seated subject faces +x), y to the subject's left (the
+exo sits on the lateral side of the right leg, at -y), z up.
+
+Before each frame the renderer colours every muscle by its activation
+(:class:`~myoexo.model.scene.MuscleColorizer`: rest colour to red), so a reflex burst of the
+spastic muscles shows. With the default ``highlight_exo=True`` the exoskeleton's geoms
+(bodies ``exo_*``) are drawn in light blue; ``show_muscles=False`` hides the muscle paths;
+``show_scene=False`` hides the floor, plinth and skybox (black background, as
+:func:`foreground_fraction` expects); :meth:`TwinRenderer.subject_mask` tells which pixels
+show the subject (leg, muscles, exo) whatever the background.
 
 :func:`record_episode` runs one episode of a controller and renders a frame every
 ``every_s`` seconds of simulated time; :func:`plot_image_strip` lays frames out in a
@@ -37,25 +46,29 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from myoexo.model.leg import KNEE_JOINT
+from myoexo.model.scene import DEFAULT_CAMERAS, SCENE_GEOM_GROUP, MuscleColorizer, MuscleColors
 
 if TYPE_CHECKING:
     import mujoco
     from matplotlib.figure import Figure
 
 __all__ = [
+    "CAMERAS",
     "EXO_BODY_PREFIX",
     "EXO_COLOR_RGBA",
     "VIEWS",
     "CameraView",
     "EpisodeRecording",
+    "ForceArrowStyle",
     "TwinRenderer",
+    "camera_name",
     "foreground_fraction",
     "knee_camera",
     "plot_image_strip",
     "record_episode",
 ]
 
-#: Joint the cameras look at (the human knee).
+#: Joint the free cameras look at (the human knee).
 LOOKAT_JOINT = KNEE_JOINT
 #: Bodies whose name starts with this prefix belong to the exoskeleton.
 EXO_BODY_PREFIX = "exo_"
@@ -63,6 +76,32 @@ EXO_BODY_PREFIX = "exo_"
 EXO_COLOR_RGBA = (0.25, 0.6, 1.0, 1.0)
 #: Pixels whose brightest channel exceeds this value (0-255) are foreground.
 FOREGROUND_THRESHOLD = 12
+#: The twin's named cameras (model cameras aimed at the knee).
+CAMERAS: tuple[str, ...] = tuple(c.name for c in DEFAULT_CAMERAS)
+#: Force sensor (N, cuff frame) and site of the shank cuff: the force the exo applies to
+#: the shank through the cuff and strap.
+CUFF_FORCE_SENSOR = "shank_cuff_force"
+CUFF_FORCE_SITE = "shank_cuff_site"
+#: MuJoCo's renderer draws an arrow geom over half of its ``size[2]`` (shaft to size/3,
+#: head to size/2): the connector is stretched by the inverse so the tip lands where asked.
+_ARROW_DRAWN_FRACTION = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class ForceArrowStyle:
+    """Look of the cuff force arrow.
+
+    Attributes:
+        scale_m_per_n: Arrow length per newton, m/N (0.5 mm/N: 200 N is a 10 cm arrow).
+        width_m: Arrow shaft width, m.
+        min_force_n: Forces below this are not drawn, N.
+        rgba: Arrow colour.
+    """
+
+    scale_m_per_n: float = 5e-4
+    width_m: float = 0.008
+    min_force_n: float = 1.0
+    rgba: tuple[float, float, float, float] = (1.0, 0.75, 0.05, 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,21 +131,31 @@ class CameraView:
             raise ValueError(f"CameraView.distance_m = {self.distance_m!r} must be > 0")
 
 
-#: Named views of the knee.
-VIEWS: Mapping[str, CameraView] = {
-    "side": CameraView(azimuth_deg=90.0, elevation_deg=-10.0),  # lateral: the exo in front
-    "front": CameraView(azimuth_deg=180.0, elevation_deg=-20.0),  # facing the subject
-    "medial": CameraView(azimuth_deg=-90.0, elevation_deg=-10.0),  # from the other leg's side
-    "oblique": CameraView(azimuth_deg=135.0, elevation_deg=-25.0),  # front-lateral, above
+#: Short view names -> the twin's named cameras.
+VIEWS: Mapping[str, str] = {
+    "side": "knee_side",  # lateral: the exo in front
+    "front": "knee_front",  # facing the subject
+    "medial": "knee_medial",  # from the other leg's side, above the plinth
+    "oblique": "leg_three_quarter",  # front-lateral, above: the whole leg, exo and plinth
 }
 
 
-def _resolve_view(view: str | CameraView) -> CameraView:
-    if isinstance(view, CameraView):
-        return view
-    if view not in VIEWS:
-        raise ValueError(f"unknown view {view!r}; accepted: {sorted(VIEWS)} or a CameraView")
-    return VIEWS[view]
+def camera_name(model: mujoco.MjModel, view: str) -> str:
+    """The model camera a view name stands for (a :data:`VIEWS` name or a camera name).
+
+    Raises:
+        ValueError: Neither a view of :data:`VIEWS` nor a camera of ``model``.
+    """
+    import mujoco
+
+    name = VIEWS.get(view, view)
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, name) < 0:
+        cameras = [model.camera(i).name for i in range(model.ncam)]
+        raise ValueError(
+            f"unknown view {view!r}; accepted: {sorted(VIEWS)}, a camera of the model "
+            f"{cameras} or a CameraView"
+        )
+    return name
 
 
 def knee_camera(
@@ -115,12 +164,18 @@ def knee_camera(
     view: str | CameraView = "side",
     distance_m: float | None = None,
 ) -> mujoco.MjvCamera:
-    """A free :class:`mujoco.MjvCamera` looking at the human knee joint.
+    """A free :class:`mujoco.MjvCamera` on a view of the knee (e.g. for a zoom).
+
+    For a named view it looks along the model camera's axis, at the axis point nearest the
+    knee joint, from the camera's distance to that point (``distance_m`` moves it closer or
+    farther): the same picture as the model camera when ``distance_m`` is ``None``. For a
+    :class:`CameraView` it looks at the knee joint itself.
 
     Args:
         model: A model with the joint ``knee_angle_r`` (the twin or the bare leg).
-        data: Its data, after ``mj_forward`` / ``mj_kinematics`` (joint anchors set).
-        view: A name of :data:`VIEWS` or a :class:`CameraView`.
+        data: Its data, after ``mj_forward`` / ``mj_kinematics`` (joint anchors and camera
+            frames set).
+        view: A name of :data:`VIEWS`, a camera of the model, or a :class:`CameraView`.
         distance_m: Overrides the view's distance, m.
 
     Raises:
@@ -128,23 +183,37 @@ def knee_camera(
     """
     import mujoco
 
-    cam_view = _resolve_view(view)
-    if distance_m is not None:
-        cam_view = dataclasses.replace(cam_view, distance_m=float(distance_m))
+    if distance_m is not None and not (math.isfinite(distance_m) and distance_m > 0.0):
+        raise ValueError(f"distance_m = {distance_m!r} must be > 0")
     jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, LOOKAT_JOINT)
     if jid < 0:
         raise ValueError(f"the model has no joint {LOOKAT_JOINT!r} to look at")
+    knee = data.xanchor[jid]
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-    cam.lookat[:] = data.xanchor[jid]
-    cam.distance = cam_view.distance_m
-    cam.azimuth = cam_view.azimuth_deg
-    cam.elevation = cam_view.elevation_deg
+    if isinstance(view, CameraView):
+        cam.lookat[:] = knee
+        cam.distance = view.distance_m if distance_m is None else float(distance_m)
+        cam.azimuth = view.azimuth_deg
+        cam.elevation = view.elevation_deg
+        return cam
+    cid = model.camera(camera_name(model, view)).id
+    pos = data.cam_xpos[cid]
+    forward = -data.cam_xmat[cid].reshape(3, 3)[:, 2]  # cameras look along their -z
+    depth = max(float(np.dot(knee - pos, forward)), 1e-3)
+    cam.lookat[:] = pos + depth * forward
+    cam.distance = depth if distance_m is None else float(distance_m)
+    cam.azimuth = math.degrees(math.atan2(forward[1], forward[0]))
+    cam.elevation = math.degrees(math.asin(float(np.clip(forward[2], -1.0, 1.0))))
     return cam
 
 
 def foreground_fraction(image: np.ndarray, threshold: int = FOREGROUND_THRESHOLD) -> float:
-    """Fraction of pixels brighter than the (black) background: ~0 for an empty render.
+    """Fraction of pixels brighter than a black background: ~0 for an empty render.
+
+    Meaningful for renders without the scene (``TwinRenderer(show_scene=False)``, or a
+    twin built with ``TwinParams(scene=False)``); with the floor and skybox every pixel is
+    bright: use :meth:`TwinRenderer.subject_mask` there.
 
     Args:
         image: ``(height, width, 3)`` uint8 image.
@@ -157,10 +226,11 @@ def foreground_fraction(image: np.ndarray, threshold: int = FOREGROUND_THRESHOLD
 
 
 class TwinRenderer:
-    """Offscreen renderer of the twin with named knee views (wraps :class:`mujoco.Renderer`).
+    """Offscreen renderer of the twin's named views (wraps :class:`mujoco.Renderer`).
 
     Creating the OpenGL context costs about half a second: make one renderer and reuse it for
-    many frames; close it (or use it as a context manager) when done.
+    many frames; close it (or use it as a context manager) when done. Colouring the muscles
+    writes ``model.tendon_rgba`` (a visual field; the dynamics do not read it).
 
     Args:
         model: The twin (or any model with ``knee_angle_r``).
@@ -168,6 +238,12 @@ class TwinRenderer:
         height: Image height, pixels (at most ``model.vis.global_.offheight``).
         show_muscles: Draw MyoSuite's muscle paths (tendons).
         highlight_exo: Draw the exo's geoms (bodies ``exo_*``) in :data:`EXO_COLOR_RGBA`.
+        show_scene: Draw the floor, plinth and skybox (``False``: black background).
+        color_muscles: Colour each muscle by its activation before each frame.
+        muscle_colors: Rest and active muscle colours (default MyoSuite's red blend).
+        show_cuff_force: Draw the force the exo applies to the shank (sensor
+            ``shank_cuff_force``) as an arrow from the shank cuff (models without it: none).
+        arrow_style: Scale and colour of that arrow.
 
     Raises:
         ValueError: A size out of range.
@@ -180,6 +256,11 @@ class TwinRenderer:
         height: int = 360,
         show_muscles: bool = True,
         highlight_exo: bool = True,
+        show_scene: bool = True,
+        color_muscles: bool = True,
+        muscle_colors: MuscleColors | None = None,
+        show_cuff_force: bool = False,
+        arrow_style: ForceArrowStyle | None = None,
     ) -> None:
         import mujoco
 
@@ -196,12 +277,42 @@ class TwinRenderer:
         self.width, self.height = int(width), int(height)
         self.option = mujoco.MjvOption()
         self.option.flags[mujoco.mjtVisFlag.mjVIS_TENDON] = bool(show_muscles)
+        self.option.geomgroup[SCENE_GEOM_GROUP] = bool(show_scene)
+        self.show_scene = bool(show_scene)
         self.highlight_exo = bool(highlight_exo)
+        self.colorize = MuscleColorizer(model, muscle_colors) if color_muscles else None
+        self.arrow_style = ForceArrowStyle() if arrow_style is None else arrow_style
+        self._cuff_force: tuple[int, int] | None = None  # (sensor address, site id)
+        sensor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, CUFF_FORCE_SENSOR)
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, CUFF_FORCE_SITE)
+        if show_cuff_force and sensor >= 0 and site >= 0:
+            self._cuff_force = (int(model.sensor_adr[sensor]), site)
         exo = [
             b for b in range(model.nbody) if (model.body(b).name or "").startswith(EXO_BODY_PREFIX)
         ]
         self._exo_geoms = frozenset(np.flatnonzero(np.isin(model.geom_bodyid, exo)).tolist())
-        self._renderer = mujoco.Renderer(model, height=self.height, width=self.width)
+        self._renderer: mujoco.Renderer | None = mujoco.Renderer(
+            model, height=self.height, width=self.width
+        )
+
+    def _update_scene(
+        self, data: mujoco.MjData, view: str | CameraView, distance_m: float | None
+    ) -> mujoco.Renderer:
+        import mujoco
+
+        if self._renderer is None:
+            raise ValueError("this TwinRenderer is closed")
+        camera: str | mujoco.MjvCamera
+        if isinstance(view, str) and distance_m is None:
+            camera = camera_name(self.model, view)
+        else:
+            camera = knee_camera(self.model, data, view, distance_m)
+        if self.colorize is not None:
+            self.colorize(data)
+        self._renderer.update_scene(data, camera=camera, scene_option=self.option)
+        if not self.show_scene:
+            self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
+        return self._renderer
 
     def render(
         self,
@@ -213,25 +324,82 @@ class TwinRenderer:
 
         Args:
             data: The model's data, kinematics up to date (after ``mj_forward``/``mj_step``).
-            view: A name of :data:`VIEWS` or a :class:`CameraView`.
-            distance_m: Overrides the view's distance, m.
+            view: A name of :data:`VIEWS`, a camera of the model, or a :class:`CameraView`.
+            distance_m: Moves the view closer or farther (a free camera on the same axis,
+                see :func:`knee_camera`), m.
 
         Returns:
             ``(height, width, 3)`` uint8 RGB image.
         """
         import mujoco
 
-        if self._renderer is None:
-            raise ValueError("this TwinRenderer is closed")
-        cam = knee_camera(self.model, data, view, distance_m)
-        self._renderer.update_scene(data, camera=cam, scene_option=self.option)
+        renderer = self._update_scene(data, view, distance_m)
         if self.highlight_exo and self._exo_geoms:
-            scene = self._renderer.scene
+            scene = renderer.scene
             for i in range(scene.ngeom):
                 g = scene.geoms[i]
                 if g.objtype == mujoco.mjtObj.mjOBJ_GEOM and g.objid in self._exo_geoms:
                     g.rgba[:3] = EXO_COLOR_RGBA[:3]
-        return self._renderer.render().copy()
+        if self._cuff_force is not None:
+            self._add_force_arrow(renderer.scene, data, *self._cuff_force)
+        return renderer.render().copy()
+
+    def _add_force_arrow(
+        self, scene: mujoco.MjvScene, data: mujoco.MjData, sensor_adr: int, site: int
+    ) -> None:
+        """Append an arrow for a site's force sensor (site frame -> world) to the scene."""
+        import mujoco
+
+        style = self.arrow_style
+        force_n = data.site_xmat[site].reshape(3, 3) @ data.sensordata[sensor_adr : sensor_adr + 3]
+        if np.linalg.norm(force_n) < style.min_force_n or scene.ngeom >= scene.maxgeom:
+            return
+        start = data.site_xpos[site]
+        geom = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(
+            geom,
+            mujoco.mjtGeom.mjGEOM_ARROW,
+            np.zeros(3),
+            np.zeros(3),
+            np.eye(3).reshape(-1),
+            np.asarray(style.rgba, dtype=np.float32),
+        )
+        mujoco.mjv_connector(
+            geom,
+            mujoco.mjtGeom.mjGEOM_ARROW,
+            style.width_m,
+            start,
+            start + style.scale_m_per_n * force_n / _ARROW_DRAWN_FRACTION,
+        )
+        scene.ngeom += 1
+
+    def subject_mask(
+        self,
+        data: mujoco.MjData,
+        view: str | CameraView = "side",
+        distance_m: float | None = None,
+    ) -> np.ndarray:
+        """Pixels that show the subject (bones, muscles, exo), not the scene or background.
+
+        A segmentation render of the same view: a pixel belongs to the subject when it
+        shows a geom of a body other than the world, or a muscle path.
+
+        Returns:
+            ``(height, width)`` bool mask.
+        """
+        import mujoco
+
+        renderer = self._update_scene(data, view, distance_m)
+        renderer.enable_segmentation_rendering()
+        try:
+            seg = renderer.render()
+        finally:
+            renderer.disable_segmentation_rendering()
+        objid, objtype = seg[..., 0], seg[..., 1]
+        geom = (objtype == mujoco.mjtObj.mjOBJ_GEOM) & (objid >= 0)
+        body = np.zeros_like(objid)
+        body[geom] = self.model.geom_bodyid[objid[geom]]
+        return (geom & (body > 0)) | (objtype == mujoco.mjtObj.mjOBJ_TENDON)
 
     def render_views(
         self, data: mujoco.MjData, views: Sequence[str | CameraView] = ("front", "side")
@@ -288,7 +456,8 @@ def record_episode(
         seed: Episode seed (the subject and the start angle).
         every_s: Simulated time between two frames, s (a whole number of control steps is
             used: the nearest one, at least one).
-        view: Camera view (a name of :data:`VIEWS` or a :class:`CameraView`).
+        view: Camera view (a name of :data:`VIEWS`, a camera of the model, or a
+            :class:`CameraView`).
         width: Frame width, pixels.
         height: Frame height, pixels.
         show_muscles: Draw the muscle paths.

@@ -80,6 +80,7 @@ from myoexo.model import (
     pose_twin,
 )
 from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
 from myoexo.reflex import ReflexConfig
 from myoexo.spasticity import SPASTIC_MUSCLES, SpasticityStage
 
@@ -167,6 +168,10 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     """
 
     DEFAULT_OBS_KEYS: ClassVar[list[str]] = list(DEFAULT_OBS_KEYS)
+    #: Model camera that ``render()`` shows (a fixed camera aimed at the knee).
+    render_camera: str | None = DEFAULT_CAMERA
+    #: Colours the muscles before each ``render()`` (made at the first render).
+    _muscle_colorizer: MuscleColorizer | None = None
 
     def __init__(
         self,
@@ -513,6 +518,16 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             unstable=unstable,
         )
         return info
+
+    def render(self, **kwargs: Any) -> Any:
+        """MyoSuite's ``render()`` (camera :attr:`render_camera`, 640x480 unless ``kwargs``
+        say otherwise), with every muscle coloured by its activation first (rest colour to
+        red, :class:`~myoexo.model.scene.MuscleColorizer`)."""
+        if self.render_mode is not None:
+            if self._muscle_colorizer is None:
+                self._muscle_colorizer = MuscleColorizer(self.model)
+            self._muscle_colorizer(self.data)
+        return super().render(**kwargs)
 
     def get_proprioception(self) -> tuple:
         """``(time, vector, dict)`` of what the exo itself senses (encoder, torque, cuffs)."""

@@ -4,7 +4,9 @@ Both models come from MyoSuite's leg fragment through
 :class:`myosuite.core.model_builder.ModelBuilder` (see :mod:`myoexo.model.leg`); the twin
 adds the exo fragment (:mod:`myoexo.model.exo`) at the thigh, laid out on the knee's mean
 flexion axis (:mod:`myoexo.model.geometry`), the strap weld to the shank, and a keyframe
-``seated_90`` (knee at 90 deg, loop closed) for easy resets.
+``seated_90`` (knee at 90 deg, loop closed) for easy resets. Both models get the named
+cameras of :mod:`myoexo.model.scene` and, with ``TwinParams.scene`` (default), its floor,
+plinth, lights and skybox (visual only: no effect on the dynamics).
 """
 
 from __future__ import annotations
@@ -16,9 +18,17 @@ import numpy as np
 
 from myoexo.model.exo import EXO_ACTUATOR, exo_spec, strap_to_shank
 from myoexo.model.geometry import ExoGeometry, KneeAxisFit, exo_geometry, fit_knee_axis
-from myoexo.model.leg import build_spec_quietly, compile_quietly, leg_builder, standalone_spec
+from myoexo.model.leg import (
+    KNEE_JOINT,
+    PELVIS_BODY,
+    build_spec_quietly,
+    compile_quietly,
+    leg_builder,
+    standalone_spec,
+)
 from myoexo.model.params import TwinParams
 from myoexo.model.posing import pose_twin
+from myoexo.model.scene import add_cameras, add_scene
 
 __all__ = [
     "HOME_KEY",
@@ -44,8 +54,10 @@ def _check_bodies(spec: mujoco.MjSpec, params: TwinParams) -> None:
             )
 
 
-def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel) -> mujoco.MjModel:
-    """Add the ``seated_90`` keyframe (posed with :func:`pose_twin`) and recompile."""
+def _finish(spec: mujoco.MjSpec, model: mujoco.MjModel, params: TwinParams) -> mujoco.MjModel:
+    """Pose the model at the home pose (:func:`pose_twin`), add the ``seated_90`` keyframe,
+    the named cameras aimed at the posed knee and (``params.scene``) the visual scene, and
+    recompile."""
     data = mujoco.MjData(model)
     pose_twin(model, data, knee_angle_deg=HOME_KNEE_ANGLE_DEG)
     key = spec.add_key()
@@ -54,6 +66,11 @@ def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel) -> mujoco.MjModel:
     key.qvel = np.zeros(model.nv)
     key.act = np.zeros(model.na)
     key.ctrl = np.zeros(model.nu)
+    knee_m = data.xanchor[model.joint(KNEE_JOINT).id].copy()
+    add_cameras(spec, knee_m)
+    if params.scene:
+        pelvis_m = data.xpos[model.body(PELVIS_BODY).id].copy()
+        add_scene(spec, knee_m, pelvis_m, params.cuff_radius_m)
     return compile_quietly(spec)
 
 
@@ -64,7 +81,8 @@ def build_leg_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, m
         params: Twin parameters (hip posture, timestep, ...); default ``TwinParams()``.
 
     Returns:
-        ``(model, spec)``: 40 ``*_r`` muscles, pelvis fixed, hip locked, no contacts.
+        ``(model, spec)``: 40 ``*_r`` muscles, pelvis fixed, hip locked, no contacts;
+        the named cameras and (``params.scene``) the visual scene.
 
     Raises:
         ValueError: If ``params.thigh_body`` / ``shank_body`` are not bodies of the leg.
@@ -73,7 +91,7 @@ def build_leg_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, m
     spec = build_spec_quietly(leg_builder(params))
     _check_bodies(spec, params)
     spec = standalone_spec(spec)
-    model = _add_home_key(spec, compile_quietly(spec))
+    model = _finish(spec, compile_quietly(spec), params)
     return model, spec
 
 
@@ -99,7 +117,9 @@ def build_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoc
 
     Returns:
         ``(model, spec)``. Actuators: the 40 ``*_r`` muscles, then ``exo_motor`` (last).
-        Keyframe ``seated_90``: knee at 90 deg with the strap loop closed.
+        Keyframe ``seated_90``: knee at 90 deg with the strap loop closed. Cameras
+        :data:`~myoexo.model.scene.DEFAULT_CAMERAS`; with ``params.scene``, the floor,
+        plinth, lights and skybox of :func:`~myoexo.model.scene.add_scene`.
 
     Raises:
         ValueError: If ``params.thigh_body`` / ``shank_body`` are not bodies of the leg.
@@ -117,5 +137,5 @@ def build_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoc
     model = compile_quietly(spec)
     if model.actuator(model.nu - 1).name != EXO_ACTUATOR:
         raise RuntimeError("exo_motor must be the last actuator of the twin")
-    model = _add_home_key(spec, model)
+    model = _finish(spec, model, params)
     return model, spec

@@ -39,6 +39,7 @@ __all__ = [
     "HIP_JOINTS",
     "KNEE_JOINT",
     "LEG_FRAGMENT",
+    "PELVIS_BODY",
     "build_spec_quietly",
     "compile_quietly",
     "hip_lock_name",
@@ -51,6 +52,8 @@ __all__ = [
 LEG_FRAGMENT = "leg"
 #: Human knee flexion joint (radians, 0 = full extension, flexion positive).
 KNEE_JOINT = "knee_angle_r"
+#: The pelvis body (fixed to the world: the seated subject's root).
+PELVIS_BODY = "pelvis"
 #: Right-hip joints locked by joint equalities.
 HIP_JOINTS: tuple[str, ...] = ("hip_flexion_r", "hip_adduction_r", "hip_rotation_r")
 #: Root rotation that turns MyoSuite's pelvis (facing -y) to face +x: 90 deg about z.
@@ -80,7 +83,7 @@ def _remove_left_leg(spec: mujoco.MjSpec) -> None:
     ]:
         spec.delete(sensor)
     spec.delete(spec.body("femur_l"))
-    pelvis = spec.body("pelvis")
+    pelvis = spec.body(PELVIS_BODY)
     for site in [s for s in pelvis.sites if _is_left(s.name)]:
         spec.delete(site)
     # Left wrapping surfaces only (the "pelvis_l" mesh is the left hemipelvis: kept).

@@ -116,6 +116,9 @@ class TwinParams:
         shank_cuff_mass_kg: Shank cuff + strap mass (kg).
         cuff_radius_m: Inner radius of the cuffs (m), for their inertia and visuals.
         cuff_height_m: Height of the cuffs along the limb (m).
+        scene: Add the visual scene (floor, plinth under the thigh, lights, skybox; see
+            :mod:`myoexo.model.scene`). Visual only: the dynamics are the same without it.
+            The named cameras are there either way.
     """
 
     timestep_s: float = 0.002
@@ -161,6 +164,8 @@ class TwinParams:
     shank_cuff_mass_kg: float = 0.2
     cuff_radius_m: float = 0.065
     cuff_height_m: float = 0.06
+
+    scene: bool = True
 
     def __post_init__(self) -> None:
         """Validate every field; raise ``ValueError`` naming the first bad one."""
@@ -244,6 +249,8 @@ class TwinParams:
         for name in ("thigh_body", "shank_body"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ValueError(f"TwinParams.{name} must be a non-empty body name")
+        if not isinstance(self.scene, bool):
+            raise ValueError(f"TwinParams.scene must be True or False, got {self.scene!r}")
 
     @property
     def slide_frictionloss_n(self) -> float:
