@@ -65,9 +65,12 @@ EVAL_ARGS = [
 EVAL_CONFIG = EvaluationConfig(
     controllers=("pid",), levels=(0, 1), subjects=6, episode_duration_s=0.5, chunk_size=1
 )
-#: A longer one (60 chunks), for the tests that interrupt a run in progress.
+#: A longer one (60 chunks), for the tests that interrupt a run in progress ...
 LONG_EVAL_ARGS = [*EVAL_ARGS]
 LONG_EVAL_ARGS[LONG_EVAL_ARGS.index("--subjects") + 1] = "30"
+#: ... and one with 2-s episodes, killed by its test, that cannot end while it is checked.
+ENDLESS_EVAL_ARGS = [*LONG_EVAL_ARGS]
+ENDLESS_EVAL_ARGS[ENDLESS_EVAL_ARGS.index("--episode-duration") + 1] = "2"
 
 #: Tiny training settings (as in tests/test_training.py): half-second episodes, a checkpoint
 #: every 100 steps, no periodic evaluation.
@@ -162,6 +165,18 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _left_after(pids: list[int], timeout: float = ORPHAN_TIMEOUT_S) -> list[int]:
+    """The processes of ``pids`` still running after up to ``timeout`` seconds; those are
+    killed (by pid) so that a failing test leaves nothing behind."""
+    deadline = time.monotonic() + timeout
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(POLL_S)
+    left = [pid for pid in pids if _alive(pid)]
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    return left
+
+
 def _children(pid: int) -> list[int]:
     """Descendants of ``pid`` (psutil, else a scan of ``/proc``)."""
     try:
@@ -212,12 +227,13 @@ def test_kill9_evaluation_at_random_points_then_resume_gives_the_same_table(
         proc = spawn(cmd, "eval")
         wait_chunks = rng.randint(0, 3)  # 0: during the start-up
         _wait_for(lambda b=before, w=wait_chunks: len(_chunks(out)) >= b + w, proc)
-        time.sleep(rng.uniform(0.0, 0.3))
+        time.sleep(rng.uniform(0.0, 0.1))
         if proc.poll() is not None:
             break  # finished before the kill point
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         landed += 0 < len(_chunks(out)) < len(eval_reference)
+    print(f"{landed} kills landed while chunks were being written")
     assert landed, "no kill landed while chunks were being written"
     assert not (out / "episodes.parquet").exists() or len(_chunks(out)) == len(eval_reference)
     for chunk in _chunks(out):
@@ -230,20 +246,25 @@ def test_kill9_evaluation_at_random_points_then_resume_gives_the_same_table(
 
 
 @pytest.mark.slow
-def test_workers_end_with_a_killed_evaluation_driver(tmp_path, spawn):
+def test_a_second_evaluation_into_a_folder_in_use_stops_and_workers_end_with_a_killed_driver(
+    tmp_path, spawn, capsys
+):
     out = tmp_path / "eval"
-    proc = spawn(["evaluate", *LONG_EVAL_ARGS, "--out", str(out)], "eval")
-    assert _wait_for(lambda: len(_chunks(out)) >= 2, proc), "the run ended too early"
+    cmd = ["evaluate", *ENDLESS_EVAL_ARGS, "--out", str(out)]
+    proc = spawn(cmd, "eval")
+    assert _wait_for(lambda: len(_chunks(out)) >= 1, proc), "the run ended too early"
+
+    # a second run into the same folder stops at once, naming the holder
+    assert cli_main(cmd) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("myoexo evaluate: error: evaluation folder")
+    assert f"in use by pid {proc.pid} on host" in line and "myoexo evaluate" in line
+
     children = _children(proc.pid)  # two workers and multiprocessing's resource tracker
     assert len(children) >= 2
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    deadline = time.monotonic() + ORPHAN_TIMEOUT_S
-    while any(_alive(pid) for pid in children) and time.monotonic() < deadline:
-        time.sleep(POLL_S)
-    left = [pid for pid in children if _alive(pid)]
-    for pid in left:  # do not leave them behind if the test fails
-        os.kill(pid, signal.SIGKILL)
+    left = _left_after(children)
     assert not left, f"worker processes {left} outlived their killed driver"
 
 
@@ -255,14 +276,7 @@ def test_a_signal_stops_an_evaluation_cleanly_and_the_same_command_resumes(
     out = tmp_path / "eval"
     cmd = ["evaluate", *LONG_EVAL_ARGS, "--out", str(out)]
     proc = spawn(cmd, "eval")
-    assert _wait_for(lambda: len(_chunks(out)) >= 2, proc), "the run ended too early"
-
-    # a second run into the same folder stops at once, naming the holder
-    assert cli_main(cmd) == 2
-    (line,) = capsys.readouterr().err.splitlines()
-    assert line.startswith("myoexo evaluate: error: evaluation folder")
-    assert f"in use by pid {proc.pid} on host" in line and "myoexo evaluate" in line
-
+    assert _wait_for(lambda: len(_chunks(out)) >= 1, proc), "the run ended too early"
     children = _children(proc.pid)
     t0 = time.monotonic()
     proc.send_signal(sig)
@@ -275,7 +289,7 @@ def test_a_signal_stops_an_evaluation_cleanly_and_the_same_command_resumes(
     assert not _temporaries(out)  # the chunks in flight finished
     stored = _chunks(out)
     assert stored and all(chunk_done(c) for c in stored)
-    assert not [pid for pid in children if _alive(pid)]  # the pool was shut down
+    assert not _left_after(children)  # the pool was shut down
 
     assert cli_main(cmd) == 0
     table = pd.read_parquet(out / "episodes.parquet")
@@ -591,12 +605,12 @@ def test_kill9_training_at_random_points_then_resume_continues_from_the_newest_c
     tmp_path, spawn, capsys
 ):
     rng = random.Random(KILL_SEED + 1)
-    print(f"kill seed {KILL_SEED + 1}")
     run_dir = tmp_path / "run"
     total = 1_000
     first = ["train", *TINY_TRAIN_SETS, "--total-timesteps", str(total), "--no-progress"]
     first += ["--run-dir", str(run_dir)]
     expected: str | None = None  # the checkpoint the next session must start from
+    kills = 0
     for i in range(N_KILLS):
         before = {c.name for c in ck.list_checkpoints(run_dir)}
         proc = spawn(first if i == 0 else ["train", "--resume", str(run_dir), "--no-progress"])
@@ -606,6 +620,7 @@ def test_kill9_training_at_random_points_then_resume_continues_from_the_newest_c
             break
         proc.send_signal(signal.SIGKILL)
         proc.wait()
+        kills += 1
         printed = proc.out_path.read_text()
         if expected is not None:
             assert f"from {expected}: " in printed  # resumed from the newest intact one
@@ -614,7 +629,9 @@ def test_kill9_training_at_random_points_then_resume_continues_from_the_newest_c
         saved = [int(n) for n in re.findall(r"\[checkpoint\] step (\d+)", printed)]
         assert ck.step_of(intact[-1]) >= max(saved, default=0)  # nothing older than printed
 
-    assert expected is not None
+    with capsys.disabled():
+        print(f"\nkill seed {KILL_SEED + 1}: {kills} kills, the last one after {expected}")
+    assert kills >= 2 and expected is not None
     capsys.readouterr()
     result = resume(run_dir, verbose=1)
     assert f"from {expected}: {ck.step_of(run_dir / ck.CHECKPOINTS_DIR / expected)} steps" in (
