@@ -4,19 +4,27 @@ Each sub-command lives in the module that owns the concept and exposes two funct
 ``add_arguments(parser)`` and ``run(args) -> int``; this file only routes to them, so the
 modules stay independent and importing the CLI stays cheap.
 
-A user's mistake (a bad value, a missing file or run folder, the shipped policy missing)
-is reported as one line, ``myoexo <command>: error: <message>``, with exit status 2; any
-other exception is a bug and keeps its traceback. ``myoexo --debug <command>`` (or the
-environment variable ``MYOEXO_DEBUG=1``) shows the traceback of user errors too.
+A user's mistake (a bad value, a missing file or run folder, the shipped policy missing, a
+folder in use by another run) is reported as one line, ``myoexo <command>: error:
+<message>``, with exit status 2. A full disk (or quota) is one line too, with exit status 1:
+what was written before stays intact, so the same command continues once space is freed.
+A Ctrl-C that the command did not handle itself (a second one, during a graceful stop) is one
+line with exit status 130. Any other exception is a bug and keeps its traceback.
+``myoexo --debug <command>`` (or the environment variable ``MYOEXO_DEBUG=1``) shows the
+traceback of all of these. Exit statuses of a run stopped by a signal: ``docs/long_runs.md``.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
+import signal
 import sys
 from collections.abc import Sequence
+
+from myoexo.lifecycle import SIGNAL_EXIT_BASE
 
 #: sub-command -> (module implementing it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -55,6 +63,16 @@ USER_ERRORS: tuple[type[BaseException], ...] = (
 )
 
 
+#: ``errno`` values of a write that found no space left (disk full, quota exceeded).
+NO_SPACE_ERRNOS: frozenset[int] = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+#: Exit status of a command stopped by a full disk.
+EXIT_NO_SPACE = 1
+
+#: Exit status of a user error.
+EXIT_USER_ERROR = 2
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Parser with one sub-parser per command (an import error of a command surfaces)."""
     parser = argparse.ArgumentParser(
@@ -88,9 +106,14 @@ def _one_line(message: str) -> str:
     return " ".join(line.strip() for line in message.splitlines() if line.strip())
 
 
-def _fail(command: str, message: str) -> int:
+def _fail(command: str, message: str, status: int = EXIT_USER_ERROR) -> int:
     print(f"myoexo {command}: error: {_one_line(message)}", file=sys.stderr)
-    return 2
+    return status
+
+
+def is_no_space_error(exc: BaseException) -> bool:
+    """Whether ``exc`` is a write that found the disk (or the quota) full."""
+    return isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -105,7 +128,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         message = exc.code.removeprefix(f"{args.command}: ")
         return _fail(args.command, message)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"myoexo {args.command}: interrupted", file=sys.stderr)
+        return SIGNAL_EXIT_BASE + int(signal.SIGINT)
     except Exception as exc:
+        if not debug and isinstance(exc, OSError) and is_no_space_error(exc):
+            where = f" while writing {exc.filename}" if exc.filename else ""
+            return _fail(
+                args.command,
+                f"{exc.strerror or 'no space left on device'}{where}; what was written "
+                "before is intact: free some space and run the same command again",
+                EXIT_NO_SPACE,
+            )
         if debug or not is_user_error(exc):
             raise
         return _fail(args.command, str(exc) or type(exc).__name__)

@@ -38,8 +38,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it onto ``path``.
 
     The temporary name starts with ``.tmp-`` and is unique per call (``tempfile.mkstemp``),
-    so concurrent writers never collide; on any exception it is removed and ``path`` is left
-    as it was. The parent folder is created if missing.
+    so concurrent writers never collide; on any exception (a full disk included) it is
+    removed and ``path`` is left as it was; an ``OSError`` without a file name gets
+    ``path``'s. The parent folder is created if missing.
     """
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
@@ -49,8 +50,10 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.filename is None:
+            exc.filename = str(final)  # name the file in messages (e.g. a full disk)
         raise
 
 

@@ -140,9 +140,12 @@ def test_resume_continues_the_step_counter(tiny_run):
     assert state["n_updates"] == pytest.approx(250, abs=3)  # updates continued too
     sessions = [json.loads(s) for s in (run_dir / ck.SESSIONS_FILE).read_text().splitlines()]
     assert [(s["start_step"], s["end_step"]) for s in sessions] == [(0, 400), (400, 600)]
-    # only the newest resumable checkpoint keeps its (large) replay buffer
+    # only the two newest resumable checkpoints keep their (large) replay buffer
     with_replay = [c.name for c in ck.list_checkpoints(run_dir) if (c / ck.REPLAY_FILE).exists()]
-    assert with_replay == ["step_0000000600"]
+    assert with_replay == ["step_0000000400", "step_0000000600"]
+    # the cadence is recorded with the run
+    cadence = ck.read_config(run_dir)["checkpoint_cadence"]
+    assert cadence["every_steps"] == 200 and cadence["keep_resumable"] == 2
 
 
 @pytest.mark.slow

@@ -6,13 +6,16 @@
 
 Interrupting and re-running the same command continues where it stopped: finished chunks of
 episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.engine`). Bad
-arguments (an unknown level, ``--subjects 0``, an unreadable policy file) stop the command
-with a one-line error before anything is written.
+arguments (an unknown level, ``--subjects 0``, an unreadable policy file) or a folder in use
+by another run stop the command with a one-line error (exit status 2) before anything is
+written. SIGTERM or Ctrl-C (SIGINT) stops it after the chunks in flight with one line on
+stderr and exit status 128 + the signal number (143, 130); see ``docs/long_runs.md``.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -85,7 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments."""
+    """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments or a folder in use,
+    128 + the signal number when stopped by SIGINT / SIGTERM."""
     from myoexo.evaluation.engine import evaluate
 
     try:
@@ -103,6 +107,16 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
         return 2
+    if result.stopped_by is not None:
+        from myoexo.lifecycle import signal_exit_status
+
+        print(
+            f"myoexo evaluate: stopped by {result.stopped_by}: {result.stored} of "
+            f"{result.total} episodes stored in {result.out_dir} ({result.computed} computed "
+            "now), no table written; run the same command again to continue",
+            file=sys.stderr,
+        )
+        return signal_exit_status(signal.Signals[result.stopped_by])
     n = len(result.table)
     print(
         f"{n} episodes ({result.computed} computed now) of {', '.join(result.controllers)} "

@@ -5,12 +5,14 @@ resumable runs, logging, and the export of a trained actor.
 
     train(get_preset("cpu"), "runs/cpu_seed0", seed=0)   # or: myoexo train --preset cpu
     resume("runs/cpu_seed0")                               # or: myoexo train --resume DIR
+    restart("runs/cpu_seed0")   # a first session that never checkpointed: --restart DIR
 
 Modules: :mod:`~myoexo.training.presets` (``paper`` = Table II, ``cpu``),
 :mod:`~myoexo.training.train` (runs), :mod:`~myoexo.training.callbacks` (reward terms,
 small evaluation vs the PID, checkpoints), :mod:`~myoexo.training.checkpoints` (run
 layout), :mod:`~myoexo.training.export` (numpy actor, ONNX), :mod:`~myoexo.training.cli`.
-Heavy dependencies (torch, SB3) are imported when a run starts, not on import.
+Heavy dependencies (torch, SB3) are imported when a run starts, not on import. What a kill,
+a signal, a damaged file or a full disk costs a run: ``docs/long_runs.md``.
 """
 
 from myoexo.training.presets import (
@@ -20,7 +22,7 @@ from myoexo.training.presets import (
     SACPreset,
     get_preset,
 )
-from myoexo.training.train import TrainResult, resume, train
+from myoexo.training.train import TrainResult, restart, resume, train
 
 __all__ = [
     "PRESETS",
@@ -29,6 +31,7 @@ __all__ = [
     "SACPreset",
     "TrainResult",
     "get_preset",
+    "restart",
     "resume",
     "train",
 ]

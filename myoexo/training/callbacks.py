@@ -7,7 +7,11 @@
   and RMS interaction torque (docs/reference.md section 5), and the score that ranks
   checkpoints (:func:`myoexo.evaluation.criteria.score`).
 * :class:`PeriodicCheckpointCallback`: model + replay buffer + normalization statistics +
-  step counter every ``every_s`` seconds (and/or steps), and at the end of training.
+  step counter every ``every_s`` seconds or ``every_steps`` transitions, whichever comes
+  first, a first one soon after learning starts, and at the end of training.
+* :class:`StopOnSignalCallback`: ends ``learn`` at the next step once SIGTERM / SIGINT was
+  received (:class:`myoexo.lifecycle.StopSignals`); the checkpoint callback then writes
+  the final checkpoint.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from myoexo.evaluation import criteria
 from myoexo.evaluation.criteria import CRITERIA_METRICS
 from myoexo.io import write_json_atomic
+from myoexo.lifecycle import StopSignals
 from myoexo.spasticity import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
@@ -116,11 +121,23 @@ class SmallEvalSpec:
     episode_duration_s: float | None = None
 
 
-def _level_means(controller: Any, level: int, spec: SmallEvalSpec, env: Any) -> dict[str, float]:
+class EvaluationAborted(Exception):
+    """A small evaluation given up because training is stopping (SIGTERM / SIGINT)."""
+
+
+def _level_means(
+    controller: Any,
+    level: int,
+    spec: SmallEvalSpec,
+    env: Any,
+    stop: StopSignals | None = None,
+) -> dict[str, float]:
     from myoexo.evaluation import run_episode, subject_seed
 
     rows = []
     for i in range(spec.subjects):
+        if stop is not None and stop.received is not None:
+            raise EvaluationAborted(f"stopped by {stop.name}")
         res = run_episode(env, controller, subject_seed(level, i, spec.root_seed))
         m = res.metrics.as_dict()
         rows.append([m[k] for k in CRITERIA_METRICS] + [float(res.unstable)])
@@ -139,14 +156,27 @@ class PaperMetricsEvalCallback(BaseCallback):
     appends the rows to ``<run>/eval.csv`` and keeps :attr:`last_score` for the
     checkpoints. The PID's numbers are computed once per run (``eval_pid.json``).
 
+    Once ``stop`` has received a signal, no evaluation starts and the one running is given
+    up before its next episode (no row, no score): the stop of a run waits for one episode,
+    not for a whole evaluation.
+
     Args:
         run_dir: Run folder.
         every_steps: Transitions between evaluations.
         spec: Levels, subjects and bounds.
+        stop: The training's stop flag (:class:`~myoexo.lifecycle.StopSignals`).
     """
 
-    def __init__(self, run_dir: Path, every_steps: int, spec: SmallEvalSpec, verbose: int = 0):
+    def __init__(
+        self,
+        run_dir: Path,
+        every_steps: int,
+        spec: SmallEvalSpec,
+        verbose: int = 0,
+        stop: StopSignals | None = None,
+    ):
         super().__init__(verbose)
+        self.stop = stop
         if every_steps <= 0:
             raise ValueError(f"every_steps = {every_steps} must be > 0")
         self.run_dir = Path(run_dir)
@@ -175,25 +205,42 @@ class PaperMetricsEvalCallback(BaseCallback):
         if missing:
             from myoexo.control import build_controller, parse_controller_spec
 
-            for level in missing:
-                env = self._env(level)
-                pid = build_controller(parse_controller_spec("pid"), env)
-                self._pid[level] = _level_means(pid, level, self.spec, env)
+            try:
+                for level in missing:
+                    env = self._env(level)
+                    pid = build_controller(parse_controller_spec("pid"), env)
+                    self._pid[level] = _level_means(pid, level, self.spec, env, self.stop)
+            except EvaluationAborted:
+                return  # stopping: the next session computes the PID's numbers
             write_json_atomic(path, {str(k): v for k, v in sorted(self._pid.items())})
+
+    def _stopping(self) -> bool:
+        return self.stop is not None and self.stop.received is not None
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
             self._next += self.every_steps
-            self.evaluate()
+            if not self._stopping():
+                try:
+                    self.evaluate()
+                except EvaluationAborted:
+                    pass  # stopping: this step goes without an evaluation
         return True
 
     def evaluate(self) -> float:
-        """Run the small evaluation now; returns the score."""
+        """Run the small evaluation now; returns the score.
+
+        Raises:
+            EvaluationAborted: Training is stopping (the evaluation was given up).
+        """
         from myoexo.training.export import actor_from_sac
 
         actor = actor_from_sac(self.model)
         t0 = time.perf_counter()
-        sac = {lv: _level_means(actor, lv, self.spec, self._env(lv)) for lv in self.spec.levels}
+        sac = {
+            lv: _level_means(actor, lv, self.spec, self._env(lv), self.stop)
+            for lv in self.spec.levels
+        }
         score = criteria.score(criteria.compare(sac, {lv: self._pid[lv] for lv in sac}))
         rows = []
         for level, m in sac.items():
@@ -232,8 +279,15 @@ class PaperMetricsEvalCallback(BaseCallback):
 
 
 class PeriodicCheckpointCallback(BaseCallback):
-    """Save a resumable checkpoint every ``every_s`` seconds and/or ``every_steps``
-    transitions, and at the end of training (see :mod:`myoexo.training.checkpoints`).
+    """Save a resumable checkpoint every ``every_s`` seconds or ``every_steps`` transitions,
+    whichever comes first, and at the end of training (see
+    :mod:`myoexo.training.checkpoints`).
+
+    A run without a resumable checkpoint yet gets its first one early: once
+    ``learning_starts + first_after_steps`` transitions are collected or ``first_after_s``
+    seconds have passed, whichever comes first (each only with its cadence on), so that a
+    run killed early does not start over. A policy snapshot (no replay buffer) is also saved
+    at every evaluated step.
 
     Args:
         run_dir: Run folder.
@@ -242,6 +296,9 @@ class PeriodicCheckpointCallback(BaseCallback):
         wall_time_offset_s: Training wall time of the previous sessions of this run.
         evaluator: Its :attr:`~PaperMetricsEvalCallback.last_score` goes into each state.
         keep_replay: Replay buffers kept (newest checkpoints).
+        first_after_steps: Transitions after ``learning_starts`` of the first checkpoint
+            (0: off).
+        first_after_s: Wall time of the first checkpoint (0: off).
     """
 
     def __init__(
@@ -251,8 +308,10 @@ class PeriodicCheckpointCallback(BaseCallback):
         every_steps: int = 0,
         wall_time_offset_s: float = 0.0,
         evaluator: PaperMetricsEvalCallback | None = None,
-        keep_replay: int = 1,
+        keep_replay: int = ck.DEFAULT_KEEP_REPLAY,
         verbose: int = 0,
+        first_after_steps: int = 0,
+        first_after_s: float = 0.0,
     ) -> None:
         super().__init__(verbose)
         self.run_dir = Path(run_dir)
@@ -261,28 +320,42 @@ class PeriodicCheckpointCallback(BaseCallback):
         self.wall_time_offset_s = float(wall_time_offset_s)
         self.evaluator = evaluator
         self.keep_replay = int(keep_replay)
+        self.first_after_steps = int(first_after_steps)
+        self.first_after_s = float(first_after_s)
         self.last_checkpoint: Path | None = None
         self._t_start = 0.0
         self._t_last = 0.0
         self._step_last = 0  # step of the last checkpoint of any kind
         self._step_last_full = 0  # step of the last resumable checkpoint
         self._steps_at_start = 0
+        self._first_pending = False
+        self._first_step = 0
 
     def _on_training_start(self) -> None:
         self._t_start = self._t_last = time.monotonic()
         self._step_last = self._step_last_full = self._steps_at_start = self.num_timesteps
+        self._first_pending = ck.latest_checkpoint(self.run_dir, with_replay=True) is None
+        learning_starts = int(getattr(self.model, "learning_starts", 0))
+        self._first_step = learning_starts + self.first_after_steps
 
     def wall_time_s(self) -> float:
         """Training wall time of the run so far, all sessions."""
         return self.wall_time_offset_s + time.monotonic() - self._t_start
 
+    def _due(self, now: float) -> bool:
+        """Whether a resumable checkpoint is due now."""
+        use_time, use_steps = self.every_s > 0, self.every_steps > 0
+        if self._first_pending:
+            if use_time and self.first_after_s > 0 and now - self._t_start >= self.first_after_s:
+                return True
+            if use_steps and self.first_after_steps > 0 and self.num_timesteps >= self._first_step:
+                return True
+        due_time = use_time and now - self._t_last >= self.every_s
+        due_steps = use_steps and self.num_timesteps - self._step_last_full >= self.every_steps
+        return due_time or due_steps
+
     def _on_step(self) -> bool:
-        now = time.monotonic()
-        due_time = self.every_s > 0 and now - self._t_last >= self.every_s
-        due_steps = (
-            self.every_steps > 0 and self.num_timesteps - self._step_last_full >= self.every_steps
-        )
-        if due_time or due_steps:
+        if self._due(time.monotonic()):
             self.save(with_replay=True)
         elif (
             self.evaluator is not None
@@ -317,6 +390,7 @@ class PeriodicCheckpointCallback(BaseCallback):
         if with_replay:
             self._t_last = time.monotonic()
             self._step_last_full = self.num_timesteps
+            self._first_pending = False
         if self.verbose:
             print(
                 f"[checkpoint] step {state['num_timesteps']} updates {state['n_updates']} "
@@ -326,6 +400,25 @@ class PeriodicCheckpointCallback(BaseCallback):
         return self.last_checkpoint
 
     def _on_training_end(self) -> None:
-        last = ck.latest_checkpoint(self.run_dir, with_replay=True)
-        if last is None or ck.read_state(last)["num_timesteps"] != self.num_timesteps:
-            self.save(with_replay=True)
+        if self._step_last_full != self.num_timesteps or self.last_checkpoint is None:
+            last = ck.latest_checkpoint(self.run_dir, with_replay=True)
+            if last is None or ck.step_of(last) != self.num_timesteps:
+                self.save(with_replay=True)
+
+
+class StopOnSignalCallback(BaseCallback):
+    """End training at the next step once ``signals`` has received SIGTERM / SIGINT.
+
+    SB3 then leaves ``learn`` as at its normal end: the update in progress completes (the
+    flag is only read between env steps) and :class:`PeriodicCheckpointCallback` writes
+    the final resumable checkpoint in its ``_on_training_end``. The transitions of the
+    vector step that saw the flag are counted but not stored in the replay buffer (SB3
+    stops before storing them): ``n_envs`` transitions.
+    """
+
+    def __init__(self, signals: StopSignals, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.signals = signals
+
+    def _on_step(self) -> bool:
+        return self.signals.received is None

@@ -9,13 +9,18 @@
     <run>/progress_<NN>.csv        SB3 logger output of training session NN (CSV)
     <run>/tb/                      the same as tensorboard event files
     <run>/checkpoints/step_<n>/    model.zip, vecnormalize.pkl, state.json and, for the
-                                   newest ``keep_replay`` resumable checkpoints,
+                                   newest ``keep_replay`` (2) resumable checkpoints,
                                    replay_buffer.pkl (the others are policy snapshots)
+    <run>/checkpoints/damaged-step_<n>-<time>/   a checkpoint found damaged, set aside
     <run>/latest.json              name of the newest resumable checkpoint
+    <run>/.myoexo.lock             the lock of the process training in the folder
 
-A checkpoint is written into a temporary folder and renamed into place, and
-``latest.json`` is replaced atomically afterwards, so a run killed at any moment resumes
-from its newest complete checkpoint.
+A checkpoint is written into a temporary folder (a unique ``.tmp_*`` name) and renamed into
+place, and ``latest.json`` is replaced atomically afterwards, so a run killed at any moment
+resumes from its newest complete checkpoint; a failed write (a full disk) removes its
+temporary folder and leaves the previous checkpoints as they were. Resuming checks the
+newest resumable checkpoint (:func:`checkpoint_problem`) and falls back to the previous one
+with a :class:`DamagedCheckpointWarning` if it is damaged.
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ import json
 import os
 import shutil
 import tempfile
+import time
+import warnings
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +51,19 @@ VECNORM_FILE = "vecnormalize.pkl"
 STATE_FILE = "state.json"
 
 _PREFIX = "step_"
+_TMP_PREFIX = ".tmp_"
+#: Prefix of a damaged checkpoint set aside (not listed as a checkpoint).
+DAMAGED_PREFIX = "damaged-"
+#: Last byte of a complete pickle (its STOP opcode): a truncated pickle usually lacks it.
+_PICKLE_STOP = b"."
+#: Members every SB3 ``model.zip`` holds (its parameters as JSON, the policy's weights).
+MODEL_MEMBERS: tuple[str, ...] = ("data", "policy.pth")
+#: Resumable checkpoints kept with their replay buffer unless told otherwise.
+DEFAULT_KEEP_REPLAY = 2
+
+
+class DamagedCheckpointWarning(UserWarning):
+    """A checkpoint could not be resumed from; the run falls back to an older one."""
 
 
 def checkpoint_name(num_timesteps: int) -> str:
@@ -55,7 +76,7 @@ def save_checkpoint(
     run_dir: Path,
     state: dict[str, Any],
     with_replay: bool = True,
-    keep_replay: int = 1,
+    keep_replay: int = DEFAULT_KEEP_REPLAY,
 ) -> Path:
     """Save ``model`` (SB3 SAC), its VecNormalize statistics, ``state`` and (if
     ``with_replay``) its replay buffer.
@@ -78,14 +99,18 @@ def save_checkpoint(
     root = run_dir / CHECKPOINTS_DIR
     root.mkdir(parents=True, exist_ok=True)
     final = root / checkpoint_name(model.num_timesteps)
-    tmp = Path(tempfile.mkdtemp(dir=root, prefix=".tmp_"))
-    model.save(tmp / MODEL_FILE)
-    vec_normalize = model.get_vec_normalize_env()
-    if vec_normalize is not None:
-        vec_normalize.save(str(tmp / VECNORM_FILE))
-    if with_replay:
-        model.save_replay_buffer(tmp / REPLAY_FILE)
-    write_json_atomic(tmp / STATE_FILE, state)
+    tmp = Path(tempfile.mkdtemp(dir=root, prefix=_TMP_PREFIX))
+    try:
+        model.save(tmp / MODEL_FILE)
+        vec_normalize = model.get_vec_normalize_env()
+        if vec_normalize is not None:
+            vec_normalize.save(str(tmp / VECNORM_FILE))
+        if with_replay:
+            model.save_replay_buffer(tmp / REPLAY_FILE)
+        write_json_atomic(tmp / STATE_FILE, state)
+    except BaseException:  # e.g. a full disk: no partial checkpoint stays behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     if final.exists():
         shutil.rmtree(final)
     os.replace(tmp, final)
@@ -113,6 +138,126 @@ def latest_checkpoint(run_dir: Path, with_replay: bool = False) -> Path | None:
     if with_replay:
         ckpts = [p for p in ckpts if (p / REPLAY_FILE).is_file()]
     return ckpts[-1] if ckpts else None
+
+
+def resumable_checkpoints(run_dir: Path) -> list[Path]:
+    """Checkpoints of a run that hold a replay buffer, oldest first."""
+    return [p for p in list_checkpoints(run_dir) if (p / REPLAY_FILE).is_file()]
+
+
+def _pickle_problem(path: Path) -> str | None:
+    if not path.is_file():
+        return f"{path.name} is missing"
+    size = path.stat().st_size
+    if size == 0:
+        return f"{path.name} is empty"
+    with open(path, "rb") as f:
+        f.seek(size - 1)
+        if f.read(1) != _PICKLE_STOP:
+            return f"{path.name} is truncated"
+    return None
+
+
+def checkpoint_problem(checkpoint: Path, with_replay: bool = True) -> str | None:
+    """Why ``checkpoint`` cannot be resumed from, or ``None`` if it looks intact.
+
+    Checks: ``state.json`` parses and holds the step counter; ``model.zip`` is a readable
+    zip (every member's CRC) with SB3's members (:data:`MODEL_MEMBERS`); the replay buffer
+    (if ``with_replay``) and the normalization statistics (if present) are complete pickles
+    (their last byte). Loading them is the final check
+    (:func:`myoexo.training.train.resume` falls back on a failure there too).
+    """
+    checkpoint = Path(checkpoint)
+    try:
+        state = read_state(checkpoint)
+        int(state["num_timesteps"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return f"{STATE_FILE} is unreadable ({type(exc).__name__}: {exc})"
+    try:
+        with zipfile.ZipFile(checkpoint / MODEL_FILE) as z:
+            bad = z.testzip()
+            missing = sorted(set(MODEL_MEMBERS) - set(z.namelist()))
+        if bad is not None:
+            return f"{MODEL_FILE} member {bad} is corrupt"
+        if missing:  # e.g. cut inside an embedded torch archive, read as the whole zip
+            return f"{MODEL_FILE} lacks {missing}"
+    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+        return f"{MODEL_FILE} is not a readable zip ({type(exc).__name__}: {exc})"
+    if with_replay:
+        problem = _pickle_problem(checkpoint / REPLAY_FILE)
+        if problem:
+            return problem
+    if (checkpoint / VECNORM_FILE).exists():
+        return _pickle_problem(checkpoint / VECNORM_FILE)
+    return None
+
+
+def set_aside(checkpoint: Path, reason: str) -> Path:
+    """Rename a damaged checkpoint to ``damaged-<name>-<UTC time>`` (kept for inspection, no
+    longer listed) and warn with ``reason``; returns its new path."""
+    checkpoint = Path(checkpoint)
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    aside = checkpoint.with_name(f"{DAMAGED_PREFIX}{checkpoint.name}-{stamp}")
+    os.replace(checkpoint, aside)
+    warnings.warn(
+        f"checkpoint {checkpoint} is damaged ({reason}); set aside as {aside.name}, "
+        "falling back to the previous checkpoint",
+        DamagedCheckpointWarning,
+        stacklevel=2,
+    )
+    return aside
+
+
+def remove_stale_temporaries(run_dir: Path) -> int:
+    """Delete what writes cut short by a kill left in a run folder (temporary checkpoint
+    folders, temporary files); returns how many. Call it while holding the folder's lock."""
+    run_dir = Path(run_dir)
+    n = 0
+    root = run_dir / CHECKPOINTS_DIR
+    if root.is_dir():
+        for stale in root.glob(f"{_TMP_PREFIX}*"):
+            if stale.is_dir():
+                shutil.rmtree(stale, ignore_errors=True)
+                n += 1
+    for pattern in (".tmp-*", f"{CHECKPOINTS_DIR}/.tmp-*"):
+        for stale in run_dir.glob(pattern):
+            if stale.is_file():
+                stale.unlink(missing_ok=True)
+                n += 1
+    for name in (SESSIONS_FILE, EVAL_FILE):
+        n += trim_partial_line(run_dir / name)
+    return n
+
+
+def clear_run_outputs(run_dir: Path) -> int:
+    """Delete what a training session writes in a run folder (checkpoints, logs,
+    evaluations), keeping ``config.json`` and the lock file; returns how many entries."""
+    run_dir = Path(run_dir)
+    n = 0
+    for name in (CHECKPOINTS_DIR, TB_DIR):
+        if (run_dir / name).is_dir():
+            shutil.rmtree(run_dir / name)
+            n += 1
+    files = [run_dir / name for name in (LATEST_FILE, SESSIONS_FILE, EVAL_FILE, EVAL_PID_FILE)]
+    files += [*run_dir.glob("progress_*.csv"), *run_dir.glob(".tmp-*")]
+    for path in files:
+        if path.is_file():
+            path.unlink()
+            n += 1
+    return n
+
+
+def trim_partial_line(path: Path) -> int:
+    """Cut an unfinished last line (an append cut short by a kill) from a text file that is
+    only ever appended to; returns 1 if it did."""
+    if not path.is_file():
+        return 0
+    data = path.read_bytes()
+    if not data or data.endswith(b"\n"):
+        return 0
+    with open(path, "r+b") as f:
+        f.truncate(data.rfind(b"\n") + 1)
+    return 1
 
 
 def read_state(checkpoint: Path) -> dict[str, Any]:

@@ -30,6 +30,13 @@ normalize_obs          no              yes             VecNormalize running mean
 Unchanged: Adam, tau = 0.05, gamma = 0.99, two critics, entropy coefficient tuned
 automatically (SB3's ``"auto"``, target entropy -1 for the 1-D action), tanh-squashed
 Gaussian actor (the paper's "tanh output").
+
+Checkpoint cadence (both presets; ``paper``: every 1 M steps instead of 200 k): a resumable
+checkpoint every ``checkpoint_every_s`` = 600 s or ``checkpoint_every_steps`` transitions,
+whichever comes first; the first one ``first_checkpoint_steps`` = 1,000 transitions after
+``learning_starts`` or ``first_checkpoint_s`` = 60 s into the run, whichever comes first;
+the newest ``keep_resumable_checkpoints`` = 2 keep their replay buffer. A kill -9 loses at
+most one interval (``docs/long_runs.md``).
 """
 
 from __future__ import annotations
@@ -76,9 +83,20 @@ class SACPreset:
             SAC keeps raw rewards).
         clip_obs: Clip of the normalized observation (``VecNormalize.clip_obs``).
         torch_threads: ``torch.set_num_threads`` of the learner.
-        checkpoint_every_s: Wall time between two checkpoints (model, replay buffer,
-            normalization statistics, step counter).
-        checkpoint_every_steps: Transitions between two checkpoints (0: time-based only).
+        checkpoint_every_s: Wall time (s) between two resumable checkpoints (model, replay
+            buffer, normalization statistics, step counter); 0: no time-based cadence.
+        checkpoint_every_steps: Transitions between two resumable checkpoints (0: no
+            step-based cadence). With both cadences, whichever comes first.
+        first_checkpoint_steps: The first resumable checkpoint of a run comes once
+            ``learning_starts + first_checkpoint_steps`` transitions are collected (0: no
+            early first checkpoint) ...
+        first_checkpoint_s: ... or after this wall time (s) of its first session, whichever
+            comes first (0: none), so that a run killed early does not start from scratch.
+            Each applies only with its cadence on (``checkpoint_every_steps`` /
+            ``checkpoint_every_s`` > 0).
+        keep_resumable_checkpoints: Newest resumable checkpoints that keep their replay
+            buffer (older ones become policy snapshots); with 2, a damaged newest checkpoint
+            falls back to the previous one.
         eval_every_steps: Transitions between two small evaluations (0: none).
         eval_subjects: Fixed subjects per level in each small evaluation.
         eval_levels: Levels of the small evaluation.
@@ -109,7 +127,10 @@ class SACPreset:
     clip_obs: float = 10.0
     torch_threads: int = 1
     checkpoint_every_s: float = 600.0
-    checkpoint_every_steps: int = 0
+    checkpoint_every_steps: int = 200_000
+    first_checkpoint_steps: int = 1_000
+    first_checkpoint_s: float = 60.0
+    keep_resumable_checkpoints: int = 2
     eval_every_steps: int = 50_000
     eval_subjects: int = 2
     eval_levels: tuple[int, ...] = VALID_LEVELS
@@ -124,6 +145,7 @@ class SACPreset:
         "gradient_steps",
         "torch_threads",
         "eval_subjects",
+        "keep_resumable_checkpoints",
     )
 
     def __post_init__(self) -> None:
@@ -141,7 +163,12 @@ class SACPreset:
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
                 raise ValueError(f"{f} = {v!r} must be a positive integer")
-        for f in ("learning_starts", "checkpoint_every_steps", "eval_every_steps"):
+        for f in (
+            "learning_starts",
+            "checkpoint_every_steps",
+            "first_checkpoint_steps",
+            "eval_every_steps",
+        ):
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"{f} = {v!r} must be an integer >= 0")
@@ -150,6 +177,7 @@ class SACPreset:
         _check_float("gamma", self.gamma, 0.0, 1.0, high_open=True)
         _check_float("clip_obs", self.clip_obs, 0.0, 1e6, low_open=True)
         _check_float("checkpoint_every_s", self.checkpoint_every_s, 0.0, 1e7)
+        _check_float("first_checkpoint_s", self.first_checkpoint_s, 0.0, 1e7)
         if self.episode_duration_s is not None:
             _check_float("episode_duration_s", self.episode_duration_s, 0.0, 3600.0, True)
         if self.batch_size > self.buffer_size:
@@ -216,6 +244,7 @@ class PaperPreset(SACPreset):
     gradient_steps: int = 1
     learning_starts: int = 100
     normalize_obs: bool = False
+    checkpoint_every_steps: int = 1_000_000
     eval_every_steps: int = 500_000
 
 
@@ -239,8 +268,9 @@ class CpuPreset(SACPreset):
       levels before the first update.
     * ``normalize_obs``: running mean/std normalization (``VecNormalize``, clip 10) on top of
       the env's fixed scales; the statistics ship with the actor.
-    * Checkpoints every 10 min and a small evaluation (2 fixed subjects x 4 levels against
-      the PID) every 50 k steps.
+    * Checkpoints every 10 min or 200 k steps, whichever comes first (the first one 1 k steps
+      after ``learning_starts`` or after 60 s), the last two with their replay buffer, and
+      a small evaluation (2 fixed subjects x 4 levels against the PID) every 50 k steps.
     """
 
     name: str = "cpu"

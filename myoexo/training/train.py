@@ -13,20 +13,31 @@ counter) and continues with SB3's ``reset_num_timesteps=False``, so logs, checkp
 the total step budget continue where they stopped. The resumed envs are seeded with
 ``seed + num_timesteps``: a resumed run is deterministic, though not bit-identical to an
 uninterrupted one (the envs' RNG streams restart).
+
+Long runs (``docs/long_runs.md``): the run folder is locked while a session trains in it (a
+second ``train`` / ``resume`` into it stops with the holder's name); SIGTERM or SIGINT ends
+``learn`` after the current step, writes a resumable checkpoint and returns with
+:attr:`TrainResult.stopped_by` set; ``resume`` falls back to the previous checkpoint when the
+newest is damaged; ``restart`` starts a folder again whose first session ended before its
+first checkpoint.
 """
 
 from __future__ import annotations
 
 import json
 import platform
+import re
+import signal
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from myoexo.io import package_versions, write_json_atomic
+from myoexo.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
 from myoexo.training.presets import SACPreset, preset_from_dict
 
@@ -41,6 +52,9 @@ class TrainResult:
         num_timesteps: Env transitions of the run so far (all sessions).
         wall_time_s: Training wall time of the run so far (all sessions).
         session_env_steps_per_s: Transitions per second in this session.
+        stopped_by: Name of the signal (``"SIGTERM"``, ``"SIGINT"``) that ended the session
+            before its step budget, else ``None``; ``checkpoint`` is then the checkpoint
+            written at the stop.
     """
 
     run_dir: Path
@@ -48,6 +62,18 @@ class TrainResult:
     num_timesteps: int
     wall_time_s: float
     session_env_steps_per_s: float
+    stopped_by: str | None = None
+
+
+#: How the lock error and messages name a training folder.
+RUN_FOLDER = "training run folder"
+
+#: ``progress_<NN>.csv``: the SB3 log of one session.
+_PROGRESS_RE = re.compile(r"progress_(\d+)\.csv")
+
+
+class NoCheckpointError(ValueError):
+    """A run folder without a resumable checkpoint to continue from."""
 
 
 def is_myoexo_env(env_id: str) -> bool:
@@ -72,10 +98,17 @@ class _EnvFactory:
     rank: int
     episode_duration_s: float | None
     reward_weights: tuple[tuple[str, float], ...] = ()
+    in_worker: bool = False  # called in a SubprocVecEnv worker
 
     def __call__(self) -> Any:
         import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
+
+        if self.in_worker:
+            # the trainer stops its env workers itself; they end when it closes (or loses)
+            # the pipe to them, so a terminal's Ctrl-C or a group's SIGTERM must not kill
+            # them under a trainer that is writing its final checkpoint
+            ignore_signals((signal.SIGINT, signal.SIGTERM))
 
         if is_myoexo_env(self.env_id):
             from myoexo.envs import make_env
@@ -100,8 +133,9 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
     wrapped in ``VecNormalize`` (observations only) if the preset says so."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    fns = [
-        make_env_fn(preset.env_id, i, preset.episode_duration_s, preset.reward_weights)
+    subproc = preset.vec_env == "subproc"
+    fns: list[Callable[[], Any]] = [
+        _EnvFactory(preset.env_id, i, preset.episode_duration_s, preset.reward_weights, subproc)
         for i in range(preset.n_envs)
     ]
     venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
@@ -160,6 +194,33 @@ def _sessions(run_dir: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+def _next_session(run_dir: Path) -> int:
+    """Number of the new session: after every recorded session and every progress log (a
+    session killed with SIGKILL has a log but no record; its log is kept)."""
+    logged = [
+        int(m.group(1))
+        for p in run_dir.glob("progress_*.csv")
+        if (m := _PROGRESS_RE.fullmatch(p.name))
+    ]
+    return max(len(_sessions(run_dir)), max(logged, default=-1) + 1)
+
+
+def checkpoint_cadence(preset: SACPreset) -> dict[str, Any]:
+    """The checkpoint cadence of a run (recorded in its ``config.json``)."""
+    return {
+        "every_s": preset.checkpoint_every_s,
+        "every_steps": preset.checkpoint_every_steps,
+        "first_after_learning_starts_steps": preset.first_checkpoint_steps,
+        "first_after_s": preset.first_checkpoint_s,
+        "learning_starts": preset.learning_starts,
+        "keep_resumable": preset.keep_resumable_checkpoints,
+        "rule": "a resumable checkpoint when either cadence is due (whichever comes first); "
+        "the first one once learning_starts + first_after_learning_starts_steps transitions "
+        "are collected or first_after_s seconds have passed; the newest keep_resumable keep "
+        "their replay buffer",
+    }
+
+
 def _learn(
     model: Any,
     preset: SACPreset,
@@ -168,8 +229,10 @@ def _learn(
     wall_time_offset_s: float,
     progress_bar: bool,
     verbose: int,
+    graceful_stop: bool = True,
 ) -> TrainResult:
-    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks."""
+    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks;
+    with ``graceful_stop``, SIGINT / SIGTERM end it early with a checkpoint."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -178,11 +241,13 @@ def _learn(
         PeriodicCheckpointCallback,
         RewardTermsCallback,
         SmallEvalSpec,
+        StopOnSignalCallback,
     )
 
     torch.set_num_threads(preset.torch_threads)
-    session = len(_sessions(run_dir))
+    session = _next_session(run_dir)
     model.set_logger(_make_logger(run_dir, session, verbose))
+    stop = StopSignals(enabled=graceful_stop)
     evaluator = None
     if preset.eval_every_steps > 0 and is_myoexo_env(preset.env_id):
         spec = SmallEvalSpec(
@@ -190,16 +255,20 @@ def _learn(
             subjects=preset.eval_subjects,
             episode_duration_s=preset.episode_duration_s,
         )
-        evaluator = PaperMetricsEvalCallback(run_dir, preset.eval_every_steps, spec, verbose)
+        evaluator = PaperMetricsEvalCallback(
+            run_dir, preset.eval_every_steps, spec, verbose, stop=stop
+        )
     checkpointer = PeriodicCheckpointCallback(
         run_dir,
         every_s=preset.checkpoint_every_s,
         every_steps=preset.checkpoint_every_steps,
         wall_time_offset_s=wall_time_offset_s,
         evaluator=evaluator,
+        keep_replay=preset.keep_resumable_checkpoints,
         verbose=verbose,
+        first_after_steps=preset.first_checkpoint_steps,
+        first_after_s=preset.first_checkpoint_s,
     )
-    callbacks = [RewardTermsCallback(), *([evaluator] if evaluator else []), checkpointer]
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
     record = {
@@ -210,23 +279,34 @@ def _learn(
         "argv": sys.argv,
     }
     t0 = time.monotonic()
-    if remaining > 0:
-        model.learn(
-            total_timesteps=remaining,
-            callback=CallbackList(callbacks),
-            reset_num_timesteps=start_step == 0,
-            progress_bar=progress_bar,
-            log_interval=max(1, preset.n_envs),
-        )
-    elapsed = time.monotonic() - t0
-    last = ck.latest_checkpoint(run_dir, with_replay=True)
-    if last is None:  # nothing left to do and never checkpointed
-        last = checkpointer.save(with_replay=True)
+    with stop:
+        if remaining > 0:
+            callbacks = [
+                RewardTermsCallback(),
+                *([evaluator] if evaluator else []),
+                checkpointer,
+                StopOnSignalCallback(stop),
+            ]
+            model.learn(
+                total_timesteps=remaining,
+                callback=CallbackList(callbacks),
+                reset_num_timesteps=start_step == 0,
+                progress_bar=progress_bar,
+                log_interval=max(1, preset.n_envs),
+            )
+        elapsed = time.monotonic() - t0
+        last = checkpointer.last_checkpoint
+        if last is None or not (last / ck.REPLAY_FILE).is_file():
+            last = ck.latest_checkpoint(run_dir, with_replay=True)
+        if last is None:  # nothing left to do and never checkpointed
+            last = checkpointer.save(with_replay=True)
     steps = int(model.num_timesteps)
+    stopped_by = stop.name if steps < int(total_timesteps) else None
     record.update(
         end_step=steps,
         wall_time_s=round(elapsed, 3),
         ended_utc=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        stopped_by=stopped_by,
     )
     with open(run_dir / ck.SESSIONS_FILE, "a") as f:
         f.write(json.dumps(record) + "\n")
@@ -236,6 +316,7 @@ def _learn(
         num_timesteps=steps,
         wall_time_s=wall_time_offset_s + elapsed,
         session_env_steps_per_s=(steps - start_step) / max(elapsed, 1e-9),
+        stopped_by=stopped_by,
     )
 
 
@@ -245,6 +326,7 @@ def train(
     seed: int = 0,
     progress_bar: bool = False,
     verbose: int = 1,
+    graceful_stop: bool = True,
 ) -> TrainResult:
     """Train a new SAC run in ``run_dir`` (created; must not already hold a run).
 
@@ -254,38 +336,129 @@ def train(
         seed: Seed of the learner (torch, numpy) and of the envs (``seed + i``).
         progress_bar: Show SB3's tqdm/rich progress bar.
         verbose: 0 silent, 1 one line per checkpoint/evaluation, 2 also SB3's log tables.
+        graceful_stop: Handle SIGINT / SIGTERM during ``learn`` (main thread only): stop
+            after the current step with a checkpoint (:attr:`TrainResult.stopped_by`).
+
+    Raises:
+        ValueError: A bad seed, a folder that already holds a run, or a folder in use by
+            another process (:class:`~myoexo.lifecycle.FolderInUseError`).
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed = {seed!r} must be an integer >= 0")
     run_dir = Path(run_dir)
-    if (run_dir / ck.CONFIG_FILE).exists():
-        raise ValueError(
-            f"{str(run_dir)!r} already holds a run; continue it with resume() / "
-            "`myoexo train --resume DIR`, or choose another folder"
-        )
     run_dir.mkdir(parents=True, exist_ok=True)
+    with FolderLock(run_dir, RUN_FOLDER):
+        if (run_dir / ck.CONFIG_FILE).exists():
+            raise ValueError(
+                f"{str(run_dir)!r} already holds a run; continue it with resume() / "
+                "`myoexo train --resume DIR` (or, if it never wrote a checkpoint, start it "
+                "again with `myoexo train --restart DIR`), or choose another folder"
+            )
+        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop)
+
+
+def _start(
+    preset: SACPreset,
+    run_dir: Path,
+    seed: int,
+    progress_bar: bool,
+    verbose: int,
+    graceful_stop: bool,
+) -> TrainResult:
+    """A new run in ``run_dir`` (locked by the caller): ``config.json``, then ``learn``."""
+    ck.remove_stale_temporaries(run_dir)
     venv = make_vec_env(preset, seed)
     try:
-        obs_keys = venv.get_attr("obs_keys", [0])[0]
-    except AttributeError:
-        obs_keys = None
-    config = {
-        "preset": preset.to_dict(),
-        "seed": seed,
-        "env_id": preset.env_id,
-        "obs_dim": int(venv.observation_space.shape[0]),
-        "obs_keys": list(obs_keys) if obs_keys is not None else None,
-        "updates_per_transition": preset.updates_per_transition,
-        "versions": package_versions(),
-        "platform": platform.platform(),
-        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    write_json_atomic(run_dir / ck.CONFIG_FILE, config)
-    model = build_sac(preset, venv, seed)
-    try:
-        return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, progress_bar, verbose)
+        try:
+            obs_keys = venv.get_attr("obs_keys", [0])[0]
+        except AttributeError:
+            obs_keys = None
+        config = {
+            "preset": preset.to_dict(),
+            "seed": seed,
+            "env_id": preset.env_id,
+            "obs_dim": int(venv.observation_space.shape[0]),
+            "obs_keys": list(obs_keys) if obs_keys is not None else None,
+            "updates_per_transition": preset.updates_per_transition,
+            "checkpoint_cadence": checkpoint_cadence(preset),
+            "versions": package_versions(),
+            "platform": platform.platform(),
+            "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+        write_json_atomic(run_dir / ck.CONFIG_FILE, config)
+        model = build_sac(preset, venv, seed)
+        return _learn(
+            model,
+            preset,
+            run_dir,
+            preset.total_timesteps,
+            0.0,
+            progress_bar,
+            verbose,
+            graceful_stop,
+        )
     finally:
         venv.close()
+
+
+def _load_checkpoint(checkpoint: Path, preset: SACPreset, seed: int) -> tuple[Any, Any]:
+    """``(model, venv)`` restored from a resumable checkpoint (raises if it cannot be)."""
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    step = int(ck.read_state(checkpoint)["num_timesteps"])
+    venv = make_vec_env(preset, seed + step)
+    try:
+        if preset.normalize_obs:
+            venv = VecNormalize.load(str(checkpoint / ck.VECNORM_FILE), venv.venv)
+            venv.training = True
+        model = SAC.load(checkpoint / ck.MODEL_FILE, env=venv, device="cpu")
+        model.load_replay_buffer(checkpoint / ck.REPLAY_FILE)
+        model.set_random_seed(seed + step)
+    except BaseException:
+        venv.close()
+        raise
+    return model, venv
+
+
+def _restore_newest(run_dir: Path, preset: SACPreset, seed: int) -> tuple[Any, Any, Path]:
+    """``(model, venv, checkpoint)`` from the newest intact resumable checkpoint.
+
+    A checkpoint that fails :func:`~myoexo.training.checkpoints.checkpoint_problem` is set
+    aside; one that fails to load is skipped; both with a
+    :class:`~myoexo.training.checkpoints.DamagedCheckpointWarning`.
+    """
+    candidates = ck.resumable_checkpoints(run_dir)
+    if not candidates:
+        raise NoCheckpointError(
+            f"{str(run_dir)!r} has no resumable checkpoint yet (its first session ended "
+            "before writing one); start it again in the same folder, with its saved "
+            f"settings, with: myoexo train --restart {run_dir}"
+        )
+    failures: list[str] = []
+    for checkpoint in reversed(candidates):
+        problem = ck.checkpoint_problem(checkpoint)
+        if problem is not None:
+            ck.set_aside(checkpoint, problem)
+            failures.append(f"{checkpoint.name}: {problem}")
+            continue
+        try:
+            model, venv = _load_checkpoint(checkpoint, preset, seed)
+        except Exception as exc:
+            reason = f"{type(exc).__name__}: {exc}"
+            warnings.warn(
+                f"checkpoint {checkpoint} cannot be loaded ({reason}); falling back to the "
+                "previous checkpoint",
+                ck.DamagedCheckpointWarning,
+                stacklevel=3,
+            )
+            failures.append(f"{checkpoint.name}: {reason}")
+            continue
+        return model, venv, checkpoint
+    raise NoCheckpointError(
+        f"{str(run_dir)!r} has no intact resumable checkpoint ({'; '.join(failures)}); start "
+        f"it again with: myoexo train --restart {run_dir}"
+    )
 
 
 def resume(
@@ -293,44 +466,83 @@ def resume(
     total_timesteps: int | None = None,
     progress_bar: bool = False,
     verbose: int = 1,
+    graceful_stop: bool = True,
 ) -> TrainResult:
-    """Continue the run in ``run_dir`` from its newest resumable checkpoint.
+    """Continue the run in ``run_dir`` from its newest intact resumable checkpoint.
 
     Args:
         run_dir: A folder written by :func:`train`.
         total_timesteps: New total step budget of the run (default: the preset's).
         progress_bar: Show SB3's progress bar.
         verbose: As in :func:`train`.
-    """
-    from stable_baselines3 import SAC
-    from stable_baselines3.common.vec_env import VecNormalize
+        graceful_stop: As in :func:`train`.
 
+    Raises:
+        ValueError: Not a run folder; no resumable checkpoint (:class:`NoCheckpointError`:
+            use :func:`restart`); a folder in use by another process.
+    """
     run_dir = Path(run_dir)
-    config = ck.read_config(run_dir)
-    preset = preset_from_dict(config["preset"])
-    seed = int(config["seed"])
-    last = ck.latest_checkpoint(run_dir, with_replay=True)
-    if last is None:
-        raise ValueError(f"{str(run_dir)!r} has no resumable checkpoint yet; start it again")
-    state = ck.read_state(last)
-    step = int(state["num_timesteps"])
-    venv = make_vec_env(preset, seed + step)
-    if preset.normalize_obs:
-        venv = VecNormalize.load(str(last / ck.VECNORM_FILE), venv.venv)
-        venv.training = True
-    model = SAC.load(last / ck.MODEL_FILE, env=venv, device="cpu")
-    model.load_replay_buffer(last / ck.REPLAY_FILE)
-    model.set_random_seed(seed + step)
-    if verbose and model.replay_buffer is not None:
-        print(
-            f"[resume] {run_dir} from {last.name}: {step} steps, "
-            f"{model.replay_buffer.size() * model.n_envs} transitions in the replay buffer",
-            flush=True,
-        )
-    total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
-    try:
-        return _learn(
-            model, preset, run_dir, total, float(state["wall_time_s"]), progress_bar, verbose
-        )
-    finally:
-        venv.close()
+    ck.read_config(run_dir)  # not a run folder: refused before anything is written
+    with FolderLock(run_dir, RUN_FOLDER):
+        config = ck.read_config(run_dir)
+        preset = preset_from_dict(config["preset"])
+        seed = int(config["seed"])
+        ck.remove_stale_temporaries(run_dir)
+        model, venv, last = _restore_newest(run_dir, preset, seed)
+        try:
+            state = ck.read_state(last)
+            step = int(state["num_timesteps"])
+            if verbose and model.replay_buffer is not None:
+                print(
+                    f"[resume] {run_dir} from {last.name}: {step} steps, "
+                    f"{model.replay_buffer.size() * model.n_envs} transitions in the replay "
+                    "buffer",
+                    flush=True,
+                )
+            total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
+            return _learn(
+                model,
+                preset,
+                run_dir,
+                total,
+                float(state["wall_time_s"]),
+                progress_bar,
+                verbose,
+                graceful_stop,
+            )
+        finally:
+            venv.close()
+
+
+def restart(
+    run_dir: str | Path,
+    progress_bar: bool = False,
+    verbose: int = 1,
+    graceful_stop: bool = True,
+) -> TrainResult:
+    """Start the run in ``run_dir`` again from step 0 with its saved settings.
+
+    For a run whose first session ended (a crash, a kill) before its first resumable
+    checkpoint: its outputs (checkpoints, logs, evaluations) are deleted, its
+    ``config.json`` (preset, seed) is kept and rewritten.
+
+    Raises:
+        ValueError: Not a run folder; the folder holds an intact resumable checkpoint
+            (continue it with :func:`resume`); a folder in use by another process.
+    """
+    run_dir = Path(run_dir)
+    ck.read_config(run_dir)  # not a run folder: refused before anything is written
+    with FolderLock(run_dir, RUN_FOLDER):
+        config = ck.read_config(run_dir)
+        preset = preset_from_dict(config["preset"])
+        seed = int(config["seed"])
+        intact = [c for c in ck.resumable_checkpoints(run_dir) if ck.checkpoint_problem(c) is None]
+        if intact:
+            raise ValueError(
+                f"{str(run_dir)!r} holds the resumable checkpoint {intact[-1].name}; continue "
+                f"it with: myoexo train --resume {run_dir}"
+            )
+        removed = ck.clear_run_outputs(run_dir)
+        if verbose:
+            print(f"[restart] {run_dir}: removed {removed} output(s) of the failed start")
+        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop)
