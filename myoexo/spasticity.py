@@ -526,6 +526,7 @@ class SpasticityStage:
         self._dof_adr = int(model.jnt_dofadr[jid])
         self._act_ids = np.asarray(ids, dtype=np.intp)
         self._nu = int(model.nu)
+        self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
         self._model = model
 
     @property
@@ -573,9 +574,10 @@ class SpasticityStage:
         if ctrl.shape[0] != self._nu:
             raise ValueError(f"ctrl has {ctrl.shape[0]} entries, the model {self._nu} actuators.")
         data = env.data
-        sc = self.sc_now(
-            float(data.qpos[self._qpos_adr]) * _RAD_TO_DEG, float(data.qvel[self._dof_adr])
-        )
+        views = self._data_views
+        if views is None or views[0] is not data:  # its qpos/qvel views, looked up once
+            views = self._data_views = (data, data.qpos, data.qvel)
+        sc = self.sc_now(views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr))
         ids = self._act_ids
         u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
         u += sc
@@ -592,7 +594,7 @@ class SpasticityStage:
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state["_model"] = None  # re-bound on the first step after unpickling
-        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu"):
+        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu", "_data_views"):
             state.pop(key, None)
         return state
 
