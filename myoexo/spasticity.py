@@ -603,6 +603,7 @@ class SpasticityStage:
         self._nu = int(model.nu)
         period = float(control_period_s or model.opt.timestep)
         self._delay = DelayLine(round(self.reflex.delay_s / period))
+        self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
         self._model = model
 
     @property
@@ -687,8 +688,11 @@ class SpasticityStage:
         if ctrl.shape[0] != self._nu:
             raise ValueError(f"ctrl has {ctrl.shape[0]} entries, the model {self._nu} actuators.")
         data = env.data
+        views = self._data_views
+        if views is None or views[0] is not data:  # its qpos/qvel views, looked up once
+            views = self._data_views = (data, data.qpos, data.qvel)
         theta_deg, vel_rad_s = self._delay.push(
-            float(data.qpos[self._qpos_adr]) * _RAD_TO_DEG, float(data.qvel[self._dof_adr])
+            views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
         )
         flex, ext = self._excitations(theta_deg, vel_rad_s, self._uniform)
         ids = self._act_ids
@@ -711,7 +715,7 @@ class SpasticityStage:
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state["_model"] = None  # re-bound on the first step after unpickling
-        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu", "_n_flex"):
+        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu", "_n_flex", "_data_views"):
             state.pop(key, None)
         return state
 

@@ -220,3 +220,76 @@ def test_instability_truncates_with_a_flag_and_finite_observation(env1):
     assert truncated and not terminated
     assert info["unstable"] is True
     assert np.isfinite(obs).all() and np.isfinite(reward)
+
+
+def test_step_is_raw_physics_and_forces_are_those_of_the_last_substep():
+    """The documented timing of ``step``: the state after the step is exactly
+    ``mj_step(frame_skip)`` with the step's ``ctrl``; the force-like observations equal what a
+    fresh ``mj_forward`` of the state at t - h (the last substep's start) gives."""
+    import mujoco
+
+    from myoexo.model.joint_torque import CoupledJointTorque
+
+    env = gym.make("MyoExoKnee-v2")
+    base = env.unwrapped
+    model, fs = base.model, base.frame_skip
+    env.reset(seed=4)
+    for a in (-0.5, 0.2, -0.8, 0.0, -0.3):
+        env.step(np.array([a], np.float32))
+    replica = mujoco.MjData(model)
+    mujoco.mj_copyData(replica, model, base.data)
+    obs, _, _, _, info = env.step(np.array([0.4], np.float32))
+    od = info["obs_dict"]
+
+    replica.ctrl[:] = base.data.ctrl  # the step's control, spastic excitations included
+    mujoco.mj_step(model, replica, fs - 1)
+    mujoco.mj_forward(model, replica)  # the state at t - h, as the last substep saw it
+    ids = np.array([model.actuator(n).id for n in myoexo.spasticity.SPASTIC_MUSCLES])
+    f0 = np.abs(model.actuator_gainprm[ids, 2])
+    lo, hi = model.actuator_lengthrange[ids].T
+    span = np.maximum(hi - lo, 1e-6)
+    exo = replica.qfrc_actuator[model.joint("exo_knee").dofadr[0]]
+    muscle = CoupledJointTorque(model, "knee_angle_r")(replica)
+    assert od["exo_torque_nm"][0] == exo == info["exo_torque_nm"]
+    assert od["muscle_knee_torque_nm"][0] == muscle == info["muscle_knee_torque_nm"]
+    assert od["interaction_torque_nm"][0] == abs(exo) + abs(muscle)
+    for key, sensor in myoexo.envs.knee_exo.CUFF_OBS_KEYS.items():
+        np.testing.assert_array_equal(od[key], replica.sensor(sensor).data)
+    np.testing.assert_array_equal(od["spastic_force"], replica.actuator_force[ids] * (-1.0 / f0))
+    np.testing.assert_array_equal(
+        od["spastic_length"], (replica.actuator_length[ids] - lo) * (1.0 / span)
+    )
+    np.testing.assert_array_equal(
+        od["spastic_velocity"], replica.actuator_velocity[ids] * (1.0 / span)
+    )
+
+    mujoco.mj_step(model, replica)  # the last substep: the state after the step
+    for name in ("qpos", "qvel", "act"):
+        np.testing.assert_array_equal(getattr(replica, name), getattr(base.data, name))
+    assert replica.time == base.data.time == info["time_s"]
+    knee = model.joint("knee_angle_r")
+    assert od["knee_angle_rad"][0] == replica.qpos[knee.qposadr[0]]
+    assert od["knee_vel_rad_s"][0] == replica.qvel[knee.dofadr[0]]
+    np.testing.assert_array_equal(od["spastic_act"], replica.act[model.actuator_actadr[ids]])
+    np.testing.assert_array_equal(obs, base._obs_dict_to_vec(od))
+    env.close()
+
+
+def test_ctrl_stages_installed_or_removed_between_steps_take_effect():
+    env = gym.make("MyoExoKnee-v0")
+    base = env.unwrapped
+    env.reset(seed=0)
+    env.step(np.array([0.0], np.float32))
+    muscle = int(np.flatnonzero(base._muscle_act_ind)[0])
+
+    def excite(_env, ctrl):
+        ctrl[muscle] = 0.7
+        return ctrl
+
+    base.add_ctrl_stage("test_excite", excite)
+    env.step(np.array([0.0], np.float32))
+    assert base.data.ctrl[muscle] == 0.7
+    base.remove_ctrl_stage("test_excite")
+    env.step(np.array([0.0], np.float32))
+    assert base.data.ctrl[muscle] == 0.0
+    env.close()

@@ -43,6 +43,10 @@ spastic_velocity              11     their velocity / length range (1/s)        
 time_frac                     1      time / episode duration (-)                 1
 ============================  =====  ==========================================  =======
 
+Timing after a step (details in :meth:`MyoExoKneeEnv.step`): angles, velocities, activations
+and time are the state after the step; torques, cuff sensors and muscle force/length/velocity
+are those MuJoCo computed in the step's last physics substep (one timestep earlier).
+
 Reward (MyoSuite ``weighted_reward_keys``; docs/reference.md section 3, defaults in
 :data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`): ``pose`` = exp(-e^2/(2 sigma^2)) - |e|;
 ``bonus`` = 0.01 while |e| < 0.05 rad and |knee vel| < 0.05 rad/s; ``inter`` =
@@ -59,7 +63,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, ClassVar
+import operator
+from collections.abc import Sequence
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import mujoco
@@ -279,9 +285,6 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         lr = m.actuator_lengthrange[ids]
         span = np.maximum(lr[:, 1] - lr[:, 0], 1e-6)
         n = len(ids)
-        # muscle block = (stacked [act, force, length, velocity] - offset) * gain
-        self._muscle_offset = np.concatenate([np.zeros(n), np.zeros(n), lr[:, 0], np.zeros(n)])
-        self._muscle_gain = np.concatenate([np.ones(n), -1.0 / f0, 1.0 / span, 1.0 / span])
 
         # Layout of the raw observation buffer (physical units): key -> slice.
         nc = len(names)
@@ -294,6 +297,31 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             self._slices[key] = slice(i, i + size)
             i += size
         self._raw_size = i
+        # The raw entries after the scalars, in layout order, as (MjData field, indices):
+        # _DataViews gathers them all with one index into the MjData's memory.
+        self._gathered = (
+            ("sensordata", self._sensor_idx),
+            ("qpos", self._coupling_qadr),
+            ("qvel", self._coupling_dadr),
+            ("act", self._spastic_actadr),
+            ("actuator_force", ids),
+            ("actuator_length", ids),
+            ("actuator_velocity", ids),
+        )
+        self._at = {key: sl.start for key, sl in self._slices.items()}  # key -> first index
+        # the other keys of obs_dict and a getter of their views of raw (one C call)
+        self._vector_keys = [k for k in self._slices if k not in _SCALAR_KEYS]
+        self._vector_views = operator.itemgetter(*(self._slices[k] for k in self._vector_keys))
+        # _add_info reads the scalars and the cuff sensors: the leading entries of the buffer
+        self._info_len = max(self._slices[k].stop for k in (*_SCALAR_KEYS, *CUFF_OBS_KEYS))
+        # raw buffer = (gathered values - offset) * gain: the muscle block [act, force,
+        # length, velocity] is normalized, every other entry kept exactly ((x - 0) * 1 = x)
+        self._raw_offset = np.zeros(i)
+        self._raw_gain = np.ones(i)
+        self._raw_offset[self._slices["spastic_length"]] = lr[:, 0]
+        self._raw_gain[self._slices["spastic_force"]] = -1.0 / f0
+        self._raw_gain[self._slices["spastic_length"]] = 1.0 / span
+        self._raw_gain[self._slices["spastic_velocity"]] = 1.0 / span
         unknown = [k for k in self.obs_keys if k not in self._slices]
         if unknown:
             raise ValueError(f"unknown obs_keys {unknown}; accepted: {list(self._slices)}")
@@ -306,6 +334,10 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         )
         self._vec_scale = np.concatenate([scales[k] for k in self.obs_keys])
         self._target_rad = math.radians(self.task.target_angle_deg)
+        self._half_timestep_s = 0.5 * float(m.opt.timestep)
+        self._views: _DataViews | None = None
+        self._stages_seen: tuple = ()  # see _run_ctrl_stages
+        self._stage_applies: tuple = ()
 
     def _clear_episode_state(self) -> None:
         self._command = 0.0
@@ -313,6 +345,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._prev_knee_vel = 0.0
         self._prev_tau_knee = 0.0
         self._steps = 0
+        self._episode_steps = self.task.episode_steps
         self._subject: dict[str, float] = {}
 
     # ------------------------------------------------------------------ properties
@@ -337,141 +370,230 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         return self.task.episode_steps
 
     # ------------------------------------------------------------------ observation
-    def _get_obs_dict(self, accessor: CpuEnvAccessor) -> dict[str, np.ndarray]:
-        """Every quantity the env observes, in physical units (see the module docstring).
+    def _data_views(self) -> _DataViews:
+        """What the step reads from ``self.data`` (:class:`_DataViews`), set up once per
+        ``MjData`` object: an ``MjData`` array attribute is a view of memory that lives as
+        long as the ``MjData``, so caching it saves a lookup and a new view per read."""
+        views = self._views
+        if views is None or views.data is not self.data:
+            views = self._views = _DataViews.of(self.data, self._gathered)
+        return views
 
-        The values are views into one freshly allocated buffer per call (gathered with
-        index arrays resolved at construction), so stored dicts are never overwritten.
+    def _gather_raw(self, views: _DataViews, forces_knee_rad: float | None = None) -> np.ndarray:
+        """Every observed quantity, in physical units, in a freshly allocated buffer.
+
+        Layout ``self._slices``: the scalars of ``_SCALAR_KEYS``, then the cuff sensors,
+        coupling joints and spastic muscles (``self._gathered``, one index into the data's
+        buffer), the muscle block normalized. Everything is read from ``views`` as it
+        stands (see :meth:`step` for what that means in time after a step).
+
+        Args:
+            views: What to read (:meth:`_data_views` or another ``MjData``'s).
+            forces_knee_rad: Knee angle (rad) of the state the data's forces were computed
+                at, for the muscle torque's knee transmission (default: the current angle).
+        """
+        qpos, qvel, qfrc = views.qpos, views.qvel, views.qfrc_actuator
+        time_s = views.data.time
+        knee_rad = qpos.item(self._knee_qadr)
+        exo_torque_nm = qfrc.item(self._exo_dadr)
+        if forces_knee_rad is None:
+            forces_knee_rad = knee_rad
+        muscle_torque_nm = self._knee_torque.torque_at(forces_knee_rad, qfrc)
+        scalars = (  # _SCALAR_KEYS, in order
+            time_s,
+            knee_rad,
+            qvel.item(self._knee_dadr),
+            qpos.item(self._exo_qadr),
+            qvel.item(self._exo_dadr),
+            self._target_rad,
+            knee_rad - self._target_rad,
+            self._command,
+            exo_torque_nm,
+            muscle_torque_nm,
+            abs(exo_torque_nm) + abs(muscle_torque_nm),
+            time_s / self.task.episode_duration_s,
+        )
+        # then the cuff sensors, coupling joints, muscles: one index into the data's buffer
+        raw = np.concatenate((scalars, views.buffer[views.gather_index]))
+        raw -= self._raw_offset
+        raw *= self._raw_gain
+        return raw
+
+    def _split_raw(self, raw: np.ndarray) -> dict[str, np.ndarray]:
+        """``obs_dict``: one view of *raw* per key (a new buffer per step: stored dicts are
+        never overwritten)."""
+        # The scalars' 1-element views: iterating a column view makes them faster than
+        # slicing. The lengths match by construction (zip(strict=True) costs ~1 us here).
+        obs_dict = dict(zip(_SCALAR_KEYS, raw[: len(_SCALAR_KEYS), None]))  # noqa: B905
+        obs_dict.update(zip(self._vector_keys, self._vector_views(raw)))  # noqa: B905
+        return obs_dict
+
+    def _get_obs_dict(self, accessor: CpuEnvAccessor) -> dict[str, np.ndarray]:
+        """Every quantity the env observes, in physical units (see the module docstring),
+        read from ``accessor.data`` as it stands.
+
+        For all of it to refer to the current state, the data's derived quantities must be
+        those of its state (true after ``reset``, ``forward()``, ``set_state`` or an
+        ``mj_forward``). Right after a ``step`` they are the last substep's (see
+        :meth:`step`, whose own observation evaluates the knee transmission at that substep's
+        angle; this path evaluates it at the current angle).
         """
         d = accessor.data
-        knee = d.qpos[self._knee_qadr]
-        exo_torque = d.qfrc_actuator[self._exo_dadr]
-        muscle_torque = self._knee_torque(d)
-        t = d.time
-        ids = self._spastic_ids
-        scalars = (
-            t,
-            knee,
-            d.qvel[self._knee_dadr],
-            d.qpos[self._exo_qadr],
-            d.qvel[self._exo_dadr],
-            self._target_rad,
-            knee - self._target_rad,
-            self._command,
-            exo_torque,
-            muscle_torque,
-            abs(exo_torque) + abs(muscle_torque),
-            t / self.task.episode_duration_s,
-        )
-        muscles = np.concatenate(
-            (
-                d.act[self._spastic_actadr],
-                d.actuator_force[ids],
-                d.actuator_length[ids],
-                d.actuator_velocity[ids],
-            )
-        )
-        muscles -= self._muscle_offset
-        muscles *= self._muscle_gain
-        raw = np.concatenate(
-            (
-                scalars,
-                d.sensordata[self._sensor_idx],
-                d.qpos[self._coupling_qadr],
-                d.qvel[self._coupling_dadr],
-                muscles,
-            )
-        )
-        return {key: raw[sl] for key, sl in self._slices.items()}
+        views = self._data_views() if d is self.data else _DataViews.of(d, self._gathered)
+        return self._split_raw(self._gather_raw(views))
+
+    def _raw_to_vec(self, raw: np.ndarray) -> np.ndarray:
+        """The observation vector: the ``obs_keys`` entries of *raw*, each times its scale."""
+        return (raw[self._vec_idx] * self._vec_scale).astype(np.float32)
 
     def _obs_dict_to_vec(self, obs_dict: dict[str, np.ndarray]) -> np.ndarray:
         """Flatten the ``obs_keys`` entries, each times its fixed scale (float32)."""
         raw = obs_dict["time"].base
         if raw is None or raw.size != self._raw_size:  # a dict not made by _get_obs_dict
             raw = np.concatenate([np.atleast_1d(obs_dict[k]).ravel() for k in self._slices])
-        return (raw[self._vec_idx] * self._vec_scale).astype(np.float32)
+        return self._raw_to_vec(raw)
 
     # ------------------------------------------------------------------ reward
     def get_reward_dict(self, obs_dict: dict[str, np.ndarray]) -> dict[str, Any]:
         """The paper's reward terms (docs/reference.md section 3) and their weighted sum."""
+        return self._reward_terms(
+            float(obs_dict["error_rad"][0]),
+            float(obs_dict["knee_vel_rad_s"][0]),
+            float(obs_dict["interaction_torque_nm"][0]),
+        )
+
+    def _reward_terms(
+        self, error_rad: float, knee_vel_rad_s: float, interaction_torque_nm: float
+    ) -> dict[str, Any]:
+        """:meth:`get_reward_dict` from the three observed scalars it depends on."""
         p = self.reward_params
-        e = float(obs_dict["error_rad"][0])
-        knee_vel = float(obs_dict["knee_vel_rad_s"][0])
-        tau = float(obs_dict["interaction_torque_nm"][0])
+        e = error_rad
+        tau = interaction_torque_nm
         d_tau = (tau - self._prev_tau_knee) / p.torque_scale_nm
         inter = d_tau * d_tau
         if tau > p.torque_threshold_nm:
             inter += (tau / p.torque_scale_nm) ** 2
+        abs_e = abs(e)
         rwd = {
-            "pose": math.exp(-e * e / (2.0 * p.sigma_rad**2)) - abs(e),
+            "pose": math.exp(-e * e / (2.0 * p.sigma_rad**2)) - abs_e,
             "bonus": p.bonus
-            if abs(e) < p.bonus_error_rad and abs(knee_vel) < p.bonus_vel_rad_s
+            if abs_e < p.bonus_error_rad and abs(knee_vel_rad_s) < p.bonus_vel_rad_s
             else 0.0,
             "inter": inter,
-            "vel": abs(knee_vel - self._prev_knee_vel),
+            "vel": abs(knee_vel_rad_s - self._prev_knee_vel),
             "act": (self._command - self._prev_command) ** 2,
-            "sparse": -abs(e),
-            "solved": abs(e) < p.bonus_error_rad,
+            "sparse": -abs_e,
+            "solved": abs_e < p.bonus_error_rad,
             "done": False,
         }
-        rwd["dense"] = sum(w * rwd[k] for k, w in self.rwd_keys_wt.items())
+        dense = 0.0
+        for key, weight in self.rwd_keys_wt.items():
+            dense += weight * rwd[key]
+        rwd["dense"] = dense
         return rwd
 
     # ------------------------------------------------------------------ gymnasium API
     def _check_action(self, action: Any) -> float:
-        a = np.asarray(action, dtype=np.float64)
-        if a.size != 1 or a.ndim > 1:
-            raise ValueError(
-                f"action must have shape (1,) (the exo motor command), got shape {a.shape}"
-            )
-        u = float(a.reshape(()))
+        if type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind == "f":
+            u = float(action[0])  # fast path: what an agent sends
+        else:
+            a = np.asarray(action, dtype=np.float64)
+            if a.size != 1 or a.ndim > 1:
+                raise ValueError(
+                    f"action must have shape (1,) (the exo motor command), got shape {a.shape}"
+                )
+            u = float(a.reshape(()))
         if not math.isfinite(u):
             raise ValueError(f"action must be finite, got {u}; accepted range [-1, 1]")
         return min(1.0, max(-1.0, u))
+
+    def _run_ctrl_stages(self, ctrl: np.ndarray) -> np.ndarray:
+        """Apply the installed stages to *ctrl* (:class:`CtrlStageHost`'s pipeline).
+
+        The stage list is sorted once and kept until a stage is added or removed (the
+        installed entries are compared by identity each step, which is cheaper than the
+        host's sort).
+        """
+        installed = tuple(self._stage_store().values())
+        if installed != self._stages_seen:
+            self._stages_seen = installed
+            self._stage_applies = tuple(apply for _, (_, apply, _) in self._stages_in_order())
+        for apply in self._stage_applies:
+            ctrl = apply(self, ctrl)
+        return ctrl
 
     def step(
         self, action: Any, **kwargs: Any
     ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the exo command for one control period and return the 5-tuple.
 
-        Physics: the position/velocity stages of the current state are valid at every step
-        start (``reset``, ``forward`` and the end of each step run ``mj_forward``), so the
-        first substep is ``mj_step2`` (actuation with the new ``ctrl``, acceleration,
-        integration) instead of a full ``mj_step``; the remaining substeps are ``mj_step``
-        and a final ``mj_forward`` makes every derived quantity (sensors, muscle forces)
-        consistent with the returned state. The trajectory is the one ``mj_step`` x
-        ``frame_skip`` gives, without computing the first substep's kinematics twice.
+        Physics: exactly ``mj_step(model, data, frame_skip)`` with this step's ``ctrl``
+        (run as ``frame_skip - 1`` substeps and a last one, to note the knee angle in
+        between; the state trajectory is bit-identical to raw ``mj_step``), and no extra
+        ``mj_forward``: the returned quantities are what the state and the last substep
+        provide. With ``t = info["time_s"]`` and ``h`` the physics
+        timestep (the last substep integrated the state from ``t - h`` to ``t``):
+
+        * **state, at t** (after the step): ``time``, ``time_frac``, ``knee_angle_rad``,
+          ``knee_vel_rad_s``, ``exo_angle_rad``, ``exo_vel_rad_s``, ``error_rad``,
+          ``coupling_qpos``, ``coupling_qvel``, ``spastic_act`` (MuJoCo's activation
+          state) and the info entries made from them (``knee_angle_deg``, ...).
+        * **forces and muscle paths, at t - h** (the state the last substep started from,
+          with this step's command applied): ``exo_torque_nm``, ``muscle_knee_torque_nm``
+          (its knee transmission is evaluated at the knee angle of t - h too),
+          ``interaction_torque_nm``, the four cuff force/torque sensors, ``spastic_force``,
+          ``spastic_length``, ``spastic_velocity``. These are what MuJoCo computed in the
+          last substep (``actuator_force``, ``qfrc_actuator``, ``sensordata``, ...): the
+          forces that acted over ``[t - h, t]``, all of one instant, equal to what
+          ``mj_forward`` of the state at t - h gives (tests/test_envs.py checks it).
+        * ``command``: this step's (clipped) command; ``sc_total``: the reflex computed
+          from the knee state at the step start and held over the step.
+
+        After ``reset`` everything refers to the initial state (``mj_forward``, zero
+        command). If MuJoCo reset the data during the step (NaN/inf or a huge value:
+        ``info["unstable"]``, the episode truncates), an ``mj_forward`` of the reset state
+        makes every quantity refer to that state, so the observation stays finite.
         """
         u = self._check_action(action)
         self._prev_command, self._command = self._command, u
+        views = self._data_views()
         ctrl = self._ctrl
-        ctrl[:] = 0.0
+        ctrl.fill(0.0)
         ctrl[self._exo_act] = u
+        views.ctrl[:] = self._run_ctrl_stages(ctrl)
         m, d = self.model, self.data
-        d.ctrl[:] = self._run_ctrl_stages(ctrl)
-        t_expected = d.time + self._ctrl_dt
-        mujoco.mj_step2(m, d)
+        t_expected_s = d.time + self._ctrl_dt
         if self.frame_skip > 1:
             mujoco.mj_step(m, d, self.frame_skip - 1)
-        mujoco.mj_forward(m, d)
+        forces_knee_rad = views.qpos.item(self._knee_qadr)  # knee angle at t - h
+        mujoco.mj_step(m, d)
         self._steps += 1
         # MuJoCo checks every substep for NaN/inf/huge qpos, qvel or qacc and then resets
         # the data (time -> 0, finite state): a time that went back is an instability.
-        unstable = d.time < t_expected - 0.5 * m.opt.timestep
+        unstable = d.time < t_expected_s - self._half_timestep_s
+        if unstable:
+            mujoco.mj_forward(m, d)
+            forces_knee_rad = views.qpos.item(self._knee_qadr)
 
-        obs_dict = self._get_obs_dict(self._accessor)
-        rwd_dict = self.get_reward_dict(obs_dict)
-        obs = self._obs_dict_to_vec(obs_dict)
-        info = {k: v for k, v in rwd_dict.items() if k not in ("dense", "done")}
+        raw = self._gather_raw(views, forces_knee_rad)
+        obs_dict = self._split_raw(raw)
+        values = raw[: self._info_len].tolist()  # python floats: cheapest for scalar math
+        at = self._at
+        knee_vel = values[at["knee_vel_rad_s"]]
+        tau = values[at["interaction_torque_nm"]]
+        rwd_dict = self._reward_terms(values[at["error_rad"]], knee_vel, tau)
+        info = dict(rwd_dict)
+        del info["dense"], info["done"]
         info["obs_dict"] = obs_dict
         info["rwd_dict"] = rwd_dict
-        self._prev_knee_vel = float(obs_dict["knee_vel_rad_s"][0])
-        self._prev_tau_knee = float(obs_dict["interaction_torque_nm"][0])
-        truncated = unstable or self._steps >= self.task.episode_steps
-        self._add_info(info, obs_dict, unstable)
+        self._prev_knee_vel = knee_vel
+        self._prev_tau_knee = tau
+        truncated = unstable or self._steps >= self._episode_steps
+        self._add_info(info, values, unstable)
         if self.mujoco_render_frames:
             self.mj_render()
-        return obs, float(rwd_dict["dense"]), bool(rwd_dict["done"]), truncated, info
+        reward = float(rwd_dict["dense"])
+        return self._raw_to_vec(raw), reward, bool(rwd_dict["done"]), truncated, info
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -488,30 +610,41 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         start = self.task.start_angle_deg + float(self.np_random.uniform(-noise, noise))
         pose_twin(self.model, self.data, knee_angle_deg=start)
         mujoco.mj_forward(self.model, self.data)
-        obs_dict = self._get_obs_dict(self._accessor)
-        obs = self._ensure_obs_gymnasium_compliant(self._obs_dict_to_vec(obs_dict))
-        self._prev_tau_knee = float(obs_dict["interaction_torque_nm"][0])
+        raw = self._gather_raw(self._data_views())
+        obs = self._ensure_obs_gymnasium_compliant(self._raw_to_vec(raw))
+        values = raw[: self._info_len].tolist()
+        self._prev_tau_knee = values[self._at["interaction_torque_nm"]]
         info: dict[str, Any] = {}
-        self._add_info(info, obs_dict, False)
+        self._add_info(info, values, False)
         return obs, info
 
-    def _add_info(self, info: dict[str, Any], obs_dict: dict[str, np.ndarray], unstable: bool):
-        """Per-step quantities in clinical units (documented in the README's info table)."""
-        knee_deg = math.degrees(obs_dict["knee_angle_rad"][0])
+    def _add_info(self, info: dict[str, Any], values: list[float], unstable: bool):
+        """Per-step quantities in clinical units (documented in the README's info table).
+
+        Args:
+            info: The dict to complete (in place; returned).
+            values: The leading entries of the raw observation buffer (the scalars and the
+                cuff sensors) as python floats.
+            unstable: Whether MuJoCo reset the data during the step.
+        """
+        at = self._at
+        knee_deg = math.degrees(values[at["knee_angle_rad"]])
+        target_deg = self.task.target_angle_deg
+        thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
         stage = self.spasticity
         info.update(
-            time_s=float(obs_dict["time"][0]),
+            time_s=values[at["time"]],
             knee_angle_deg=knee_deg,
-            knee_vel_rad_s=float(obs_dict["knee_vel_rad_s"][0]),
-            exo_angle_deg=math.degrees(obs_dict["exo_angle_rad"][0]),
-            target_angle_deg=self.task.target_angle_deg,
-            error_deg=knee_deg - self.task.target_angle_deg,
+            knee_vel_rad_s=values[at["knee_vel_rad_s"]],
+            exo_angle_deg=math.degrees(values[at["exo_angle_rad"]]),
+            target_angle_deg=target_deg,
+            error_deg=knee_deg - target_deg,
             command=self._command,
-            exo_torque_nm=float(obs_dict["exo_torque_nm"][0]),
-            muscle_knee_torque_nm=float(obs_dict["muscle_knee_torque_nm"][0]),
-            interaction_torque_nm=float(obs_dict["interaction_torque_nm"][0]),
-            thigh_cuff_force_n=math.hypot(*obs_dict["thigh_cuff_force_n"]),
-            shank_cuff_force_n=math.hypot(*obs_dict["shank_cuff_force_n"]),
+            exo_torque_nm=values[at["exo_torque_nm"]],
+            muscle_knee_torque_nm=values[at["muscle_knee_torque_nm"]],
+            interaction_torque_nm=values[at["interaction_torque_nm"]],
+            thigh_cuff_force_n=math.hypot(values[thigh], values[thigh + 1], values[thigh + 2]),
+            shank_cuff_force_n=math.hypot(values[shank], values[shank + 1], values[shank + 2]),
             sc_total=float(stage.last_sc_total),
             level=int(stage.level),
             subject=self._subject,
@@ -539,3 +672,51 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
 def _has(model: mujoco.MjModel, obj: mujoco.mjtObj, name: str) -> bool:
     return mujoco.mj_name2id(model, obj, name) >= 0
+
+
+class _DataViews(NamedTuple):
+    """What the env reads from one ``MjData`` every step, looked up once.
+
+    ``qpos``, ``qvel``, ``ctrl``, ``qfrc_actuator`` are the data's arrays (views of its
+    memory, valid as long as ``data``). ``buffer[gather_index]`` gathers the array entries of
+    the observation (``MyoExoKneeEnv._gathered``) in one numpy call instead of one call per
+    array and a concatenation: MuJoCo allocates every per-model array of an ``mjData`` from
+    one main buffer (``mjData.buffer``, ``nbuffer`` bytes, "all pointers point in it"), so a
+    strided float64 view starting at the lowest of the arrays spans them all. ``buffer`` is
+    read-only, its base is one of ``data``'s own arrays (it keeps ``data`` alive), and only
+    the gathered entries, which lie inside their arrays, are ever read.
+    """
+
+    data: mujoco.MjData
+    qpos: np.ndarray
+    qvel: np.ndarray
+    ctrl: np.ndarray
+    qfrc_actuator: np.ndarray
+    buffer: np.ndarray
+    gather_index: np.ndarray
+
+    @classmethod
+    def of(cls, data: mujoco.MjData, gathered: Sequence[tuple[str, np.ndarray]]) -> _DataViews:
+        """Views of *data*, gathering ``[(field, indices), ...]`` in that order.
+
+        Raises:
+            RuntimeError: If the arrays do not lie in one buffer of ``data.nbuffer`` bytes.
+        """
+        arrays = [getattr(data, field) for field, _ in gathered]
+        addrs = [a.__array_interface__["data"][0] for a in arrays]
+        lowest = int(np.argmin(addrs))
+        start = addrs[lowest]
+        end = max(addr + a.nbytes for addr, a in zip(addrs, arrays, strict=True))
+        in_one_buffer = end - start <= data.nbuffer and all(
+            a.dtype == np.float64 and a.ndim == 1 and (addr - start) % 8 == 0
+            for addr, a in zip(addrs, arrays, strict=True)
+        )
+        if not in_one_buffer:
+            raise RuntimeError(f"MjData arrays {[f for f, _ in gathered]} are not in one buffer")
+        buffer = np.lib.stride_tricks.as_strided(
+            arrays[lowest], shape=((end - start) // 8,), strides=(8,), writeable=False
+        )
+        gather_index = np.concatenate(
+            [(addr - start) // 8 + idx for addr, (_, idx) in zip(addrs, gathered, strict=True)]
+        ).astype(np.intp)
+        return cls(data, data.qpos, data.qvel, data.ctrl, data.qfrc_actuator, buffer, gather_index)

@@ -43,15 +43,31 @@ class CoupledJointTorque:
         coef = np.array([model.eq_data[eq, 1:5] for eq in eqs]).reshape(len(eqs), 4)
         # d/dx (c1 x + c2 x^2 + c3 x^3 + c4 x^4) = c1 + 2 c2 x + 3 c3 x^2 + 4 c4 x^3
         self._dcoef = coef * np.arange(1, 5)
+        # torque = [qfrc[theta], qfrc[q_j]...] @ _power_coef @ [1, x, x^2, x^3]
+        self._dofs = np.concatenate([[self._dadr], self.dependent_dofs]).astype(np.intp)
+        self._power_coef = np.vstack([[1.0, 0.0, 0.0, 0.0], self._dcoef])
 
     def transmission(self, data: mujoco.MjData) -> np.ndarray:
         """``d q_j / d theta`` of every dependent joint at the current angle."""
         x = float(data.qpos[self._qadr])
         return self._dcoef @ np.array([1.0, x, x * x, x * x * x])
 
+    def torque_at(self, theta: float, qfrc: np.ndarray) -> float:
+        """Torque (Nm) of the generalized force ``qfrc`` along the joint at joint value *theta*.
+
+        ``qfrc[theta] + sum_j qfrc[q_j] * dpoly_j/dtheta(theta)``, regrouped by powers of
+        *theta*: ``s = [qfrc[theta], qfrc[q_j]...] @ W`` (one small product) and then
+        ``s0 + s1 theta + s2 theta^2 + s3 theta^3`` on python floats. Cheaper than two numpy
+        products, which matters in an env step; equal to ``qfrc[theta] + qfrc[q_j] @
+        transmission`` up to rounding.
+        """
+        s0, s1, s2, s3 = qfrc[self._dofs].dot(self._power_coef).tolist()
+        x = theta
+        return s0 + x * (s1 + x * (s2 + x * s3))
+
     def from_generalized(self, data: mujoco.MjData, qfrc: np.ndarray) -> float:
         """Torque (Nm, positive along the joint) of a generalized force vector ``qfrc``."""
-        return float(qfrc[self._dadr] + qfrc[self.dependent_dofs] @ self.transmission(data))
+        return self.torque_at(float(data.qpos[self._qadr]), qfrc)
 
     def __call__(self, data: mujoco.MjData) -> float:
         """Actuator torque along the joint from the last computed ``qfrc_actuator`` (Nm)."""
