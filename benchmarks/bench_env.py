@@ -37,8 +37,10 @@ def _snapshot(env) -> mujoco.MjData:
     return data
 
 
-def bench(env_id: str, steps: int, repeats: int = 7, block: int = 100) -> dict[str, float]:
-    env = gym.make(env_id).unwrapped  # the bare env: what a VecEnv worker steps
+def bench(
+    env_id: str, steps: int, repeats: int = 7, block: int = 100, reflex: str = "stretch"
+) -> dict[str, float]:
+    env = gym.make(env_id, reflex=reflex).unwrapped  # the bare env: what a VecEnv worker steps
     model, fs = env.model, env.frame_skip
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.6, 0.2, size=(steps, 1)).astype(np.float32)
@@ -104,8 +106,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--block", type=int, default=100, help="steps per timed block")
     parser.add_argument("--env", default="MyoExoKnee-v2")
+    parser.add_argument(
+        "--reflex", default="stretch", choices=("stretch", "uniform"), help="reflex model"
+    )
     args = parser.parse_args()
-    r = bench(args.env, args.steps, args.repeats, args.block)
+    r = bench(args.env, args.steps, args.repeats, args.block, args.reflex)
     print(
         f"env: {args.env}  frame_skip: {r['frame_skip']}  steps: {args.steps} "
         f"(blocks of {args.block}, best of {args.repeats} per block)"
