@@ -43,6 +43,7 @@ from myoexo.clinical.common import (
     ReflexHost,
     default_twin,
     motor_nm_per_ctrl,
+    resolve_twin,
     simulate_drive,
 )
 from myoexo.reflex import ReflexConfig
@@ -366,10 +367,7 @@ def run_stretch_test(
     """
     import pandas as pd
 
-    if model is None or pose is None:
-        default_model, default_pose = _default_twin()
-        model = default_model if model is None else model
-        pose = default_pose if pose is None else pose
+    model, pose = resolve_twin(model, pose)
     conditions: Iterable[tuple[int, float]] = [
         (lv, v) for lv in params.levels for v in params.velocities_rad_s
     ]

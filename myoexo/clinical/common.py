@@ -186,6 +186,16 @@ def default_twin(params: TwinParams | None = None) -> tuple[mujoco.MjModel, Pose
     return twin_model(params), pose_twin
 
 
+def resolve_twin(
+    model: mujoco.MjModel | None, pose: PoseFn | None
+) -> tuple[mujoco.MjModel, PoseFn]:
+    """``(model, pose)`` with the default twin (:func:`default_twin`) where one is ``None``."""
+    if model is not None and pose is not None:
+        return model, pose
+    default_model, default_pose = default_twin()
+    return (default_model if model is None else model), (default_pose if pose is None else pose)
+
+
 def motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
     """Torque (Nm) per unit command of a torque motor (fixed gain, no bias)."""
     import mujoco

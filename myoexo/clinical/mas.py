@@ -52,10 +52,10 @@ from myoexo.clinical.common import (
     add_common_arguments,
     check_levels,
     check_positive,
-    default_twin,
     interp_on_angle,
     print_table,
     reflex_name,
+    resolve_twin,
     simulate_drive,
     subjects_from_args,
     write_outputs,
@@ -279,10 +279,7 @@ def run_mas_exam(
     import pandas as pd
 
     label = reflex_name(reflex)
-    if model is None or pose is None:
-        default_model, default_pose = default_twin()
-        model = default_model if model is None else model
-        pose = default_pose if pose is None else pose
+    model, pose = resolve_twin(model, pose)
     sims = {}
     for level in dict.fromkeys((REFERENCE_LEVEL, *params.levels)):
         subject = None if subjects is None else subjects.get(level)

@@ -61,10 +61,10 @@ from myoexo.clinical.common import (
     add_common_arguments,
     check_levels,
     check_positive,
-    default_twin,
     interp_on_angle,
     print_table,
     reflex_name,
+    resolve_twin,
     subjects_from_args,
     write_outputs,
 )
@@ -269,10 +269,7 @@ def run_tardieu(
     import pandas as pd
 
     label = reflex_name(reflex)
-    if model is None or pose is None:
-        default_model, default_pose = default_twin()
-        model = default_model if model is None else model
-        pose = default_pose if pose is None else pose
+    model, pose = resolve_twin(model, pose)
     rows, traces = [], []
     for level in params.levels:
         subject = None if subjects is None else subjects.get(level)
