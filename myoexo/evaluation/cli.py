@@ -5,9 +5,11 @@
     myoexo report results/eval
 
 Interrupting and re-running the same command continues where it stopped: finished chunks of
-episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.engine`). Bad
-arguments (an unknown level, ``--subjects 0``, an unreadable policy file) stop the command
-with a one-line error before anything is written.
+episodes are kept on disk and not recomputed (:mod:`myoexo.evaluation.engine`), with either
+backend: ``--backend process`` (default, this machine) or ``--backend ray`` (a Ray cluster,
+``docs/cluster.md``). Bad arguments (an unknown level, ``--subjects 0``, an unreadable
+policy file, ``--backend ray`` without Ray installed) stop the command with a one-line error
+before anything is written.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 
 from myoexo.evaluation.config import EvaluationConfig
 from myoexo.evaluation.engine import available_cores
+from myoexo.evaluation.ray_backend import BACKENDS
 from myoexo.spasticity import VALID_LEVELS
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
@@ -51,7 +54,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         default=None,
-        help=f"worker processes (default: all cores, here {available_cores()})",
+        help=f"worker processes (default: all cores, here {available_cores()}); with "
+        "--backend ray and --address: the most chunks in flight (default: the cluster's CPUs)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="process",
+        help="'process': worker processes on this machine (default); 'ray': Ray tasks, on a "
+        "local cluster of --workers CPUs or on the cluster of --address (needs the 'ray' "
+        "extra; docs/cluster.md)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster to join with --backend ray: HOST:PORT or 'auto' (default: the "
+        "RAY_ADDRESS environment variable, else a local cluster that ends with the command)",
     )
     parser.add_argument(
         "--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})"
@@ -99,7 +117,14 @@ def run(args: argparse.Namespace) -> int:
             chunk_size=args.chunk_size,
             env_id=args.env_id,
         )
-        result = evaluate(config, args.out, workers=args.workers, progress=not args.no_progress)
+        result = evaluate(
+            config,
+            args.out,
+            workers=args.workers,
+            progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
+        )
     except ValueError as exc:
         print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
         return 2

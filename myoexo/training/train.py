@@ -21,7 +21,7 @@ import json
 import platform
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -168,8 +168,10 @@ def _learn(
     wall_time_offset_s: float,
     progress_bar: bool,
     verbose: int,
+    extra_callbacks: Sequence[Any] = (),
 ) -> TrainResult:
-    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks."""
+    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks
+    (and ``extra_callbacks`` after them)."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -199,7 +201,12 @@ def _learn(
         evaluator=evaluator,
         verbose=verbose,
     )
-    callbacks = [RewardTermsCallback(), *([evaluator] if evaluator else []), checkpointer]
+    callbacks = [
+        RewardTermsCallback(),
+        *([evaluator] if evaluator else []),
+        checkpointer,
+        *extra_callbacks,
+    ]
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
     record = {
@@ -245,6 +252,7 @@ def train(
     seed: int = 0,
     progress_bar: bool = False,
     verbose: int = 1,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """Train a new SAC run in ``run_dir`` (created; must not already hold a run).
 
@@ -254,6 +262,8 @@ def train(
         seed: Seed of the learner (torch, numpy) and of the envs (``seed + i``).
         progress_bar: Show SB3's tqdm/rich progress bar.
         verbose: 0 silent, 1 one line per checkpoint/evaluation, 2 also SB3's log tables.
+        callbacks: More SB3 callbacks, called after the run's own (one returning ``False``
+            stops the session early, with a final resumable checkpoint).
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed = {seed!r} must be an integer >= 0")
@@ -283,7 +293,16 @@ def train(
     write_json_atomic(run_dir / ck.CONFIG_FILE, config)
     model = build_sac(preset, venv, seed)
     try:
-        return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, progress_bar, verbose)
+        return _learn(
+            model,
+            preset,
+            run_dir,
+            preset.total_timesteps,
+            0.0,
+            progress_bar,
+            verbose,
+            callbacks,
+        )
     finally:
         venv.close()
 
@@ -293,6 +312,7 @@ def resume(
     total_timesteps: int | None = None,
     progress_bar: bool = False,
     verbose: int = 1,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """Continue the run in ``run_dir`` from its newest resumable checkpoint.
 
@@ -301,6 +321,7 @@ def resume(
         total_timesteps: New total step budget of the run (default: the preset's).
         progress_bar: Show SB3's progress bar.
         verbose: As in :func:`train`.
+        callbacks: As in :func:`train`.
     """
     from stable_baselines3 import SAC
     from stable_baselines3.common.vec_env import VecNormalize
@@ -330,7 +351,14 @@ def resume(
     total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
     try:
         return _learn(
-            model, preset, run_dir, total, float(state["wall_time_s"]), progress_bar, verbose
+            model,
+            preset,
+            run_dir,
+            total,
+            float(state["wall_time_s"]),
+            progress_bar,
+            verbose,
+            callbacks,
         )
     finally:
         venv.close()
