@@ -29,7 +29,7 @@ from myoexo.evaluation import EvaluationConfig, evaluate
 ray = pytest.importorskip("ray")
 
 CPUS = 2
-#: The brief's tiny protocol: 2 levels x 3 subjects of the PID, one subject per chunk.
+#: A tiny protocol: 2 levels x 3 subjects of the PID, one subject per chunk.
 TINY = EvaluationConfig(
     controllers=("pid",), levels=(0, 3), subjects=3, episode_duration_s=0.5, chunk_size=1
 )

@@ -75,7 +75,7 @@ from myoexo.training.train import is_myoexo_env
 DEFAULT_OUT = Path("results") / "sweeps"
 
 #: Files of a sweep folder.
-SPEC_FILE = "sweep.json"
+SETTINGS_FILE = "sweep.json"
 RUNS_DIR = "runs"
 TUNE_DIR = "tune"
 RESULTS_STEM = "results"
@@ -675,7 +675,7 @@ def _scheduler(spec: SweepSpec) -> Any:
 
 def _check_folder(sweep_dir: Path, spec: SweepSpec) -> None:
     """Record the sweep in ``sweep.json``, or refuse a folder that holds another sweep."""
-    path = sweep_dir / SPEC_FILE
+    path = sweep_dir / SETTINGS_FILE
     if path.is_file():
         previous = json.loads(path.read_text())
         if previous != spec.to_dict():
