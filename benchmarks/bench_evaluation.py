@@ -1,4 +1,4 @@
-"""Speed of the evaluation protocol (issue 5's target: the full protocol in <= 20 min here).
+"""Speed of the evaluation protocol (target: the full protocol in <= 20 min here).
 
 Measures, in this one run:
 
@@ -11,7 +11,16 @@ Measures, in this one run:
 and extrapolates the full protocol: 1000 subjects x 4 levels x 2 controllers (PID + SAC,
 a SAC episode costing a PID episode plus 800 policy decisions).
 
+With ``--backends N`` it instead compares the two backends of ``evaluate`` on one protocol,
+PID at levels 0 and 3 with N subjects each, on ``--workers`` CPUs: the process pool, then
+Ray on a local cluster of as many CPUs (``myoexo.ray_cluster.ray_session``). Ray's
+start-up (``ray.init``) and shutdown are timed apart from the evaluation; the overhead is
+Ray's evaluation wall time against the process pool's (each including its own worker
+start-up: processes spawned, or tasks' first imports), then with Ray's start-up added. The
+tables are checked identical. ``--repeats`` alternates the two backends and reports medians.
+
     .venv/bin/python benchmarks/bench_evaluation.py [--subjects 6] [--workers N]
+    .venv/bin/python benchmarks/bench_evaluation.py --backends 100 --workers 2 --repeats 3
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ import numpy as np
 
 from myoexo.control import PID
 from myoexo.control.specs import PolicyUnavailableError, load_shipped_policy
-from myoexo.envs import make_env
+from myoexo.envs import TaskParams, make_env
 from myoexo.evaluation import EvaluationConfig, available_cores, evaluate, evaluate_controller
 from myoexo.spasticity import VALID_LEVELS
 
@@ -82,6 +91,57 @@ def parallel_pid(subjects: int, workers: int) -> tuple[float, float]:
     return per_episode, times[1] - sizes[1] * per_episode
 
 
+#: Levels of the backend comparison.
+COMPARE_LEVELS = (0, 3)
+
+
+def compare_backends(subjects: int, workers: int, repeats: int) -> None:
+    """Print the process pool's and Ray's wall times on one protocol (module docstring)."""
+    import pandas as pd
+
+    from myoexo.ray_cluster import ray_session
+
+    config = EvaluationConfig(controllers=("pid",), levels=COMPARE_LEVELS, subjects=subjects)
+    quiet = {"progress": False, "log": lambda s: None}
+    times: dict[str, list[float]] = {"process": [], "ray": []}
+    tables = {}
+    t0 = time.perf_counter()
+    session = ray_session(workers)
+    session.__enter__()
+    startup_s = time.perf_counter() - t0
+    try:
+        for _ in range(repeats):
+            for backend in ("process", "ray"):
+                with tempfile.TemporaryDirectory() as tmp:
+                    t0 = time.perf_counter()
+                    run = evaluate(config, tmp, workers=workers, backend=backend, **quiet)
+                    times[backend].append(time.perf_counter() - t0)
+                    tables[backend] = run.table
+    finally:
+        t0 = time.perf_counter()
+        session.__exit__(None, None, None)
+        shutdown_s = time.perf_counter() - t0
+    n = subjects * len(COMPARE_LEVELS)
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    overhead = 100.0 * (med["ray"] - med["process"]) / med["process"]
+    with_startup = 100.0 * (med["ray"] + startup_s - med["process"]) / med["process"]
+    print(
+        f"backends, PID, levels {list(COMPARE_LEVELS)} x {subjects} subjects = {n} episodes "
+        f"of {config.episode_duration_s or TaskParams().episode_duration_s:g} s, chunks of "
+        f"{config.chunk_size}, {workers} workers, median of {repeats}:"
+    )
+    for backend, values in times.items():
+        runs = ", ".join(f"{v:.1f}" for v in values)
+        print(f"  {backend:8s} {med[backend]:7.1f} s  ({n / med[backend]:.2f} episodes/s; {runs})")
+    print(
+        f"  Ray start-up (ray.init, {workers} CPUs): {startup_s:.1f} s, shutdown {shutdown_s:.1f} s"
+    )
+    print(f"  Ray's overhead: {overhead:+.1f} % (with its start-up: {with_startup:+.1f} %)")
+    same = tables["process"].equals(tables["ray"])
+    pd.testing.assert_frame_equal(tables["process"], tables["ray"], check_exact=True)
+    print(f"  tables identical: {same}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subjects", type=int, default=6, help="subjects per level timed")
@@ -89,7 +149,18 @@ def main() -> None:
         "--parallel-subjects", type=int, default=12, help="subjects per level, parallel run"
     )
     parser.add_argument("--workers", type=int, default=available_cores())
+    parser.add_argument(
+        "--backends",
+        type=int,
+        default=0,
+        metavar="N",
+        help="compare the process and Ray backends on N subjects per level (needs the ray extra)",
+    )
+    parser.add_argument("--repeats", type=int, default=1, help="runs per backend (--backends)")
     args = parser.parse_args()
+    if args.backends > 0:
+        compare_backends(args.backends, args.workers, args.repeats)
+        return
 
     per_level = serial_pid(args.subjects)
     t_pid = float(np.mean(list(per_level.values())))

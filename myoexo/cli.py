@@ -43,6 +43,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
+    "sweep": (
+        "myoexo.training.sweep",
+        "Ray Tune over training configurations, ranked on the acceptance criteria",
+    ),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
     "video": ("myoexo.video", "render an episode of a controller to MP4 or GIF"),
     "select": (

@@ -19,6 +19,8 @@ USER_MISTAKES = [
     (["train", "--resume", "/nonexistent", "--set", "n_envs=2"], "drop --set/--run-dir"),
     # a command that stops with SystemExit("export-policy: ...") gets the same format
     (["export-policy", "/nonexistent"], "nothing to do"),
+    (["sweep", "/nonexistent.yaml"], "does not exist"),
+    (["evaluate", "--backend", "process", "--address", "auto"], "needs --backend ray"),
 ]
 
 

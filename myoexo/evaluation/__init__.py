@@ -7,7 +7,8 @@ Markdown report (``myoexo evaluate``, ``myoexo report``).
     run.table.groupby(["controller", "level"]).peak_interaction_torque_nm.mean()
 
 Modules: :mod:`.config` (what a run is, subject seeds, ``config.json``), :mod:`.engine`
-(episodes, chunks, workers), :mod:`.storage` (chunk, table and trace files),
+(episodes, chunks, workers), :mod:`.ray_backend` (the chunks as Ray tasks, on a cluster:
+``docs/cluster.md``), :mod:`.storage` (chunk, table and trace files),
 :mod:`.metrics`, :mod:`.criteria` (the acceptance criteria), :mod:`.paper` (the study's
 numbers), :mod:`.figures`, :mod:`.report`.
 """

@@ -10,6 +10,8 @@ arguments (an unknown level, ``--subjects 0``, an unreadable policy file) or a f
 by another run stop the command with a one-line error (exit status 2) before anything is
 written. SIGTERM or Ctrl-C (SIGINT) stops it after the chunks in flight with one line on
 stderr and exit status 128 + the signal number (143, 130); see ``docs/long_runs.md``.
+Backends: ``--backend process`` (default, this machine) or ``--backend ray`` (a Ray cluster,
+``docs/cluster.md``; ``--backend ray`` without Ray installed is a one-line error).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pathlib import Path
 
 from myoexo.evaluation.config import EvaluationConfig
 from myoexo.evaluation.engine import available_cores
+from myoexo.evaluation.ray_backend import BACKENDS
 from myoexo.spasticity import VALID_LEVELS
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
@@ -54,7 +57,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         default=None,
-        help=f"worker processes (default: all cores, here {available_cores()})",
+        help=f"worker processes (default: all cores, here {available_cores()}); with "
+        "--backend ray and --address: the most chunks in flight (default: the cluster's CPUs)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="process",
+        help="'process': worker processes on this machine (default); 'ray': Ray tasks, on a "
+        "local cluster of --workers CPUs or on the cluster of --address (needs the 'ray' "
+        "extra; docs/cluster.md)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster to join with --backend ray: HOST:PORT or 'auto' (default: the "
+        "RAY_ADDRESS environment variable, else a local cluster that ends with the command)",
     )
     parser.add_argument(
         "--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})"
@@ -103,7 +121,14 @@ def run(args: argparse.Namespace) -> int:
             chunk_size=args.chunk_size,
             env_id=args.env_id,
         )
-        result = evaluate(config, args.out, workers=args.workers, progress=not args.no_progress)
+        result = evaluate(
+            config,
+            args.out,
+            workers=args.workers,
+            progress=not args.no_progress,
+            backend=args.backend,
+            address=args.address,
+        )
     except ValueError as exc:
         print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
         return 2

@@ -314,6 +314,8 @@ def evaluate(
     progress: bool = True,
     log: Callable[[str], None] = print,
     graceful_stop: bool = True,
+    backend: str = "process",
+    address: str | None = None,
 ) -> EvaluationRun:
     """Run (or continue) an evaluation and write its table.
 
@@ -325,6 +327,10 @@ def evaluate(
         log: Where messages go.
         graceful_stop: Handle SIGINT / SIGTERM (main thread only): stop after the chunks in
             flight and return with :attr:`EvaluationRun.stopped_by` set, no table written.
+        backend: ``"process"`` (a pool of worker processes on this machine) or ``"ray"``
+            (Ray tasks, :mod:`.ray_backend`: ``workers`` CPUs of a local cluster, or the
+            cluster at ``address``, where ``workers=None`` uses every CPU).
+        address: Ray cluster to join (default: ``$RAY_ADDRESS``, else a local cluster).
 
     Raises:
         ValueError: Bad settings, an unreadable model file, or an output folder that holds
@@ -336,6 +342,10 @@ def evaluate(
     """
     from tqdm.auto import tqdm
 
+    from myoexo.evaluation import ray_backend
+
+    ray_backend.check_backend(backend, address)
+    ray_workers = workers  # None: every CPU of a Ray cluster
     if workers is None:
         workers = available_cores()
     if not isinstance(workers, (int, np.integer)) or workers <= 0:
@@ -363,7 +373,9 @@ def evaluate(
         )
         computed = 0
         try:
-            if workers == 1 or len(todo) <= 1:
+            if backend == "ray":
+                computed = ray_backend.run_chunks(todo, config, out, bar, ray_workers, address)
+            elif workers == 1 or len(todo) <= 1:
                 try:
                     for chunk in todo:
                         if stop.received is not None:

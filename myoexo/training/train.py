@@ -31,7 +31,7 @@ import signal
 import sys
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -230,9 +230,11 @@ def _learn(
     progress_bar: bool,
     verbose: int,
     graceful_stop: bool = True,
+    extra_callbacks: Sequence[Any] = (),
 ) -> TrainResult:
-    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks;
-    with ``graceful_stop``, SIGINT / SIGTERM end it early with a checkpoint."""
+    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks
+    (and ``extra_callbacks`` after them); with ``graceful_stop``, SIGINT / SIGTERM end it
+    early with a checkpoint."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -286,6 +288,7 @@ def _learn(
                 *([evaluator] if evaluator else []),
                 checkpointer,
                 StopOnSignalCallback(stop),
+                *extra_callbacks,
             ]
             model.learn(
                 total_timesteps=remaining,
@@ -327,6 +330,7 @@ def train(
     progress_bar: bool = False,
     verbose: int = 1,
     graceful_stop: bool = True,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """Train a new SAC run in ``run_dir`` (created; must not already hold a run).
 
@@ -338,6 +342,8 @@ def train(
         verbose: 0 silent, 1 one line per checkpoint/evaluation, 2 also SB3's log tables.
         graceful_stop: Handle SIGINT / SIGTERM during ``learn`` (main thread only): stop
             after the current step with a checkpoint (:attr:`TrainResult.stopped_by`).
+        callbacks: More SB3 callbacks, called after the run's own (one returning ``False``
+            stops the session early, with a final resumable checkpoint).
 
     Raises:
         ValueError: A bad seed, a folder that already holds a run, or a folder in use by
@@ -396,6 +402,7 @@ def _start(
             progress_bar,
             verbose,
             graceful_stop,
+            callbacks,
         )
     finally:
         venv.close()
@@ -467,6 +474,7 @@ def resume(
     progress_bar: bool = False,
     verbose: int = 1,
     graceful_stop: bool = True,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """Continue the run in ``run_dir`` from its newest intact resumable checkpoint.
 
@@ -476,6 +484,7 @@ def resume(
         progress_bar: Show SB3's progress bar.
         verbose: As in :func:`train`.
         graceful_stop: As in :func:`train`.
+        callbacks: As in :func:`train`.
 
     Raises:
         ValueError: Not a run folder; no resumable checkpoint (:class:`NoCheckpointError`:
@@ -509,6 +518,7 @@ def resume(
                 progress_bar,
                 verbose,
                 graceful_stop,
+                callbacks,
             )
         finally:
             venv.close()
