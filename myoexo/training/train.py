@@ -360,7 +360,7 @@ def train(
                 "`myoexo train --resume DIR` (or, if it never wrote a checkpoint, start it "
                 "again with `myoexo train --restart DIR`), or choose another folder"
             )
-        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop)
+        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop, callbacks)
 
 
 def _start(
@@ -370,6 +370,7 @@ def _start(
     progress_bar: bool,
     verbose: int,
     graceful_stop: bool,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """A new run in ``run_dir`` (locked by the caller): ``config.json``, then ``learn``."""
     ck.remove_stale_temporaries(run_dir)
