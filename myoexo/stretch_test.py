@@ -47,7 +47,7 @@ from myoexo.clinical.common import (
     simulate_drive,
 )
 from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import KNEE_JOINT, LEVELS, SpasticityParams
+from myoexo.spasticity import KNEE_JOINT, LEVELS, VALID_LEVELS, SpasticityParams
 
 if TYPE_CHECKING:
     import mujoco
@@ -91,7 +91,7 @@ class StretchTestParams:
     start_deg: float = 90.0
     end_deg: float = 20.0
     velocities_rad_s: tuple[float, ...] = (0.2, 3.0)
-    levels: tuple[int, ...] = (0, 1, 2, 3)
+    levels: tuple[int, ...] = VALID_LEVELS
     kp_nm_per_rad: float = 400.0
     kd_nm_s_per_rad: float = 5.0
     accel_time_s: float = 0.05

@@ -1,4 +1,4 @@
-"""Tests of the human + knee-exoskeleton twin (issue 2).
+"""Tests of the human + knee-exoskeleton twin (docs/reference.md section 1).
 
 Measured with the default ``TwinParams`` (2 ms timestep), which the bounds below cover
 with some margin:
