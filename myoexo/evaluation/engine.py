@@ -374,7 +374,9 @@ def evaluate(
         computed = 0
         try:
             if backend == "ray":
-                computed = ray_backend.run_chunks(todo, config, out, bar, ray_workers, address)
+                computed = ray_backend.run_chunks(
+                    todo, config, out, bar, ray_workers, address, stop
+                )
             elif workers == 1 or len(todo) <= 1:
                 try:
                     for chunk in todo:

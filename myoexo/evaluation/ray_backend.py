@@ -64,6 +64,7 @@ def run_chunks(
     bar: Any,
     workers: int | None = None,
     address: str | None = None,
+    stop: Any = None,
 ) -> int:
     """Run the chunks ``todo`` as Ray tasks; returns the episodes computed.
 
@@ -75,6 +76,8 @@ def run_chunks(
         workers: CPUs of a local cluster; on a joined cluster, the most chunks in flight at
             once (``None``: every CPU of the cluster).
         address: Cluster to join (:func:`myoexo.ray_cluster.resolve_address`).
+        stop: A :class:`~myoexo.lifecycle.StopSignals`: once it has received a signal, no
+            chunk is submitted any more and the running ones are finished and stored.
 
     Raises:
         The first error of a task (the others are cancelled).
@@ -93,6 +96,8 @@ def run_chunks(
         computed = 0
         try:
             while queue or pending:
+                if stop is not None and stop.received is not None:
+                    queue.clear()  # a graceful stop: finish the tasks in flight only
                 while queue and len(pending) < limit:
                     pending.append(task.remote(queue.pop(0), config_ref, out_dir))
                 done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
