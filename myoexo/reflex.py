@@ -247,8 +247,10 @@ def group_excitations_torch(
     cal = calibration if calibration is not None else LevelCalibration()
     k = get(params, "k")
 
+    from myoexo.spasticity import phi_torch  # the same sigmoid (eq. 1) in torch
+
     def below_t(z: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
-        return 0.5 * (1.0 - torch.tanh(0.5 * k * (z - limit)))
+        return phi_torch(k, z, limit)
 
     theta_thr = get(params, "theta_ext_deg") + get(cal, "flexor_threshold_shift_deg")
     flex = get(cal, "flexor_gain") * (

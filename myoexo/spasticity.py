@@ -53,7 +53,7 @@ import numpy as np
 from gymnasium.utils import RecordConstructorArgs
 
 from myoexo.model.leg import KNEE_JOINT  # the joint whose angle and velocity drive the reflex
-from myoexo.reflex import DelayLine, LevelCalibration, ReflexConfig, reflex_config
+from myoexo.reflex import DelayLine, LevelCalibration, ReflexConfig, below, reflex_config
 
 if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
     import torch
@@ -262,9 +262,9 @@ def phi(k: float, b: Any, b0: float) -> np.ndarray:
     """Sigmoid of eq. 1, ``1 / (1 + exp(k (b - b0)))``, vectorized over *b*.
 
     Evaluated as ``(1 - tanh(k (b - b0) / 2)) / 2``, which is the same function without
-    overflow for large ``k |b - b0|``.
+    overflow for large ``k |b - b0|`` (:func:`myoexo.reflex.below`: -> 1 below ``b0``).
     """
-    return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(b, dtype=np.float64) - b0)))
+    return below(b, b0, k)
 
 
 def _outside_window(x: np.ndarray, k: float, upper: float, lower: float, scale: float):

@@ -41,6 +41,7 @@ from myoexo.clinical.common import (
     DriveParams,
     PoseFn,
     ReflexHost,
+    control_substeps,
     default_twin,
     motor_nm_per_ctrl,
     resolve_twin,
@@ -287,8 +288,7 @@ def simulate_stretch(
     if not (math.isfinite(vel_rad_s) and vel_rad_s > 0):
         raise ValueError(f"vel_rad_s must be a positive speed, got {vel_rad_s!r}.")
     drive = params.drive
-    n_sub = max(1, round(drive.control_period_s / model.opt.timestep))
-    dt = n_sub * model.opt.timestep
+    _, dt = control_substeps(drive, model)
     n_steps = math.ceil(_motion_duration_s(vel_rad_s, params) / dt)
     times = np.arange(n_steps) * dt
     ref_deg, ref_vel, phase = reference_profile(times, vel_rad_s, params)

@@ -196,6 +196,13 @@ def resolve_twin(
     return (default_model if model is None else model), (default_pose if pose is None else pose)
 
 
+def control_substeps(drive: DriveParams, model: mujoco.MjModel) -> tuple[int, float]:
+    """``(physics substeps per control period, the period they make in s)``: the drive's
+    control period rounded to whole timesteps of *model* (at least one)."""
+    n_sub = max(1, round(drive.control_period_s / model.opt.timestep))
+    return n_sub, n_sub * model.opt.timestep
+
+
 def motor_nm_per_ctrl(model: mujoco.MjModel, actuator_id: int) -> float:
     """Torque (Nm) per unit command of a torque motor (fixed gain, no bias)."""
     import mujoco
@@ -266,8 +273,7 @@ def simulate_drive(
     muscle_torque = CoupledJointTorque(model, drive.human_joint)
     nm_per_ctrl = motor_nm_per_ctrl(model, exo_a)
     ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
-    n_sub = max(1, round(drive.control_period_s / model.opt.timestep))
-    dt = n_sub * model.opt.timestep
+    n_sub, dt = control_substeps(drive, model)
 
     data = mujoco.MjData(model)
     pose(model, data, knee_angle_deg=start_deg)

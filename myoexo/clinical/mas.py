@@ -52,6 +52,7 @@ from myoexo.clinical.common import (
     add_common_arguments,
     check_levels,
     check_positive,
+    control_substeps,
     interp_on_angle,
     print_table,
     reflex_name,
@@ -191,8 +192,7 @@ def _simulate(
 ) -> pd.DataFrame:
     import pandas as pd
 
-    n_sub = max(1, round(params.drive.control_period_s / model.opt.timestep))
-    dt = n_sub * model.opt.timestep
+    _, dt = control_substeps(params.drive, model)
     total_s = params.hold_s + params.duration_s + params.end_hold_s
     times = np.arange(math.ceil(total_s / dt)) * dt
     ref_deg, ref_vel, moving = minimum_jerk(times, params)

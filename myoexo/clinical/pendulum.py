@@ -69,6 +69,7 @@ from myoexo.clinical.common import (
     add_common_arguments,
     check_levels,
     check_positive,
+    control_substeps,
     print_table,
     reflex_name,
     simulate_drive,
@@ -312,8 +313,7 @@ def run_pendulum(
     model.opt.gravity[:] = reclined_gravity(params.recline_deg)
     exo = model.joint(params.drive.exo_joint)
     exo_stop_deg = math.degrees(float(model.jnt_range[exo.id, 1]))
-    n_sub = max(1, round(params.drive.control_period_s / model.opt.timestep))
-    dt = n_sub * model.opt.timestep
+    _, dt = control_substeps(params.drive, model)
     n_hold = round(params.hold_s / dt)
     n_swing = round(params.swing_s / dt)
     ref_deg = np.full(n_hold + n_swing, params.start_deg)

@@ -546,8 +546,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
           last substep (``actuator_force``, ``qfrc_actuator``, ``sensordata``, ...): the
           forces that acted over ``[t - h, t]``, all of one instant, equal to what
           ``mj_forward`` of the state at t - h gives (tests/test_envs.py checks it).
-        * ``command``: this step's (clipped) command; ``sc_total``: the reflex computed
-          from the knee state at the step start and held over the step.
+        * ``command``: this step's (clipped) command; ``sc_total``: the reflex excitation
+          applied over the step, computed at the step start from the knee state the reflex
+          reads (delayed by the reflex model's transmission delay).
 
         After ``reset`` everything refers to the initial state (``mj_forward``, zero
         command). If MuJoCo reset the data during the step (NaN/inf or a huge value:
