@@ -21,7 +21,9 @@ register_envs()
 
 
 def load_policy(*args, **kwargs):
-    """The SAC policy shipped with the package (see ``myoexo/policies/MODEL_CARD.md``)."""
+    """A SAC policy shipped with the package by name: ``"sac"`` (full state, default) or
+    ``"sac_exo"`` (the exoskeleton's own sensors); see :func:`myoexo.policies.load_policy`
+    and the model cards in ``myoexo/policies/``."""
     from myoexo.policies import load_policy as _load
 
     return _load(*args, **kwargs)

@@ -42,7 +42,9 @@ import numpy as np
 #: Accepted anti-windup schemes.
 ANTI_WINDUP_SCHEMES: tuple[str, ...] = ("clamping", "back_calculation", "none")
 
-#: Accepted feedback signals: ``info`` key of the measured angle (deg).
+#: Accepted feedback signals: ``info`` key of the angle (deg). The PID reads the sensed value
+#: ``info["measured_<key>"]`` where the env gives it (with sensor noise and latency on a
+#: perturbed twin, :mod:`myoexo.envs.robustness`), else the true one.
 FEEDBACK_KEYS: dict[str, str] = {"knee": "knee_angle_deg", "exo": "exo_angle_deg"}
 
 
@@ -155,6 +157,7 @@ class PID:
         self.config = config if config is not None else PIDConfig()
         self.dt_s = float(dt_s)
         self._feedback_key = FEEDBACK_KEYS[self.config.feedback]
+        self._measured_key = "measured_" + self._feedback_key
         self.reset()
 
     @classmethod
@@ -204,7 +207,9 @@ class PID:
         del obs
         try:
             target_deg = float(info["target_angle_deg"])
-            measured_deg = float(info[self._feedback_key])
+            # the sensed angle (noisy and late on a perturbed twin) when the env gives one
+            measured = info.get(self._measured_key)
+            measured_deg = float(info[self._feedback_key] if measured is None else measured)
         except KeyError as exc:
             raise ValueError(
                 f"PID.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict); got keys "

@@ -12,14 +12,21 @@ spec                               controller
 ``pid:anti_windup=none``           ``clamping`` (default), ``back_calculation`` or ``none``
 ``pid:derivative=error``           derivative on the error instead of the measurement
 ``pid:textbook``                   plain parallel PID (derivative on error, no anti-windup)
-``sac``                            the policy shipped with the package
+``sac``                            the full-state policy shipped with the package
                                    (:func:`myoexo.load_policy`)
+``sac_exo``                        the shipped policy on the exo's own sensors
+                                   (``load_policy("sac_exo")``, env ``obs_preset="exo"``)
+``oracle``                         sampling-based MPC on a copy of the twin (true state):
+                                   the achievable bound (:mod:`myoexo.control.oracle`);
+                                   options ``samples``, ``horizon_s``, ``replan``, ``iters``
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
                                    ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:`` for other algorithms
 =================================  ==========================================================
 
 Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
-``controller``) is the spec itself for ``pid``/``sac``, the file stem for a model file.
+``controller``) is the spec itself for ``pid``/``sac``/``oracle``, the file stem for a model
+file. A controller may need its own env (:func:`spec_env_kwargs`: the observation preset a
+policy was trained on).
 """
 
 from __future__ import annotations
@@ -54,12 +61,14 @@ class ControllerSpec:
     """A parsed controller spec.
 
     Attributes:
-        kind: ``"pid"``, ``"shipped"`` (``sac``) or ``"sb3"`` (a model file).
+        kind: ``"pid"``, ``"shipped"`` (``sac``, ``sac_exo``), ``"oracle"`` or ``"sb3"``
+            (a model file).
         label: Name in tables and figures.
         text: The spec as given.
-        path: Model file (``sb3`` only).
+        path: Model file (``sb3``) or shipped policy name (``shipped``).
         algorithm: SB3 class name (``sb3`` only).
-        options: PID options (``pid`` only), as :class:`PIDConfig` keyword arguments.
+        options: PID options (``pid``), as :class:`PIDConfig` keyword arguments, or
+            :class:`~myoexo.control.oracle.OracleConfig` fields (``oracle``).
     """
 
     kind: str
@@ -86,8 +95,14 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     head, _, tail = text.partition(":")
     if head.lower() == "pid":
         return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
-    if text.lower() == "sac":
-        return ControllerSpec(kind="shipped", label="sac", text=text)
+    if text.lower() in ("sac", "sac_exo"):
+        return ControllerSpec(kind="shipped", label=text.lower(), text=text, path=text.lower())
+    if head.lower() == "oracle":
+        from myoexo.control.oracle import parse_oracle_options
+
+        return ControllerSpec(
+            kind="oracle", label=text, text=text, options=parse_oracle_options(tail)
+        )
     algorithm = "SAC"
     path_text = text
     if head.lower() in SB3_ALGORITHMS and tail:
@@ -95,7 +110,8 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     path = Path(path_text).expanduser()
     if path.suffix != ".zip":
         raise ValueError(
-            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', or the path of a "
+            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'sac_exo', "
+            "'oracle[:options]', or the path of a "
             "stable-baselines3 model file (.zip)"
         )
     if not path.is_file():
@@ -142,15 +158,15 @@ def pid_config(options: dict[str, Any]) -> PIDConfig:
     return PIDConfig(gains=gains, **opts)
 
 
-def load_shipped_policy() -> Controller:
-    """``myoexo.load_policy()``, or :class:`PolicyUnavailableError` saying why not."""
+def load_shipped_policy(name: str = "sac") -> Any:
+    """``myoexo.load_policy(name)``, or :class:`PolicyUnavailableError` saying why not."""
     try:
         import myoexo
 
-        return myoexo.load_policy()
+        return myoexo.load_policy(name)
     except (ImportError, FileNotFoundError, OSError, AttributeError) as exc:
         raise PolicyUnavailableError(
-            f"the shipped SAC policy is not available ({type(exc).__name__}: {exc})"
+            f"the shipped policy {name!r} is not available ({type(exc).__name__}: {exc})"
         ) from exc
 
 
@@ -197,7 +213,11 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     if spec.kind == "pid":
         return PID.from_env(env, pid_config(spec.options))
     if spec.kind == "shipped":
-        return load_shipped_policy()
+        return load_shipped_policy(spec.path or "sac")
+    if spec.kind == "oracle":
+        from myoexo.control.oracle import OracleMPC
+
+        return OracleMPC.from_env(env, **spec.options)
     if spec.kind == "sb3" and spec.path is not None:
         return SB3Controller(
             load_sb3_model(spec.path, spec.algorithm or "SAC"),
@@ -205,3 +225,47 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
             obs_normalizer=load_obs_normalizer(spec.path),
         )
     raise ValueError(f"unknown controller kind {spec.kind!r}")
+
+
+def _run_config_of_model(model_path: str) -> dict[str, Any]:
+    """``config.json`` of the ``myoexo train`` run a model file belongs to (``{}`` if none):
+    ``<run>/checkpoints/<step>/model.zip``."""
+    import json
+
+    config = Path(model_path).parent.parent.parent / "config.json"
+    try:
+        return dict(json.loads(config.read_text()))
+    except (OSError, ValueError):
+        return {}
+
+
+def policy_metadata(spec: ControllerSpec) -> dict[str, Any]:
+    """Provenance a policy carries: the shipped actor's metadata, or the training run's
+    preset for a model file (``{}`` for the PID and the oracle)."""
+    if spec.kind == "shipped":
+        return dict(load_shipped_policy(spec.path or "sac").metadata)
+    if spec.kind == "sb3" and spec.path is not None:
+        config = _run_config_of_model(spec.path)
+        return {"obs_preset": config.get("preset", {}).get("obs_preset", "full")}
+    return {}
+
+
+def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
+    """Env keyword arguments a controller needs (the observation preset of a policy)."""
+    preset = policy_metadata(spec).get("obs_preset") or "full"
+    return {} if preset == "full" else {"obs_preset": preset}
+
+
+def check_no_selection_leak(spec: ControllerSpec, root_seed: int) -> None:
+    """Refuse to report a policy on the subjects that selected it.
+
+    Raises:
+        ValueError: The policy records ``selection_root_seed`` equal to ``root_seed``.
+    """
+    chosen_on = policy_metadata(spec).get("selection_root_seed")
+    if chosen_on is not None and int(chosen_on) == int(root_seed):
+        raise ValueError(
+            f"controller {spec.text!r} was selected on the subjects of root seed {root_seed}; "
+            "evaluating it there would report its selection subjects: use another root seed "
+            "(the default evaluation root is 0, selection uses 1)"
+        )

@@ -75,12 +75,14 @@ from myosuite.envs.gymnasium_env import CpuEnvAccessor, MyoGymnasiumEnv
 from myosuite.envs.muscle_stages import CtrlStageHost
 
 from myoexo.envs.config import RewardParams, TaskParams
+from myoexo.envs.robustness import RobustnessParams, SensorModel, TwinPerturbation
 from myoexo.model import (
     COUPLING_JOINTS,
     CUFF_SENSORS,
     EXO_ACTUATOR,
     EXO_JOINT,
     KNEE_JOINT,
+    STRAP_EQUALITY,
     TwinParams,
     build_model,
     pose_twin,
@@ -130,6 +132,25 @@ DEFAULT_OBS_KEYS: tuple[str, ...] = (
     "time_frac",
 )
 
+#: What a real knee exoskeleton measures: its own encoder (angle, velocity), the motor torque,
+#: the two cuffs' 6-axis force/torque sensors, the last command, the target and the time.
+#: No human joint angle and no muscle state: a policy on these runs on a device.
+EXO_SENSOR_OBS_KEYS: tuple[str, ...] = (
+    "exo_angle_rad",
+    "exo_vel_rad_s",
+    "target_rad",
+    "command",
+    "exo_torque_nm",
+    *CUFF_OBS_KEYS,
+    "time_frac",
+)
+
+#: Observation presets (``obs_preset=`` of the env): name -> ``obs_keys``.
+OBS_PRESETS: dict[str, tuple[str, ...]] = {
+    "full": DEFAULT_OBS_KEYS,
+    "exo": EXO_SENSOR_OBS_KEYS,
+}
+
 _SCALAR_KEYS: tuple[str, ...] = (
     "time",
     "knee_angle_rad",
@@ -162,13 +183,21 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         task: Task parameters (start/target angle, duration, control period).
         reward: Reward shape and ``weights`` (the ``weighted_reward_keys``).
         twin: Parameters of the human + exo digital twin.
-        obs_keys: Observation entries (default :data:`DEFAULT_OBS_KEYS`).
+        obs_keys: Observation entries (default: those of ``obs_preset``).
+        obs_preset: Named set of ``obs_keys`` (:data:`OBS_PRESETS`): ``"full"`` (default,
+            :data:`DEFAULT_OBS_KEYS`: the twin's whole state, muscles included) or ``"exo"``
+            (:data:`EXO_SENSOR_OBS_KEYS`: what the exoskeleton itself measures). Ignored
+            when ``obs_keys`` is given.
         weighted_reward_keys: Shortcut overriding ``reward.weights``.
         subject_noise: Draw an individual subject (10 % variability) at every reset;
             ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
         reflex: Reflex model (:mod:`myoexo.reflex`): ``"stretch"`` (the calibrated stretch
             reflex with a 20 ms delay, default), ``"uniform"`` (the paper's ``SC_total`` on
             all 11 muscles, no delay: the first reading) or a ``ReflexConfig``.
+        robustness: Draw the twin's uncertain parts (strap stiffness and damping, masses,
+            slide friction, motor torque constant) and sensor noise and latency at every
+            reset (:class:`~myoexo.envs.robustness.RobustnessParams`; ``True``: the default
+            ranges; ``None``/``False``: the nominal twin, exact sensors).
         seed: Seed of the env's RNG (``reset(seed=...)`` reseeds it).
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
     """
@@ -186,9 +215,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         reward: RewardParams | None = None,
         twin: TwinParams | None = None,
         obs_keys: list[str] | tuple[str, ...] | None = None,
+        obs_preset: str = "full",
         weighted_reward_keys: dict[str, float] | None = None,
         subject_noise: bool = True,
         reflex: str | ReflexConfig = "stretch",
+        robustness: RobustnessParams | bool | None = None,
         seed: int | None = None,
         render_mode: str | None = None,
         **kwargs: Any,
@@ -219,9 +250,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             reward=reward,
             twin=twin,
             obs_keys=obs_keys,
+            obs_preset=obs_preset,
             weighted_reward_keys=weighted_reward_keys,
             subject_noise=subject_noise,
             reflex=reflex,
+            robustness=robustness,
             seed=seed,
             render_mode=render_mode,
         )
@@ -230,10 +263,14 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.data = mujoco.MjData(self.model)
         self._ctrl_dt = float(self.model.opt.timestep * frame_skip)
         self.mj_instability_termination = False  # instability truncates, see step()
-        self.obs_keys = list(obs_keys or self.DEFAULT_OBS_KEYS)
+        if obs_preset not in OBS_PRESETS:
+            raise ValueError(f"obs_preset = {obs_preset!r}; accepted: {sorted(OBS_PRESETS)}")
+        self.obs_preset = obs_preset if obs_keys is None else "custom"
+        self.obs_keys = list(obs_keys or OBS_PRESETS[obs_preset])
         self.rwd_keys_wt = dict(self.reward_params.weights)
         self._resolve_indices()
 
+        self._set_up_robustness(robustness, seed)
         self.spasticity = SpasticityStage(
             level=spasticity_level, subject_noise=subject_noise, reflex=reflex
         )
@@ -338,6 +375,47 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._views: _DataViews | None = None
         self._stages_seen: tuple = ()  # see _run_ctrl_stages
         self._stage_applies: tuple = ()
+
+    def _set_up_robustness(self, robustness: RobustnessParams | bool | None, seed: Any) -> None:
+        if robustness is True:
+            robustness = RobustnessParams()
+        elif robustness is False:
+            robustness = None
+        if robustness is not None and not isinstance(robustness, RobustnessParams):
+            raise ValueError(
+                f"robustness = {robustness!r}: expected a RobustnessParams, True, False or None"
+            )
+        self.robustness: RobustnessParams | None = robustness
+        self.twin_perturbation: TwinPerturbation | None = None
+        self._sensor: SensorModel | None = None
+        self.twin_draw: dict[str, Any] = {}
+        self._robust_rng = np.random.default_rng(seed)
+        if robustness is None:
+            return
+        m = self.model
+        self.twin_perturbation = TwinPerturbation(
+            m,
+            robustness,
+            self.coupling_joints,
+            COUPLING_JOINTS[0],
+            STRAP_EQUALITY if _has(m, mujoco.mjtObj.mjOBJ_EQUALITY, STRAP_EQUALITY) else None,
+            EXO_ACTUATOR,
+        )
+        steps = robustness.latency_s / self._ctrl_dt
+        if abs(steps - round(steps)) > 1e-6:
+            raise ValueError(
+                f"robustness.latency_s = {robustness.latency_s} s must be a whole number of "
+                f"control periods ({self._ctrl_dt} s)"
+            )
+        std = np.zeros(self._raw_size)
+        for key, value in robustness.noise_std:
+            if key not in self._slices:
+                raise ValueError(
+                    f"robustness.noise_std names unknown key {key!r}; "
+                    f"accepted: {list(self._slices)}"
+                )
+            std[self._slices[key]] = value * np.abs(self._raw_gain[self._slices[key]])
+        self._sensor = SensorModel(std, round(steps))
 
     def _clear_episode_state(self) -> None:
         self._command = 0.0
@@ -590,11 +668,12 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._prev_knee_vel = knee_vel
         self._prev_tau_knee = tau
         truncated = unstable or self._steps >= self._episode_steps
-        self._add_info(info, values, unstable)
+        sensed = raw if self._sensor is None else self._sensor.measure(raw, self._robust_rng)
+        self._add_info(info, values, unstable, sensed)
         if self.mujoco_render_frames:
             self.mj_render()
         reward = float(rwd_dict["dense"])
-        return self._raw_to_vec(raw), reward, bool(rwd_dict["done"]), truncated, info
+        return self._raw_to_vec(sensed), reward, bool(rwd_dict["done"]), truncated, info
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -609,17 +688,26 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         }
         noise = self.task.start_angle_noise_deg
         start = self.task.start_angle_deg + float(self.np_random.uniform(-noise, noise))
+        if seed is not None:  # the perturbed twin: its own stream, so subjects stay the same
+            self._robust_rng = np.random.default_rng([int(seed), 0x0B057])
+        if self.twin_perturbation is not None:
+            self.twin_draw = self.twin_perturbation.apply(self._robust_rng)
         pose_twin(self.model, self.data, knee_angle_deg=start)
         mujoco.mj_forward(self.model, self.data)
         raw = self._gather_raw(self._data_views())
-        obs = self._ensure_obs_gymnasium_compliant(self._raw_to_vec(raw))
+        sensed = raw if self._sensor is None else self._sensor.reset(raw, self._robust_rng)
+        obs = self._ensure_obs_gymnasium_compliant(self._raw_to_vec(sensed))
         values = raw[: self._info_len].tolist()
         self._prev_tau_knee = values[self._at["interaction_torque_nm"]]
         info: dict[str, Any] = {}
-        self._add_info(info, values, False)
+        self._add_info(info, values, False, sensed)
+        if self.twin_draw:
+            info["twin_draw"] = dict(self.twin_draw)
         return obs, info
 
-    def _add_info(self, info: dict[str, Any], values: list[float], unstable: bool):
+    def _add_info(
+        self, info: dict[str, Any], values: list[float], unstable: bool, sensed: np.ndarray
+    ):
         """Per-step quantities in clinical units (documented in the README's info table).
 
         Args:
@@ -627,9 +715,17 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             values: The leading entries of the raw observation buffer (the scalars and the
                 cuff sensors) as python floats.
             unstable: Whether MuJoCo reset the data during the step.
+            sensed: The raw buffer as the sensors report it (the true one unless
+                ``robustness`` adds noise and latency): ``measured_*`` entries.
         """
         at = self._at
         knee_deg = math.degrees(values[at["knee_angle_rad"]])
+        if self._sensor is None:
+            measured_knee_deg = knee_deg
+            measured_exo_deg = math.degrees(values[at["exo_angle_rad"]])
+        else:
+            measured_knee_deg = math.degrees(sensed.item(at["knee_angle_rad"]))
+            measured_exo_deg = math.degrees(sensed.item(at["exo_angle_rad"]))
         target_deg = self.task.target_angle_deg
         thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
         stage = self.spasticity
@@ -638,6 +734,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             knee_angle_deg=knee_deg,
             knee_vel_rad_s=values[at["knee_vel_rad_s"]],
             exo_angle_deg=math.degrees(values[at["exo_angle_rad"]]),
+            measured_knee_angle_deg=measured_knee_deg,
+            measured_exo_angle_deg=measured_exo_deg,
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,

@@ -34,6 +34,14 @@ from myoexo.spasticity import VALID_LEVELS
 
 CONFIG_FILE = "config.json"
 
+#: Root seed of the reported evaluations (``myoexo evaluate``'s default, the README's tables).
+EVALUATION_ROOT_SEED = 0
+#: Root seed of the subjects that *select* policies (training's periodic evaluation,
+#: ``myoexo select``). It differs from :data:`EVALUATION_ROOT_SEED`, so no subject of a
+#: reported evaluation chose the checkpoint being reported; :func:`check_no_selection_leak`
+#: enforces it for policies that record their selection seed.
+SELECTION_ROOT_SEED = 1
+
 #: How a subject's seed is derived (recorded in ``config.json``).
 SEED_RULE = (
     "numpy.random.SeedSequence(root_seed, spawn_key=(level, subject)).generate_state(1, uint64)[0]"
@@ -61,7 +69,7 @@ class EvaluationConfig:
     controllers: tuple[str, ...] = ("pid",)
     levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 1000
-    root_seed: int = 0
+    root_seed: int = EVALUATION_ROOT_SEED
     episode_duration_s: float | None = None
     trace_stride: int = 2
     chunk_size: int = 10

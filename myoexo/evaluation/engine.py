@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 import sys
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,9 +32,11 @@ from myoexo.control.specs import (
     ControllerSpec,
     PolicyUnavailableError,
     build_controller,
+    check_no_selection_leak,
     load_sb3_model,
     load_shipped_policy,
     parse_controller_spec,
+    spec_env_kwargs,
 )
 from myoexo.evaluation.config import EvaluationConfig, subject_seed, write_config
 from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
@@ -132,6 +134,7 @@ def evaluate_controller(
     root_seed: int = 0,
     episode_duration_s: float | None = None,
     label: str = "controller",
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> tuple[Any, list[EpisodeResult]]:
     """In-process evaluation of a controller *object* (notebooks, tuning, selection).
 
@@ -143,6 +146,8 @@ def evaluate_controller(
         root_seed: Root seed of :func:`~.config.subject_seed`.
         episode_duration_s: Episode length (``None``: the env's default).
         label: Value of the ``controller`` column.
+        env_kwargs: More :func:`~myoexo.envs.make_env` arguments (e.g. the ``obs_preset``
+            of a policy; default: the policy's own ``obs_preset`` attribute, if any).
 
     Returns:
         ``(table, results)``: a pandas DataFrame (one row per episode) and the
@@ -153,7 +158,13 @@ def evaluate_controller(
     from myoexo.envs import make_env
 
     indices = list(range(subjects)) if isinstance(subjects, (int, np.integer)) else list(subjects)
-    env = make_env(level, episode_duration_s=episode_duration_s)
+    kwargs = dict(env_kwargs or {})
+    preset = getattr(controller, "obs_preset", None) or getattr(
+        getattr(controller, "fn", None), "obs_preset", None
+    )
+    if isinstance(preset, str) and preset != "full":
+        kwargs.setdefault("obs_preset", preset)
+    env = make_env(level, episode_duration_s=episode_duration_s, **kwargs)
     try:
         results = [run_episode(env, controller, subject_seed(level, i, root_seed)) for i in indices]
     finally:
@@ -188,8 +199,9 @@ def plan_chunks(specs: Sequence[ControllerSpec], config: EvaluationConfig) -> li
     return chunks
 
 
-#: Per-process caches of the workers: one env per env id and duration, one controller per spec.
-_ENVS: dict[tuple[str, float | None], Any] = {}
+#: Per-process caches of the workers: one env per env id, duration and env keyword arguments
+#: (a policy's observation preset), one controller per spec.
+_ENVS: dict[tuple[str, float | None, str, str], Any] = {}
 _CONTROLLERS: dict[str, Controller] = {}
 
 
@@ -216,13 +228,20 @@ def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chu
     """Run one chunk and store it atomically; returns ``(chunk, episodes run)``."""
     from myoexo.envs import make_env
 
-    key = (config.level_env_id(chunk.level), config.episode_duration_s)
+    env_kwargs = spec_env_kwargs(chunk.spec)
+    # the oracle plans on a copy of its env: it gets an env of its own, per level
+    owner = chunk.spec.text if chunk.spec.kind == "oracle" else ""
+    env_id = config.level_env_id(chunk.level)
+    key = (env_id, config.episode_duration_s, repr(sorted(env_kwargs.items())), owner)
     env = _ENVS.get(key)
     if env is None:
-        env = _ENVS[key] = make_env(key[0], episode_duration_s=config.episode_duration_s)
-    controller = _CONTROLLERS.get(chunk.spec.text)
+        env = _ENVS[key] = make_env(
+            env_id, episode_duration_s=config.episode_duration_s, **env_kwargs
+        )
+    controller_key = f"{chunk.spec.text}@{env_id}" if owner else chunk.spec.text
+    controller = _CONTROLLERS.get(controller_key)
     if controller is None:
-        controller = _CONTROLLERS[chunk.spec.text] = build_controller(chunk.spec, env)
+        controller = _CONTROLLERS[controller_key] = build_controller(chunk.spec, env)
     n_samples = config.trace_samples
     rows, traces = [], []
     for i in range(chunk.start, chunk.stop):
@@ -266,12 +285,16 @@ class EvaluationRun:
 
 
 def resolve_controllers(
-    specs_text: Iterable[str], log: Callable[[str], None] = print
+    specs_text: Iterable[str],
+    log: Callable[[str], None] = print,
+    root_seed: int | None = None,
 ) -> tuple[list[ControllerSpec], dict[str, str]]:
     """Parse and check every controller before anything is written.
 
     A model file that cannot be loaded raises ``ValueError``; ``sac`` without a shipped
-    policy is skipped with a message (and reported in the second return value).
+    policy is skipped with a message (and reported in the second return value). With
+    ``root_seed``, a policy selected on that root's subjects raises ``ValueError``
+    (:func:`~myoexo.control.specs.check_no_selection_leak`).
     """
     specs: list[ControllerSpec] = []
     skipped: dict[str, str] = {}
@@ -282,11 +305,13 @@ def resolve_controllers(
             load_sb3_model(str(spec.path), str(spec.algorithm))  # ValueError if unreadable
         elif spec.kind == "shipped":
             try:
-                load_shipped_policy()
+                load_shipped_policy(spec.path or "sac")
             except PolicyUnavailableError as exc:
                 skipped[text] = str(exc)
-                log(f"myoexo evaluate: skipping controller 'sac': {exc}")
+                log(f"myoexo evaluate: skipping controller {text!r}: {exc}")
                 continue
+        if root_seed is not None:
+            check_no_selection_leak(spec, root_seed)
         if spec.slug in labels:
             raise ValueError(
                 f"controllers {labels[spec.slug]!r} and {text!r} have the same label "
@@ -350,7 +375,7 @@ def evaluate(
         workers = available_cores()
     if not isinstance(workers, (int, np.integer)) or workers <= 0:
         raise ValueError(f"workers = {workers!r} must be a positive integer")
-    specs, skipped = resolve_controllers(config.controllers, log)
+    specs, skipped = resolve_controllers(config.controllers, log, root_seed=config.root_seed)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"output path {str(out)!r} exists and is not a folder")

@@ -120,6 +120,19 @@ class MLPActor:
             )
         self.metadata = dict(metadata or {})
 
+    @property
+    def obs_preset(self) -> str:
+        """Observation preset of the env the actor was trained on (``"full"`` unless its
+        metadata says otherwise): build its env with ``make_env(level, obs_preset=...)``."""
+        return str(self.metadata.get("obs_preset") or "full")
+
+    @property
+    def selection_root_seed(self) -> int | None:
+        """Root seed of the subjects that selected this checkpoint (``None``: not recorded);
+        an evaluation on the same root would report the subjects that chose it."""
+        seed = self.metadata.get("selection_root_seed")
+        return None if seed is None else int(seed)
+
     # ------------------------------------------------------------------ inference
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """The observation as the network saw it in training (float64, same shape)."""

@@ -30,6 +30,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from myoexo.evaluation import criteria
+from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.criteria import CRITERIA_METRICS
 from myoexo.io import write_json_atomic
 from myoexo.lifecycle import StopSignals
@@ -110,15 +111,18 @@ class SmallEvalSpec:
         levels: Spasticity levels.
         subjects: Fixed subjects per level (indices ``0..subjects-1`` of
             :func:`myoexo.evaluation.subject_seed`, the full protocol's first subjects).
-        root_seed: Root seed of the subjects (a held-out root by default: the training
+        root_seed: Root seed of the subjects (:data:`SELECTION_ROOT_SEED`, never the
+            reported evaluation's root; and held out from training: the training
             envs draw their subjects from the training seed, not from these).
         episode_duration_s: Episode length (``None``: the env's 8 s).
+        obs_preset: Observation preset of the policy's env.
     """
 
     levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 2
-    root_seed: int = 0
+    root_seed: int = SELECTION_ROOT_SEED
     episode_duration_s: float | None = None
+    obs_preset: str = "full"
 
 
 class EvaluationAborted(Exception):
@@ -193,7 +197,11 @@ class PaperMetricsEvalCallback(BaseCallback):
         if level not in self._envs:
             from myoexo.envs import make_env
 
-            self._envs[level] = make_env(level, episode_duration_s=self.spec.episode_duration_s)
+            self._envs[level] = make_env(
+                level,
+                episode_duration_s=self.spec.episode_duration_s,
+                obs_preset=self.spec.obs_preset,
+            )
         return self._envs[level]
 
     def _on_training_start(self) -> None:

@@ -94,8 +94,17 @@ def reference_pairs(
     }
 
 
-def load_checkpoint_actor(checkpoint: Path, with_reference: bool = True) -> MLPActor:
-    """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs."""
+def load_checkpoint_actor(
+    checkpoint: Path, with_reference: bool = True, selection_root_seed: int | None = None
+) -> MLPActor:
+    """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs.
+
+    Args:
+        checkpoint: A ``checkpoints/step_*`` folder of a ``myoexo train`` run.
+        with_reference: Store (and check) reference observation/action pairs.
+        selection_root_seed: Root seed of the subjects that selected this checkpoint
+            (``myoexo select``), recorded so that an evaluation on that root is refused.
+    """
     from stable_baselines3 import SAC
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -112,10 +121,14 @@ def load_checkpoint_actor(checkpoint: Path, with_reference: bool = True) -> MLPA
     run_dir = checkpoint.parent.parent
     config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
     state = ck.read_state(checkpoint)
+    preset = config.get("preset", {})
     meta = {
         "env_id": config.get("env_id"),
         "obs_keys": config.get("obs_keys"),
-        "preset": config.get("preset", {}).get("name"),
+        "obs_preset": preset.get("obs_preset", "full"),
+        "reward_weights": preset.get("reward_weights", []),
+        "selection_root_seed": selection_root_seed,
+        "preset": preset.get("name"),
         "seed": config.get("seed"),
         "num_timesteps": state.get("num_timesteps"),
         "train_wall_time_s": state.get("wall_time_s"),
@@ -168,8 +181,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--ship",
-        action="store_true",
-        help="write the numpy actor into the package (what myoexo.load_policy() returns)",
+        nargs="?",
+        const="sac",
+        metavar="NAME",
+        help="write the numpy actor into the package as NAME (default 'sac', what "
+        "myoexo.load_policy() returns; 'sac_exo' for the exo-sensor policy)",
+    )
+    parser.add_argument(
+        "--selection-root-seed",
+        type=int,
+        default=None,
+        help="root seed of the subjects that chose this checkpoint (myoexo select's "
+        "--root-seed); recorded, and evaluations on that root are refused",
     )
 
 
@@ -178,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     if not (args.onnx or args.out or args.ship):
         raise SystemExit("export-policy: nothing to do; give --onnx FILE, --out STEM or --ship")
     checkpoint = ck.resolve_checkpoint(args.run, args.checkpoint)
-    actor = load_checkpoint_actor(checkpoint)
+    actor = load_checkpoint_actor(checkpoint, selection_root_seed=args.selection_root_seed)
     print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")
     if args.onnx:
         print(f"onnx:  {export_onnx(actor, args.onnx)}")
@@ -186,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ship:
         from myoexo.policies import shipped_path
 
-        stems.append(shipped_path())
+        stems.append(shipped_path(args.ship))
     for stem in stems:
         npz, js = save_actor(actor, stem)
         print(f"actor: {npz} + {js.name}")

@@ -52,6 +52,8 @@ from myoexo.spasticity import VALID_LEVELS
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
 _VEC_ENVS = ("dummy", "subproc")
+#: Names of the env's observation presets (``myoexo.envs.knee_exo.OBS_PRESETS``).
+OBS_PRESET_NAMES = ("full", "exo")
 _ACTIVATIONS = ("gelu", "relu", "tanh", "elu")
 
 
@@ -103,6 +105,8 @@ class SACPreset:
         reward_weights: Overrides of the env's ``weighted_reward_keys`` as ``(key, weight)``
             pairs (e.g. ``(("inter", -0.5),)``); empty keeps the env's defaults. MyoExoKnee
             envs only.
+        obs_preset: Observation preset of the MyoExoKnee envs (``"full"``: the twin's whole
+            state; ``"exo"``: only what the exoskeleton measures, a deployable policy).
     """
 
     name: str = "custom"
@@ -135,6 +139,7 @@ class SACPreset:
     eval_subjects: int = 2
     eval_levels: tuple[int, ...] = VALID_LEVELS
     reward_weights: tuple[tuple[str, float], ...] = ()
+    obs_preset: str = "full"
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (
         "total_timesteps",
@@ -184,6 +189,8 @@ class SACPreset:
             raise ValueError(
                 f"batch_size = {self.batch_size} exceeds buffer_size = {self.buffer_size}"
             )
+        if self.obs_preset not in OBS_PRESET_NAMES:
+            raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {OBS_PRESET_NAMES}")
         if self.vec_env not in _VEC_ENVS:
             raise ValueError(f"vec_env = {self.vec_env!r}; accepted: {_VEC_ENVS}")
         if self.activation not in _ACTIVATIONS:

@@ -12,12 +12,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.criteria import compare, level_means, shortfall
 from myoexo.spasticity import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
 
-def evaluate_pid(subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = 0) -> Any:
+def evaluate_pid(
+    subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = SELECTION_ROOT_SEED
+) -> Any:
     """Per-level means of the paper's PID on subjects ``0..subjects-1``."""
     import pandas as pd
 
@@ -31,7 +34,10 @@ def evaluate_pid(subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed:
 
 
 def evaluate_checkpoint(
-    checkpoint: Path, subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = 0
+    checkpoint: Path,
+    subjects: int,
+    levels: Sequence[int] = VALID_LEVELS,
+    root_seed: int = SELECTION_ROOT_SEED,
 ) -> Any:
     """Per-level means of a checkpoint's deterministic actor on subjects ``0..subjects-1``."""
     import pandas as pd
@@ -54,7 +60,7 @@ def select_checkpoint(
     subjects: int = 10,
     last: int = 2,
     top: int = 4,
-    root_seed: int = 0,
+    root_seed: int = SELECTION_ROOT_SEED,
     verbose: bool = True,
     levels: Sequence[int] = VALID_LEVELS,
 ) -> tuple[Path, Any]:
@@ -173,7 +179,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--last", type=int, default=2, help="newest checkpoints to consider")
     parser.add_argument("--top", type=int, default=4, help="best-scored checkpoints to consider")
-    parser.add_argument("--root-seed", type=int, default=0)
+    parser.add_argument(
+        "--root-seed",
+        type=int,
+        default=SELECTION_ROOT_SEED,
+        help=f"root seed of the selection subjects (default {SELECTION_ROOT_SEED}; "
+        "the reported evaluation uses another)",
+    )
     parser.add_argument(
         "--out",
         type=Path,

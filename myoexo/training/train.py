@@ -98,7 +98,8 @@ class _EnvFactory:
     rank: int
     episode_duration_s: float | None
     reward_weights: tuple[tuple[str, float], ...] = ()
-    in_worker: bool = False  # called in a SubprocVecEnv worker
+    in_worker: bool = False
+    obs_preset: str = "full"  # called in a SubprocVecEnv worker
 
     def __call__(self) -> Any:
         import gymnasium as gym
@@ -117,10 +118,14 @@ class _EnvFactory:
                 self.env_id,
                 episode_duration_s=self.episode_duration_s,
                 reward_weights=dict(self.reward_weights),
+                obs_preset=self.obs_preset,
             )
-        elif self.episode_duration_s is not None or self.reward_weights:
+        elif (
+            self.episode_duration_s is not None or self.reward_weights or self.obs_preset != "full"
+        ):
             raise ValueError(
-                "episode_duration_s and reward_weights apply to the MyoExoKnee envs only, "
+                "episode_duration_s, reward_weights and obs_preset apply to the MyoExoKnee "
+                "envs only, "
                 f"not {self.env_id!r}"
             )
         else:
@@ -135,7 +140,14 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
 
     subproc = preset.vec_env == "subproc"
     fns: list[Callable[[], Any]] = [
-        _EnvFactory(preset.env_id, i, preset.episode_duration_s, preset.reward_weights, subproc)
+        _EnvFactory(
+            preset.env_id,
+            i,
+            preset.episode_duration_s,
+            preset.reward_weights,
+            subproc,
+            preset.obs_preset,
+        )
         for i in range(preset.n_envs)
     ]
     venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
@@ -256,6 +268,7 @@ def _learn(
             levels=preset.eval_levels,
             subjects=preset.eval_subjects,
             episode_duration_s=preset.episode_duration_s,
+            obs_preset=preset.obs_preset,
         )
         evaluator = PaperMetricsEvalCallback(
             run_dir, preset.eval_every_steps, spec, verbose, stop=stop

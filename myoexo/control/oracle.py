@@ -1,0 +1,230 @@
+"""The achievable bound: an oracle that sees the twin's true state and plans on a copy of it.
+
+:class:`OracleMPC` is receding-horizon *predictive sampling* (the planner of MuJoCo MPC,
+Howell et al. 2022): every ``replan`` control steps it copies the env's physics state and
+the reflex's delay line into a private ``MjData`` (the same ``MjModel``, so a perturbed
+twin is planned on as it is), rolls out ``samples`` torque plans over ``horizon_s`` (the
+best plan so far, shifted, plus Gaussian perturbations of it and the two saturated
+constants), and keeps the cheapest. A plan is piecewise linear between ``knots`` values;
+the cost per control step is ``(e / 1 rad)^2 + torque_weight * u^2`` with ``e`` the human
+knee error, the last step of the horizon counts ``terminal_weight`` times and adds
+``velocity_weight * (knee velocity)^2`` (end at rest).
+
+It knows the subject (its reflex parameters are in the copied stage) and the exact dynamics,
+which no real controller does; what it reaches is what the 100 Nm motor can reach on this
+twin. The paper never computed such a bound. It is slow (a few hundred rollouts per second of
+simulated time: ~20-60 s per 8-s episode on one core), so it is evaluated on a few subjects
+per level (``myoexo evaluate --controllers oracle --subjects 10``).
+
+    from myoexo.control.oracle import OracleMPC
+    env = make_env(3)
+    ep = rollout(env, OracleMPC.from_env(env), seed=0)
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import mujoco
+import numpy as np
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    """Predictive-sampling settings.
+
+    Attributes:
+        samples: Rollouts per plan (the previous best and the two saturated constants among
+            them).
+        horizon_s: Planning horizon (s).
+        replan: Control steps between two plans (the plan is followed in between).
+        knots: Values of the piecewise-linear torque plan over the horizon.
+        noise: Standard deviation of the perturbation of the knots (normalized command) far
+            from the target; it shrinks with the knee error ``|e|`` as ``noise *
+            clip(|e| / noise_error_rad, 0.1, 1)`` (fine search where holding needs precision).
+        noise_error_rad: Error below which the perturbation shrinks.
+        iters: Sampling rounds per plan, each around the best of the previous round.
+        torque_weight: Weight of ``u^2`` against ``(e / rad)^2`` in the cost.
+        terminal_weight: Weight of the horizon's last step.
+        velocity_weight: Weight of ``(knee velocity / 1 rad/s)^2`` in the last step's cost
+            (the plan must end at rest, not swing through the target).
+    """
+
+    samples: int = 12
+    horizon_s: float = 0.3
+    replan: int = 2
+    knots: int = 4
+    noise: float = 0.3
+    noise_error_rad: float = 0.1
+    iters: int = 1
+    torque_weight: float = 1e-3
+    terminal_weight: float = 10.0
+    velocity_weight: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("samples", "replan", "knots", "iters"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"OracleConfig.{name} = {v!r} must be a positive integer")
+        if self.samples < 3:
+            raise ValueError(f"OracleConfig.samples = {self.samples} must be >= 3")
+        if self.knots < 2:
+            raise ValueError(f"OracleConfig.knots = {self.knots} must be >= 2")
+        for name, low, high in (
+            ("horizon_s", 1e-3, 10.0),
+            ("noise", 0.0, 10.0),
+            ("noise_error_rad", 1e-6, 10.0),
+            ("torque_weight", 0.0, 1e6),
+            ("terminal_weight", 0.0, 1e6),
+            ("velocity_weight", 0.0, 1e6),
+        ):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and low <= v <= high):
+                raise ValueError(f"OracleConfig.{name} = {v!r} is outside [{low}, {high}]")
+
+
+def parse_oracle_options(text: str) -> dict[str, Any]:
+    """``"samples=16,horizon_s=0.4"`` -> typed :class:`OracleConfig` keyword arguments
+    (validated)."""
+    types = {f.name: f.type for f in fields(OracleConfig)}
+    options: dict[str, Any] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        key, _, value = item.partition("=")
+        key = key.strip()
+        if key not in types:
+            raise ValueError(f"unknown oracle option {key!r}; accepted: {sorted(types)}")
+        try:
+            options[key] = int(value) if types[key] in ("int", int) else float(value)
+        except ValueError:
+            raise ValueError(f"oracle option {key}={value!r} is not a number") from None
+    OracleConfig(**options)
+    return options
+
+
+class _PlanHost:
+    """What the reflex stage reads: a model, the planner's data and the control period."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, dt: float) -> None:
+        self.model, self.data, self.dt = model, data, dt
+
+
+class OracleMPC:
+    """Sampling-based MPC on a copy of the twin (see the module docstring).
+
+    Args:
+        env: The MyoExoKnee env it controls (wrappers allowed); it reads the true state
+            from ``env.unwrapped.data`` at every plan.
+        config: Planner settings.
+        seed: Seed of the sampling (``reset(seed)`` reseeds it).
+    """
+
+    name = "oracle"
+
+    def __init__(self, env: Any, config: OracleConfig | None = None, seed: int = 0) -> None:
+        self.env = env.unwrapped
+        self.config = config or OracleConfig()
+        e = self.env
+        self._model = e.model
+        self._data = mujoco.MjData(e.model)
+        self._host = _PlanHost(e.model, self._data, e.dt)
+        self._frame_skip = int(e.frame_skip)
+        self._exo_act = int(e._exo_act)
+        self._knee_qadr = int(e._knee_qadr)
+        self._knee_dadr = int(e._knee_dadr)
+        self._target_rad = math.radians(e.target_angle_deg)
+        self._steps = max(2, round(self.config.horizon_s / e.dt))
+        self._ctrl = np.zeros(e.model.nu)
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._state_spec = spec
+        self._state = np.zeros(mujoco.mj_stateSize(e.model, spec))
+        # knot values -> per-step commands (linear interpolation matrix, steps x knots)
+        t = np.linspace(0.0, self.config.knots - 1, self._steps)
+        lo = np.minimum(np.floor(t).astype(int), self.config.knots - 2)
+        w = t - lo
+        basis = np.zeros((self._steps, self.config.knots))
+        basis[np.arange(self._steps), lo] = 1.0 - w
+        basis[np.arange(self._steps), lo + 1] = w
+        self._basis = basis
+        self._weights = np.ones(self._steps)
+        self._weights[-1] = self.config.terminal_weight
+        self.rng = np.random.default_rng(seed)
+        self.reset(seed)
+
+    @classmethod
+    def from_env(cls, env: Any, seed: int = 0, **options: Any) -> OracleMPC:
+        """An oracle for ``env`` with :class:`OracleConfig` fields as keyword arguments."""
+        return cls(env, OracleConfig(**options), seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """New episode: forget the plan; reseed the sampling."""
+        if seed is not None:
+            self.rng = np.random.default_rng(int(seed))
+        self._knots = np.full(self.config.knots, -1.0)  # start: full extension torque
+        self._plan = self._basis @ self._knots
+        self._step_in_plan = 0
+        self.plans = 0
+
+    # ------------------------------------------------------------------ planning
+    def _rollout_cost(self, plan: np.ndarray, stage: Any, delay: tuple) -> float:
+        m, d = self._model, self._data
+        mujoco.mj_setState(m, d, self._state, self._state_spec)
+        line = stage._delay
+        line._theta[:], line._vel[:], line._count = delay[0], delay[1], delay[2]
+        ctrl, host = self._ctrl, self._host
+        cost = 0.0
+        tw = self.config.torque_weight
+        for k in range(self._steps):
+            u = float(plan[k])
+            ctrl.fill(0.0)
+            ctrl[self._exo_act] = u
+            d.ctrl[:] = stage.apply(host, ctrl)
+            mujoco.mj_step(m, d, self._frame_skip)
+            e = d.qpos.item(self._knee_qadr) - self._target_rad
+            cost += self._weights[k] * (e * e + tw * u * u)
+        v = d.qvel.item(self._knee_dadr)
+        return cost + self.config.terminal_weight * self.config.velocity_weight * v * v
+
+    def _plan_now(self) -> None:
+        e, cfg = self.env, self.config
+        if e.spasticity._model is not e.model:  # bound at its first step: bind it now
+            e.spasticity.bind(e.model, e.dt)
+        mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
+        stage = copy.copy(e.spasticity)
+        stage._delay = copy.deepcopy(e.spasticity._delay)
+        stage._data_views = None
+        line = e.spasticity._delay
+        delay = (list(line._theta), list(line._vel), line._count)
+        # the best plan so far, shifted by the steps it has run
+        shift = self._step_in_plan / max(self._steps - 1, 1) * (cfg.knots - 1)
+        grid = np.arange(cfg.knots) + shift
+        best = np.interp(grid, np.arange(cfg.knots), self._knots)
+        best_cost = self._rollout_cost(self._basis @ best, stage, delay)
+        candidates = [np.full(cfg.knots, -1.0), np.full(cfg.knots, 1.0)]
+        error_rad = abs(e.data.qpos.item(self._knee_qadr) - self._target_rad)
+        sigma = cfg.noise * min(1.0, max(0.1, error_rad / cfg.noise_error_rad))
+        for _ in range(cfg.iters):
+            n_random = cfg.samples - 1 - len(candidates)
+            noise = self.rng.standard_normal((n_random, cfg.knots)) * sigma
+            candidates.extend(np.clip(best + noise, -1.0, 1.0))
+            for knots in candidates:
+                c = self._rollout_cost(self._basis @ knots, stage, delay)
+                if c < best_cost:
+                    best, best_cost = knots, c
+            candidates = []
+        self._knots = best
+        self._plan = self._basis @ best
+        self._step_in_plan = 0
+        self.plans += 1
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        """The next command of the current plan (a new plan every ``replan`` steps)."""
+        del obs, info
+        if self._step_in_plan % self.config.replan == 0 or self._step_in_plan >= self._steps:
+            self._plan_now()
+        u = float(self._plan[min(self._step_in_plan, self._steps - 1)])
+        self._step_in_plan += 1
+        return np.array([u], dtype=np.float32)

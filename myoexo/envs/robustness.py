@@ -1,0 +1,237 @@
+"""What the twin does not know: per-episode perturbations of its uncertain parts.
+
+A real exoskeleton on a real leg differs from the nominal twin in ways no measurement pins
+down: how tight the straps are, segment masses, the slider's friction, the motor's torque
+constant, and its sensors are noisy and late. :class:`RobustnessParams` gives each a range;
+with ``make_env(level, robustness=RobustnessParams())`` (or ``robustness=True``) the env
+draws a new twin at every reset, from a generator seeded by the reset seed (so the same seed
+gives the same perturbed twin and the subject/start angle are those of the nominal env):
+
+=============================  ==============================  ===============================
+part                           default range                   applied to
+=============================  ==============================  ===============================
+strap stiffness                x0.5-2 (log-uniform)            the five coupling joints'
+                                                               springs; the shank weld's
+                                                               time constant (x 1/sqrt(scale),
+                                                               floored at 2 timesteps by
+                                                               MuJoCo, so its stiffening is
+                                                               capped at x1.56)
+strap damping                  x0.5-2 (log-uniform)            the coupling joints' damping,
+                                                               the weld's damping ratio
+segment masses and inertias    +-10 % (uniform, per body)      every body with mass
+slide friction                 +-50 % (uniform)                the thigh slider's frictionloss
+motor torque constant          +-5 % (uniform)                 the exo motor's gain and
+                                                               torque limit
+sensor noise                   Gaussian, std per observation   the observation vector and
+                               key (:data:`DEFAULT_NOISE_STD`)  ``info["measured_*"]``
+sensor latency                 10 ms                           the same (whole control steps)
+=============================  ==============================  ===============================
+
+What is *measured* (the observation the controller reads, ``info["measured_knee_angle_deg"]``
+and ``info["measured_exo_angle_deg"]`` that the PID uses) is noisy and late; what is *scored*
+(``info["knee_angle_deg"]``, the interaction torque, the reward) stays the true state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+#: Default sensor noise: observation key -> standard deviation in the key's physical unit.
+#: Encoders 0.1 deg / 0.01 rad/s (a 14-bit encoder and a filtered derivative), motor torque
+#: 1 Nm (current-based estimate), cuff sensors 1 N / 0.1 Nm, muscle states 1 % of their
+#: normalized range (simulation-only keys). Keys not listed are exact (target, command,
+#: time).
+DEFAULT_NOISE_STD: dict[str, float] = {
+    "knee_angle_rad": math.radians(0.1),
+    "knee_vel_rad_s": 0.01,
+    "exo_angle_rad": math.radians(0.1),
+    "exo_vel_rad_s": 0.01,
+    "error_rad": math.radians(0.1),
+    "exo_torque_nm": 1.0,
+    "muscle_knee_torque_nm": 1.0,
+    "thigh_cuff_force_n": 1.0,
+    "thigh_cuff_torque_nm": 0.1,
+    "shank_cuff_force_n": 1.0,
+    "shank_cuff_torque_nm": 0.1,
+    "coupling_qpos": 1e-4,
+    "coupling_qvel": 1e-3,
+    "spastic_act": 0.01,
+    "spastic_force": 0.01,
+    "spastic_length": 0.01,
+    "spastic_velocity": 0.01,
+}
+
+
+@dataclass(frozen=True)
+class RobustnessParams:
+    """Ranges of the twin's uncertain parts (defaults: the ranges of the module docstring).
+
+    Attributes:
+        strap_stiffness_scale: (low, high) of the strap stiffness factor, log-uniform.
+        strap_damping_scale: (low, high) of the strap damping factor, log-uniform.
+        mass_rel: Half-width of the uniform relative change of each body's mass and inertia.
+        slide_friction_rel: Half-width of the uniform relative change of the slide friction.
+        motor_gain_rel: Half-width of the uniform relative change of the motor torque constant.
+        latency_s: Sensor latency (s), a whole number of control periods (0: none).
+        noise_std: ``(obs key, std in its physical unit)`` pairs (empty: no noise).
+    """
+
+    strap_stiffness_scale: tuple[float, float] = (0.5, 2.0)
+    strap_damping_scale: tuple[float, float] = (0.5, 2.0)
+    mass_rel: float = 0.10
+    slide_friction_rel: float = 0.50
+    motor_gain_rel: float = 0.05
+    latency_s: float = 0.010
+    noise_std: tuple[tuple[str, float], ...] = field(
+        default_factory=lambda: tuple(DEFAULT_NOISE_STD.items())
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("strap_stiffness_scale", "strap_damping_scale"):
+            lo, hi = (float(v) for v in getattr(self, name))
+            if not (0.0 < lo <= hi < 1e3):
+                raise ValueError(f"{name} = {(lo, hi)} must satisfy 0 < low <= high < 1000")
+            object.__setattr__(self, name, (lo, hi))
+        for name in ("mass_rel", "slide_friction_rel", "motor_gain_rel"):
+            v = float(getattr(self, name))
+            if not (0.0 <= v < 1.0):
+                raise ValueError(f"{name} = {v!r} is outside the accepted range [0, 1)")
+        if not (math.isfinite(self.latency_s) and 0.0 <= self.latency_s <= 1.0):
+            raise ValueError(f"latency_s = {self.latency_s!r} is outside [0, 1] s")
+        pairs = tuple((str(k), float(v)) for k, v in dict(self.noise_std).items())
+        bad = [(k, v) for k, v in pairs if not (math.isfinite(v) and v >= 0.0)]
+        if bad:
+            raise ValueError(f"noise_std has negative or non-finite values {bad}")
+        object.__setattr__(self, "noise_std", pairs)
+
+    @classmethod
+    def nominal(cls) -> RobustnessParams:
+        """No perturbation at all (every range collapsed; for tests)."""
+        return cls((1.0, 1.0), (1.0, 1.0), 0.0, 0.0, 0.0, 0.0, ())
+
+
+class TwinPerturbation:
+    """Draws and applies :class:`RobustnessParams` to one env's model at every reset.
+
+    The nominal values are copied once; :meth:`apply` restores them and scales them anew,
+    so perturbations never accumulate.
+
+    Args:
+        model: The env's ``MjModel`` (modified in place).
+        params: The ranges.
+        coupling_joints: Names of the strap coupling joints.
+        slide_joint: Name of the thigh slider.
+        strap_equality: Name of the shank strap weld (``None``: no weld).
+        motor: Name of the exo motor actuator.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        params: RobustnessParams,
+        coupling_joints: tuple[str, ...],
+        slide_joint: str,
+        strap_equality: str | None,
+        motor: str,
+    ) -> None:
+        self.model = model
+        self.params = params
+        jids = np.array([model.joint(n).id for n in coupling_joints], dtype=np.intp)
+        self._jids = jids
+        self._dofs = model.jnt_dofadr[jids].astype(np.intp)
+        self._slide_dof = int(model.jnt_dofadr[model.joint(slide_joint).id])
+        self._eq = None if strap_equality is None else int(model.equality(strap_equality).id)
+        self._motor = int(model.actuator(motor).id)
+        self._bodies = np.flatnonzero(model.body_mass > 0.0)
+        self._min_tc_s = 2.0 * float(model.opt.timestep)
+        self._nominal = {
+            "jnt_stiffness": model.jnt_stiffness[jids].copy(),
+            "dof_damping": model.dof_damping[self._dofs].copy(),
+            "frictionloss": float(model.dof_frictionloss[self._slide_dof]),
+            "body_mass": model.body_mass.copy(),
+            "body_inertia": model.body_inertia.copy(),
+            "gain": float(model.actuator_gainprm[self._motor, 0]),
+            "forcerange": model.actuator_forcerange[self._motor].copy(),
+            "eq_solref": None if self._eq is None else model.eq_solref[self._eq].copy(),
+        }
+
+    def apply(self, rng: np.random.Generator) -> dict[str, Any]:
+        """Draw a twin and write it into the model; returns the drawn factors."""
+        p, m, nom = self.params, self.model, self._nominal
+
+        def log_uniform(bounds: tuple[float, float]) -> float:
+            lo, hi = bounds
+            return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+        k = log_uniform(p.strap_stiffness_scale)
+        c = log_uniform(p.strap_damping_scale)
+        mass = 1.0 + rng.uniform(-p.mass_rel, p.mass_rel, size=self._bodies.size)
+        friction = 1.0 + float(rng.uniform(-p.slide_friction_rel, p.slide_friction_rel))
+        gain = 1.0 + float(rng.uniform(-p.motor_gain_rel, p.motor_gain_rel))
+
+        m.jnt_stiffness[self._jids] = nom["jnt_stiffness"] * k
+        m.dof_damping[self._dofs] = nom["dof_damping"] * c
+        m.dof_frictionloss[self._slide_dof] = nom["frictionloss"] * friction
+        m.body_mass[:] = nom["body_mass"]
+        m.body_inertia[:] = nom["body_inertia"]
+        m.body_mass[self._bodies] *= mass
+        m.body_inertia[self._bodies] *= mass[:, None]
+        m.actuator_gainprm[self._motor, 0] = nom["gain"] * gain
+        m.actuator_forcerange[self._motor] = nom["forcerange"] * gain
+        if self._eq is not None:
+            tc, ratio = nom["eq_solref"]
+            # spring ~ 1/tc^2, damper ~ ratio/tc: stiffness x k -> tc / sqrt(k); damping x c
+            # -> ratio x c / sqrt(k) (MuJoCo floors tc at 2 timesteps)
+            m.eq_solref[self._eq] = (
+                max(tc / math.sqrt(k), self._min_tc_s),
+                ratio * c / math.sqrt(k),
+            )
+        return {
+            "strap_stiffness_scale": k,
+            "strap_damping_scale": c,
+            "mass_scale_mean": float(mass.mean()) if mass.size else 1.0,
+            "slide_friction_scale": friction,
+            "motor_gain_scale": gain,
+        }
+
+
+class SensorModel:
+    """Noise and latency of what the controller reads.
+
+    Works on the env's raw observation buffer (physical units): :meth:`measure` adds the
+    noise and returns the buffer of ``delay_steps`` control steps earlier (the reset's
+    buffer until then).
+
+    Args:
+        std_raw: Noise standard deviation of each raw entry (0: exact).
+        delay_steps: Latency in control steps.
+    """
+
+    def __init__(self, std_raw: np.ndarray, delay_steps: int) -> None:
+        self.std_raw = np.asarray(std_raw, dtype=np.float64)
+        self._noisy = np.flatnonzero(self.std_raw > 0.0)
+        self._std = self.std_raw[self._noisy]
+        self.delay_steps = int(delay_steps)
+        self._buffer: list[np.ndarray] = []
+
+    def _noise(self, raw: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        out = raw.copy()
+        if self._noisy.size:
+            out[self._noisy] += self._std * rng.standard_normal(self._noisy.size)
+        return out
+
+    def reset(self, raw: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Start of an episode: the delay line holds the reset's (noisy) reading."""
+        first = self._noise(raw, rng)
+        self._buffer = [first] * self.delay_steps
+        return first
+
+    def measure(self, raw: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """This step's reading: noisy, ``delay_steps`` control steps old."""
+        self._buffer.append(self._noise(raw, rng))
+        return self._buffer.pop(0)

@@ -1,0 +1,58 @@
+"""The oracle (sampling-based MPC on a copy of the twin): the achievable bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from myoexo.control import PID
+from myoexo.control.oracle import OracleConfig, OracleMPC, parse_oracle_options
+from myoexo.control.specs import build_controller, parse_controller_spec
+from myoexo.envs import make_env
+from myoexo.evaluation import run_episode
+
+FAST = {"samples": 4, "horizon_s": 0.06, "replan": 3, "knots": 2}
+
+
+def test_planning_leaves_the_env_untouched_and_is_deterministic():
+    env = make_env(2, episode_duration_s=0.3)
+    oracle = OracleMPC.from_env(env, **FAST)
+    env.reset(seed=2)
+    oracle.reset(2)
+    base = env.unwrapped
+    for _ in range(5):
+        env.step(np.array([-1.0], np.float32))
+    qpos, qvel, t = base.data.qpos.copy(), base.data.qvel.copy(), base.data.time
+    delay = list(base.spasticity._delay._theta)
+    u = oracle.act(None, {})
+    assert -1.0 <= u[0] <= 1.0 and oracle.plans == 1
+    np.testing.assert_array_equal(base.data.qpos, qpos)
+    np.testing.assert_array_equal(base.data.qvel, qvel)
+    assert base.data.time == t and list(base.spasticity._delay._theta) == delay
+    a = run_episode(env, OracleMPC.from_env(env, **FAST), seed=5)
+    b = run_episode(env, OracleMPC.from_env(env, **FAST), seed=5)
+    np.testing.assert_array_equal(a.signals["knee_angle_deg"], b.signals["knee_angle_deg"])
+
+
+def test_oracle_extends_at_least_as_far_as_the_pid_at_level_3():
+    """At level 3 the PID saturates the motor; the oracle, planning on the true twin,
+    cannot do worse than hold the full torque either (1.5-s episodes)."""
+    env = make_env(3, episode_duration_s=1.5)
+    oracle = run_episode(env, OracleMPC.from_env(env, **FAST), seed=1)
+    pid = run_episode(env, PID.from_env(env), seed=1)
+    assert oracle.metrics.abs_final_error_deg <= pid.metrics.abs_final_error_deg + 0.5
+    assert oracle.metrics.peak_exo_torque_nm == pytest.approx(100.0, abs=1.0)
+
+
+def test_spec_and_options():
+    spec = parse_controller_spec("oracle:samples=6,horizon_s=0.1")
+    assert spec.kind == "oracle" and spec.options == {"samples": 6, "horizon_s": 0.1}
+    env = make_env(0, episode_duration_s=0.2)
+    ctrl = build_controller(spec, env)
+    assert isinstance(ctrl, OracleMPC) and ctrl.config.samples == 6
+    with pytest.raises(ValueError, match="unknown oracle option"):
+        parse_oracle_options("speed=3")
+    with pytest.raises(ValueError, match="samples"):
+        OracleConfig(samples=1)
+    with pytest.raises(ValueError, match="horizon_s"):
+        OracleConfig(horizon_s=-1.0)
