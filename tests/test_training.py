@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -273,3 +274,41 @@ def test_reward_weight_overrides_reach_the_training_envs():
     env.close()
     with pytest.raises(ValueError, match="reward_weights"):
         get_preset("cpu", reward_weights=(("nope", 1.0),))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algorithm", ["tqc", "crossq"])
+def test_contrib_algorithms_train_evaluate_and_resume(algorithm, tmp_path):
+    """TQC and CrossQ (sb3-contrib) go through the same run folder, small evaluation,
+    checkpoint and resume as SAC."""
+    pytest.importorskip("sb3_contrib")
+    run_dir = tmp_path / algorithm
+    preset = _tiny_preset(algorithm=algorithm, eval_levels=(1,))
+    train(preset, run_dir, seed=1, verbose=0)
+    model_zip = ck.list_checkpoints(run_dir)[-1] / ck.MODEL_FILE
+    cls = {"tqc": "TQC", "crossq": "CrossQ"}[algorithm]
+    with zipfile.ZipFile(model_zip) as z:
+        assert cls in z.read("data").decode()  # SB3 records the class of its policy
+    rows = (run_dir / ck.EVAL_FILE).read_text().splitlines()
+    assert len(rows) == 1 + 2  # header + 2 evaluations x 1 level
+    second = resume(run_dir, total_timesteps=600, verbose=0)
+    assert second.num_timesteps == 600
+    assert ck.read_config(run_dir)["preset"]["algorithm"] == algorithm
+
+
+def test_obs_preset_and_algorithm_fields_are_validated():
+    preset = get_preset("cpu", obs_preset="exo", algorithm="tqc")
+    assert preset_from_dict(preset.to_dict()) == preset
+    with pytest.raises(ValueError, match="obs_preset"):
+        get_preset("cpu", obs_preset="nope")
+    with pytest.raises(ValueError, match="algorithm"):
+        get_preset("cpu", algorithm="ppo")
+
+
+def test_exo_preset_reaches_the_training_envs():
+    from myoexo.training.train import make_vec_env
+
+    venv = make_vec_env(_tiny_preset(obs_preset="exo", n_envs=1), seed=0)
+    assert venv.get_attr("obs_preset")[0] == "exo"
+    assert venv.observation_space.shape == (18,)
+    venv.close()

@@ -20,7 +20,8 @@ spec                               controller
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
-                                   ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:`` for other algorithms
+                                   ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:``, ``tqc:``,
+                                   ``crossq:`` for other algorithms
 =================================  ==========================================================
 
 Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
@@ -40,14 +41,17 @@ from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
 
-#: SB3 algorithm prefixes accepted before a model path.
+#: SB3 algorithm prefixes accepted before a model path (TQC and CrossQ: sb3-contrib).
 SB3_ALGORITHMS: dict[str, str] = {
     "sac": "SAC",
     "td3": "TD3",
     "ddpg": "DDPG",
     "ppo": "PPO",
     "a2c": "A2C",
+    "tqc": "TQC",
+    "crossq": "CrossQ",
 }
+_CONTRIB_ALGORITHMS = ("TQC", "CrossQ")
 
 _PID_KEYS = ("kp", "ki", "kd", "feedback", "anti_windup", "derivative", "textbook")
 
@@ -172,9 +176,15 @@ def load_shipped_policy(name: str = "sac") -> Any:
 
 def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
     """Load a stable-baselines3 model file on the CPU; ``ValueError`` if it is unreadable."""
-    import stable_baselines3
+    import importlib
 
-    cls = getattr(stable_baselines3, algorithm)
+    module = "sb3_contrib" if algorithm in _CONTRIB_ALGORITHMS else "stable_baselines3"
+    try:
+        cls = getattr(importlib.import_module(module), algorithm)
+    except ImportError:
+        raise ValueError(
+            f"loading a {algorithm} model needs {module} (pip install 'myoexo[contrib]')"
+        ) from None
     try:
         return cls.load(path, device="cpu")
     except Exception as exc:  # zip, pickle and torch errors all mean "not a usable model"

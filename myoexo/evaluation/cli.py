@@ -38,9 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         default=["pid", "sac"],
         metavar="SPEC",
-        help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..]', 'sac' (the "
-        "shipped policy; skipped with a message if absent) or paths of SB3 .zip models "
-        "(default: pid sac)",
+        help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..]', 'sac' / "
+        "'sac_exo' (the shipped full-state / exo-sensor policies; skipped with a message if "
+        "absent), 'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the "
+        "achievable bound, slow) or paths of SB3 .zip models (default: pid sac)",
     )
     parser.add_argument(
         "--levels",
@@ -101,6 +102,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=d.env_id,
         help="gymnasium id of a level's env, with '{level}' (default: %(default)s)",
     )
+    parser.add_argument(
+        "--perturbed",
+        action="store_true",
+        help="a perturbed twin per episode (strap stiffness/damping x0.5-2, masses +-10 %%, "
+        "slide friction +-50 %%, motor constant +-5 %%, sensor noise, 10 ms latency; "
+        "myoexo.envs.robustness), drawn from the subject's seed",
+    )
     parser.add_argument("--report", action="store_true", help="write the report when done")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -120,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
             trace_stride=args.trace_stride,
             chunk_size=args.chunk_size,
             env_id=args.env_id,
+            perturbed=args.perturbed,
         )
         result = evaluate(
             config,

@@ -64,6 +64,10 @@ class EvaluationConfig:
         env_id: Gymnasium id of the env of a level, formatted with ``level``; any env
             registered with the MyoExoKnee API (e.g. a variant with other ``TaskParams`` or
             wrappers, ``"module:EnvId-v{level}"`` imports its module first).
+        perturbed: Evaluate on perturbed twins: each episode draws the twin's uncertain
+            parts and sensor noise/latency (``make_env(..., robustness=True)``,
+            :mod:`myoexo.envs.robustness`) from its subject seed, the same for every
+            controller.
     """
 
     controllers: tuple[str, ...] = ("pid",)
@@ -74,6 +78,7 @@ class EvaluationConfig:
     trace_stride: int = 2
     chunk_size: int = 10
     env_id: str = "MyoExoKnee-v{level}"
+    perturbed: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "controllers", tuple(self.controllers))
@@ -99,6 +104,11 @@ class EvaluationConfig:
         if d is not None and not (math.isfinite(d) and 0.0 < d <= 3600.0):
             raise ValueError(f"episode_duration_s = {d!r} must be in (0, 3600] s or None")
 
+    @property
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of every env of the run (on top of a controller's own)."""
+        return {"robustness": True} if self.perturbed else {}
+
     def level_env_id(self, level: int) -> str:
         """The env id of one level."""
         return self.env_id.format(level=level)
@@ -121,6 +131,7 @@ class EvaluationConfig:
             "trace_stride": int(self.trace_stride),
             "env_id": self.env_id,
             "env_fingerprint": env_fingerprint(self.level_env_id(self.levels[0])),
+            **({"perturbed": True} if self.perturbed else {}),
         }
 
 

@@ -228,7 +228,7 @@ def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chu
     """Run one chunk and store it atomically; returns ``(chunk, episodes run)``."""
     from myoexo.envs import make_env
 
-    env_kwargs = spec_env_kwargs(chunk.spec)
+    env_kwargs = {**config.env_kwargs, **spec_env_kwargs(chunk.spec)}
     # the oracle plans on a copy of its env: it gets an env of its own, per level
     owner = chunk.spec.text if chunk.spec.kind == "oracle" else ""
     env_id = config.level_env_id(chunk.level)

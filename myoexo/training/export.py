@@ -105,11 +105,15 @@ def load_checkpoint_actor(
         selection_root_seed: Root seed of the subjects that selected this checkpoint
             (``myoexo select``), recorded so that an evaluation on that root is refused.
     """
-    from stable_baselines3 import SAC
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from myoexo.training.presets import algorithm_class
+
     checkpoint = Path(checkpoint)
-    model = SAC.load(checkpoint / ck.MODEL_FILE, device="cpu")
+    run_dir = checkpoint.parent.parent
+    config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
+    algorithm = config.get("preset", {}).get("algorithm", "sac")
+    model = algorithm_class(algorithm).load(checkpoint / ck.MODEL_FILE, device="cpu")
     vn = None
     if (checkpoint / ck.VECNORM_FILE).is_file():
         import pickle
@@ -118,8 +122,6 @@ def load_checkpoint_actor(
             vn = pickle.load(f)
         if not isinstance(vn, VecNormalize):
             raise ValueError(f"{checkpoint / ck.VECNORM_FILE} is not a VecNormalize pickle")
-    run_dir = checkpoint.parent.parent
-    config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
     state = ck.read_state(checkpoint)
     preset = config.get("preset", {})
     meta = {
@@ -129,6 +131,7 @@ def load_checkpoint_actor(
         "reward_weights": preset.get("reward_weights", []),
         "selection_root_seed": selection_root_seed,
         "preset": preset.get("name"),
+        "algorithm": algorithm,
         "seed": config.get("seed"),
         "num_timesteps": state.get("num_timesteps"),
         "train_wall_time_s": state.get("wall_time_s"),

@@ -52,6 +52,29 @@ from myoexo.spasticity import VALID_LEVELS
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
 _VEC_ENVS = ("dummy", "subproc")
+#: Off-policy algorithms a preset can name: name -> (module, class).
+ALGORITHMS: dict[str, tuple[str, str]] = {
+    "sac": ("stable_baselines3", "SAC"),
+    "tqc": ("sb3_contrib", "TQC"),
+    "crossq": ("sb3_contrib", "CrossQ"),
+}
+
+
+def algorithm_class(name: str) -> Any:
+    """The SB3 class of an algorithm name; ``ValueError`` naming the extra to install."""
+    import importlib
+
+    if name not in ALGORITHMS:
+        raise ValueError(f"algorithm = {name!r}; accepted: {sorted(ALGORITHMS)}")
+    module, cls = ALGORITHMS[name]
+    try:
+        return getattr(importlib.import_module(module), cls)
+    except ImportError:
+        raise ValueError(
+            f"algorithm {name!r} needs {module} (pip install 'myoexo[contrib]')"
+        ) from None
+
+
 #: Names of the env's observation presets (``myoexo.envs.knee_exo.OBS_PRESETS``).
 OBS_PRESET_NAMES = ("full", "exo")
 _ACTIVATIONS = ("gelu", "relu", "tanh", "elu")
@@ -107,6 +130,10 @@ class SACPreset:
             envs only.
         obs_preset: Observation preset of the MyoExoKnee envs (``"full"``: the twin's whole
             state; ``"exo"``: only what the exoskeleton measures, a deployable policy).
+        algorithm: ``"sac"`` (stable-baselines3), or from sb3-contrib (the ``contrib``
+            extra) ``"tqc"`` (truncated quantile critics, Kuznetsov 2020) or ``"crossq"``
+            (batch-renormalized critics without target networks, Bhatt 2024; ``tau`` is not
+            used).
     """
 
     name: str = "custom"
@@ -140,6 +167,7 @@ class SACPreset:
     eval_levels: tuple[int, ...] = VALID_LEVELS
     reward_weights: tuple[tuple[str, float], ...] = ()
     obs_preset: str = "full"
+    algorithm: str = "sac"
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (
         "total_timesteps",
@@ -191,6 +219,8 @@ class SACPreset:
             )
         if self.obs_preset not in OBS_PRESET_NAMES:
             raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {OBS_PRESET_NAMES}")
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm = {self.algorithm!r}; accepted: {sorted(ALGORITHMS)}")
         if self.vec_env not in _VEC_ENVS:
             raise ValueError(f"vec_env = {self.vec_env!r}; accepted: {_VEC_ENVS}")
         if self.activation not in _ACTIVATIONS:

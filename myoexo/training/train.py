@@ -39,7 +39,7 @@ from typing import Any
 from myoexo.io import package_versions, write_json_atomic
 from myoexo.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
-from myoexo.training.presets import SACPreset, preset_from_dict
+from myoexo.training.presets import SACPreset, algorithm_class, preset_from_dict
 
 
 @dataclass(frozen=True)
@@ -160,19 +160,21 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
 
 
 def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
-    """An untrained SB3 SAC with the preset's networks and hyper-parameters."""
-    from stable_baselines3 import SAC
+    """An untrained agent of the preset's algorithm (SB3 SAC by default; TQC or CrossQ
+    from sb3-contrib) with the preset's networks and hyper-parameters."""
     from torch import nn
 
+    cls = algorithm_class(preset.algorithm)
     activation = {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
-    return SAC(
+    extra: dict[str, Any] = {} if preset.algorithm == "crossq" else {"tau": preset.tau}
+    return cls(
         "MlpPolicy",
         venv,
         learning_rate=preset.learning_rate,
         buffer_size=preset.buffer_size,
         learning_starts=preset.learning_starts,
         batch_size=preset.batch_size,
-        tau=preset.tau,
+        **extra,
         gamma=preset.gamma,
         train_freq=(preset.train_freq, "step"),
         gradient_steps=preset.gradient_steps,
@@ -424,7 +426,6 @@ def _start(
 
 def _load_checkpoint(checkpoint: Path, preset: SACPreset, seed: int) -> tuple[Any, Any]:
     """``(model, venv)`` restored from a resumable checkpoint (raises if it cannot be)."""
-    from stable_baselines3 import SAC
     from stable_baselines3.common.vec_env import VecNormalize
 
     step = int(ck.read_state(checkpoint)["num_timesteps"])
@@ -433,7 +434,8 @@ def _load_checkpoint(checkpoint: Path, preset: SACPreset, seed: int) -> tuple[An
         if preset.normalize_obs:
             venv = VecNormalize.load(str(checkpoint / ck.VECNORM_FILE), venv.venv)
             venv.training = True
-        model = SAC.load(checkpoint / ck.MODEL_FILE, env=venv, device="cpu")
+        cls = algorithm_class(preset.algorithm)
+        model = cls.load(checkpoint / ck.MODEL_FILE, env=venv, device="cpu")
         model.load_replay_buffer(checkpoint / ck.REPLAY_FILE)
         model.set_random_seed(seed + step)
     except BaseException:
