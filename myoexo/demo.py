@@ -1,9 +1,12 @@
 """``myoexo demo`` (what ``make demo`` runs): the paper's evaluation protocol, small.
 
-Evaluates the PID baseline and, when the package ships one, the SAC policy on 20 subjects
-per spasticity level (paper: 1000), then writes the figures and the Markdown report and
-prints where they are. A few minutes on 2 cores. Re-running continues or reuses the
-finished episodes in the output folder (default ``results/demo``).
+Evaluates the PID baseline and the two shipped SAC policies (``sac``: full state; ``sac_exo``:
+the exoskeleton's own sensors) on 20 subjects per spasticity level (paper: 1000), and the
+achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
+then writes the figures and the Markdown report (with each controller's distance to the
+bound) and prints where they are. About 5 minutes on 2 cores, most of it the oracle.
+Re-running continues or reuses the finished episodes in the output folder (default
+``results/demo``; the oracle's in ``results/demo/bound``).
 """
 
 from __future__ import annotations
@@ -15,7 +18,9 @@ from pathlib import Path
 
 #: Defaults of the demo.
 DEMO_SUBJECTS = 20
-DEMO_CONTROLLERS = ("pid", "sac")
+DEMO_CONTROLLERS = ("pid", "sac", "sac_exo")
+#: Subjects per level of the oracle (the bound); it costs ~40 s of a core per episode.
+DEMO_BOUND_SUBJECTS = 2
 DEMO_OUT = Path("results") / "demo"
 
 
@@ -32,7 +37,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         default=list(DEMO_CONTROLLERS),
         metavar="SPEC",
-        help="controller specs as for 'myoexo evaluate' (default: pid sac)",
+        help="controller specs as for 'myoexo evaluate' (default: pid sac sac_exo)",
+    )
+    parser.add_argument(
+        "--bound-subjects",
+        type=int,
+        default=DEMO_BOUND_SUBJECTS,
+        help=f"subjects per level of the oracle bound (default: {DEMO_BOUND_SUBJECTS}; "
+        "0: no bound)",
     )
     parser.add_argument("--workers", type=int, default=None, help="default: all cores")
     parser.add_argument("--out", type=Path, default=DEMO_OUT, help=f"default: {DEMO_OUT}")
@@ -50,10 +62,17 @@ def run(args: argparse.Namespace) -> int:
         f"myoexo demo: {args.subjects} subjects x levels 0-3 x controllers "
         f"{' '.join(args.controllers)} on {workers} worker(s) -> {args.out}"
     )
+    bound_dir = args.out / "bound" if args.bound_subjects > 0 else None
     try:
         config = EvaluationConfig(controllers=tuple(args.controllers), subjects=args.subjects)
         result = evaluate(config, args.out, workers=workers, progress=not args.no_progress)
-        report = write_report(result.out_dir)
+        if bound_dir is not None:
+            print(f"achievable bound: oracle MPC on {args.bound_subjects} subjects per level")
+            bound_config = EvaluationConfig(
+                controllers=("oracle",), subjects=args.bound_subjects, chunk_size=1
+            )
+            evaluate(bound_config, bound_dir, workers=workers, progress=not args.no_progress)
+        report = write_report(result.out_dir, bound_dir=bound_dir)
     except ValueError as exc:
         print(f"myoexo demo: error: {exc}", file=sys.stderr)
         return 2
@@ -65,6 +84,20 @@ def run(args: argparse.Namespace) -> int:
             f"{s.target_overshoot_deg_mean:15.2f}  {s.settling_time_s_mean:12.2f}  "
             f"{s.peak_interaction_torque_nm_mean:9.1f}"
         )
+    if bound_dir is not None:
+        import pandas as pd
+
+        from myoexo.evaluation import load_table
+        from myoexo.evaluation.bound import distance_to_bound
+
+        both = pd.concat([result.table, load_table(bound_dir)], ignore_index=True)
+        d = distance_to_bound(both)
+        print("\ncontroller  level  |final error| (deg)  bound (deg)  distance (deg)  subjects")
+        for r in d.itertuples():
+            print(
+                f"{r.controller:<10s}  {r.level:5d}  {r.abs_final_error_deg:19.2f}  "
+                f"{r.bound_abs_final_error_deg:11.2f}  {r.distance_deg:14.2f}  {r.subjects:8d}"
+            )
     print(f"\n{len(result.table)} episodes in {time.perf_counter() - t0:.0f} s")
     print(f"report:  {report.resolve()}")
     print(f"figures: {(report.parent / 'figures').resolve()}")

@@ -56,3 +56,37 @@ def test_spec_and_options():
         OracleConfig(samples=1)
     with pytest.raises(ValueError, match="horizon_s"):
         OracleConfig(horizon_s=-1.0)
+
+
+def test_distance_to_bound_uses_the_subjects_in_common():
+    import pandas as pd
+
+    from myoexo.evaluation.bound import bound_markdown, distance_to_bound
+
+    def rows(ctrl, level, errors, peak):
+        return [
+            {
+                "controller": ctrl,
+                "level": level,
+                "subject": i,
+                "abs_final_error_deg": e,
+                "peak_interaction_torque_nm": peak,
+                "rms_interaction_torque_nm": peak / 2,
+            }
+            for i, e in enumerate(errors)
+        ]
+
+    table = pd.DataFrame(
+        rows("pid", 2, [6.0, 8.0, 100.0], 180.0)  # subject 2: the oracle did not run it
+        + rows("oracle", 2, [5.0, 5.0], 170.0)
+    )
+    d = distance_to_bound(table)
+    assert len(d) == 1
+    row = d.iloc[0]
+    assert row.controller == "pid" and row.subjects == 2
+    assert row.abs_final_error_deg == pytest.approx(7.0)
+    assert row.distance_deg == pytest.approx(2.0)
+    assert row.bound_peak_nm == pytest.approx(170.0)
+    assert "distance (deg)" in bound_markdown(table)
+    with pytest.raises(ValueError, match="no oracle"):
+        distance_to_bound(table[table.controller == "pid"])

@@ -300,12 +300,17 @@ def write_figures(out_dir: Path, fig_dir: Path, table: Any) -> list[Path]:
     return written
 
 
-def write_report(out_dir: str | Path, report_dir: str | Path | None = None) -> Path:
+def write_report(
+    out_dir: str | Path, report_dir: str | Path | None = None, bound_dir: str | Path | None = None
+) -> Path:
     """Write figures, ``summary.csv`` and ``report.md`` for an evaluation folder.
 
     Args:
         out_dir: Folder written by :func:`myoexo.evaluation.evaluate`.
         report_dir: Where to write (default: ``out_dir``).
+        bound_dir: An evaluation folder of the oracle (same root seed and twin) on some of
+            the subjects: the report adds each controller's distance to it
+            (:mod:`myoexo.evaluation.bound`). An oracle in ``out_dir`` itself is used too.
 
     Returns:
         Path of ``report.md``.
@@ -361,6 +366,7 @@ def write_report(out_dir: str | Path, report_dir: str | Path | None = None) -> P
             _reduction_section(red, reference),
             "",
         ]
+    lines += _bound_section(table, out, bound_dir)
     lines += ["## Figures", ""]
     for png in pngs:
         rel = png.relative_to(dest)
@@ -386,6 +392,35 @@ def write_report(out_dir: str | Path, report_dir: str | Path | None = None) -> P
     return path
 
 
+def _bound_section(table: Any, out: Path, bound_dir: str | Path | None) -> list[str]:
+    """The "distance to the achievable bound" section (empty without an oracle)."""
+    import pandas as pd
+
+    from myoexo.evaluation.bound import bound_label, bound_markdown
+
+    both = table
+    if bound_dir is not None:
+        bound_cfg = load_config(Path(bound_dir)).get("run_key")
+        if bound_cfg != load_config(out).get("run_key"):
+            raise ValueError(
+                f"{bound_dir} was run with other settings ({bound_cfg}) than {out}: "
+                "its subjects are not the same persons"
+            )
+        both = pd.concat([table, load_table(Path(bound_dir))], ignore_index=True)
+    if bound_label(both["controller"].unique()) is None:
+        return []
+    return [
+        "## Distance to the achievable bound",
+        "",
+        "The oracle (`myoexo/control/oracle.py`) sees the true state and plans on a copy of "
+        "the twin with the same 100 Nm motor; on the subjects it ran, each controller's mean "
+        "absolute final error minus the oracle's, and the torque each one used.",
+        "",
+        bound_markdown(both),
+        "",
+    ]
+
+
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``myoexo report``."""
@@ -393,12 +428,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, default=None, help="where to write (default: the folder itself)"
     )
+    parser.add_argument(
+        "--bound",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="evaluation folder of the oracle on some of the same subjects: adds each "
+        "controller's distance to the achievable bound",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """``myoexo report DIR``: 0 on success, 2 if DIR is not an evaluation folder."""
     try:
-        path = write_report(args.dir, args.out)
+        path = write_report(args.dir, args.out, bound_dir=args.bound)
     except ValueError as exc:
         print(f"myoexo report: error: {exc}", file=sys.stderr)
         return 2
