@@ -1,7 +1,8 @@
-"""Training speed of a SAC preset: env steps/s, gradient updates/s, and both inside ``learn``.
+"""Training speed of a preset: env steps/s, gradient updates/s, and both inside ``learn``.
 
     python benchmarks/bench_training.py                  # the cpu preset on MyoExoKneeRandom-v0
     python benchmarks/bench_training.py --preset paper --learn-steps 2000
+    python benchmarks/bench_training.py --algorithms sac tqc crossq   # the same, per algorithm
 
 Measured in one process, one after the other:
 
@@ -30,19 +31,32 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=1_000)
     parser.add_argument("--learn-steps", type=int, default=8_000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--algorithms",
+        nargs="+",
+        default=["sac"],
+        help="preset algorithms to measure one after the other (sac, tqc, crossq)",
+    )
     args = parser.parse_args()
+    for algorithm in args.algorithms:
+        measure(args, algorithm)
 
+
+def measure(args: argparse.Namespace, algorithm: str) -> None:
+    """Print the three measurements for one algorithm."""
     import torch
 
     from myoexo.training import get_preset
     from myoexo.training.callbacks import RewardTermsCallback
     from myoexo.training.train import build_sac, make_vec_env
 
-    overrides = {"env_id": args.env_id} if args.env_id else {}
+    overrides: dict = {"env_id": args.env_id} if args.env_id else {}
+    overrides["algorithm"] = algorithm
     preset = get_preset(args.preset, **overrides)
     torch.set_num_threads(preset.torch_threads)
     print(
-        f"preset {preset.name}: {preset.env_id}, n_envs {preset.n_envs} ({preset.vec_env}), "
+        f"[{algorithm}] preset {preset.name}: {preset.env_id}, "
+        f"n_envs {preset.n_envs} ({preset.vec_env}), "
         f"batch {preset.batch_size}, {preset.updates_per_transition:.3g} updates/transition, "
         f"torch threads {torch.get_num_threads()}"
     )

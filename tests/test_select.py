@@ -20,6 +20,7 @@ from myoexo.training.select import (
     evaluate_checkpoint,
     evaluate_pid,
     markdown_table,
+    paper_checks,
     select_checkpoint,
 )
 
@@ -133,6 +134,43 @@ def test_markdown_table_names_the_failed_criteria():
     assert cells[0][0] == "level" and cells[0][-1] == "criteria"
     assert cells[2][0] == "0" and cells[2][-1] == "pass"
     assert cells[3][0] == "2" and cells[3][-1] == "fails: final error, peak, RMS"
+
+
+def test_paper_checks_read_subjects_and_the_papers_reductions():
+    """Level 0: mean error 0.9 passes, but two subjects at 9 deg fail the 95th percentile;
+    level 1: a 20 % peak reduction beats the paper's 12.5 %, and a 5 % RMS reduction is
+    below its 9.7 %; a settling time of 0.2 s is within the paper's 0.78 s only with every
+    subject settled."""
+    rows = []
+    for level, errors, settle, rms, peak in (
+        (0, [0.0] * 18 + [9.0, 9.0], 0.2, 30.0, 70.0),
+        (1, [0.5] * 20, 0.2, 47.5, 80.0),
+    ):
+        for i, e in enumerate(errors):
+            rows.append(
+                {
+                    "controller": "sac",
+                    "level": level,
+                    "subject": i,
+                    "abs_final_error_deg": e,
+                    "final_error_deg": e,
+                    "settling_time_s": settle if (level == 0 or i) else float("nan"),
+                    "rms_interaction_torque_nm": rms,
+                    "peak_interaction_torque_nm": peak,
+                }
+            )
+    episodes = pd.DataFrame(rows)
+    table = paper_checks(compare(level_means(episodes), PID.loc[[0, 1]]), episodes)
+    assert table.loc[0, "final_error_ok"] and not table.loc[0, "p95_ok"]
+    assert table.loc[0, "sac_p95_abs_final_error_deg"] == pytest.approx(
+        np.quantile([0.0] * 18 + [9.0, 9.0], 0.95)
+    )
+    assert table.loc[0, "paper_peak_ok"] and table.loc[0, "paper_rms_ok"]
+    assert table.loc[1, "paper_peak_ok"] and not table.loc[1, "paper_rms_ok"]
+    assert table.loc[0, "settling_ok"] and not table.loc[1, "settling_ok"]
+    assert table.loc[1, "settled_pct"] == pytest.approx(95.0)
+    assert not table.all_ok.any()
+    assert "p95 error" in markdown_table(table)
 
 
 # ---------------------------------------------------------------------------- a crafted run
@@ -251,7 +289,8 @@ def test_table_mode_on_an_evaluation_folder(tmp_path, capsys):
     run = evaluate(config, out, workers=1, progress=False)
     table = compare_evaluation(out)
     t = run.table
-    expected = compare(level_means(t[t.controller == "sac"]), level_means(t[t.controller == "pid"]))
+    sac, pid = t[t.controller == "sac"], t[t.controller == "pid"]
+    expected = paper_checks(compare(level_means(sac), level_means(pid)), sac)
     pd.testing.assert_frame_equal(table, expected)
     with pytest.raises(ValueError, match="no episodes of"):
         compare_evaluation(out, sac="nope")

@@ -197,8 +197,12 @@ def write_config(
     controllers = dict(previous.get("controllers", {}))
     for spec in specs:
         entry = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
-        if spec.path:
+        if spec.kind == "sb3" and spec.path:
             entry["sha256"] = _file_sha256(spec.path)
+        elif spec.kind == "shipped":  # a re-exported policy is another controller
+            from myoexo.policies import shipped_path
+
+            entry["sha256"] = _file_sha256(str(shipped_path(spec.path or "sac")) + ".npz")
         old = controllers.get(spec.slug)
         if old is not None and old != entry:
             raise ValueError(

@@ -100,7 +100,8 @@ def select_checkpoint(
 
 
 def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any:
-    """:func:`compare` table of two controllers of a ``myoexo evaluate`` output folder."""
+    """:func:`compare` table of two controllers of a ``myoexo evaluate`` output folder, with
+    the stricter reading of the paper's numbers added (:func:`paper_checks`)."""
     from myoexo.evaluation import load_table
 
     table = load_table(out_dir)
@@ -108,7 +109,49 @@ def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any
     if missing:
         raise ValueError(f"{str(out_dir)!r} has no episodes of {sorted(missing)}")
     means = {c: level_means(table[table.controller == c]) for c in (sac, pid)}
-    return compare(means[sac], means[pid])
+    return paper_checks(compare(means[sac], means[pid]), table[table.controller == sac])
+
+
+#: Levels where the final error must be below 1 deg in the mean and 2 deg at the 95th
+#: percentile, and where the RMS reduction must reach the paper's.
+_PRECISE_LEVELS = (0, 1, 2)
+
+
+def paper_checks(table: Any, episodes: Any) -> Any:
+    """Add the per-subject and at-least-the-paper's checks to a :func:`compare` table.
+
+    Columns added: ``sac_p95_abs_final_error_deg`` (95th percentile over subjects),
+    ``settled_pct`` (subjects whose response settled), ``p95_ok`` (< 2 deg at levels 0-2),
+    ``paper_peak_ok`` / ``paper_rms_ok`` (reduction against the PID at least the paper's;
+    RMS at levels 0-2 only), ``settling_ok`` (mean settling time no longer than the paper's
+    SAC) and ``all_ok`` (these and :func:`compare`'s ``pass``).
+    """
+    from myoexo.evaluation.paper import PAPER_RESULTS
+
+    out = table.copy()
+    err = episodes.groupby("level").abs_final_error_deg
+    out["sac_p95_abs_final_error_deg"] = err.quantile(0.95)
+    settled = episodes.groupby("level").settling_time_s.apply(lambda s: 100 * s.notna().mean())
+    out["settled_pct"] = settled
+    for level in out.index:
+        ref = PAPER_RESULTS[int(level)]
+        row = out.loc[level]
+        precise = int(level) in _PRECISE_LEVELS
+        out.loc[level, "p95_ok"] = (not precise) or row.sac_p95_abs_final_error_deg < 2.0
+        peak_ref = ref.peak_reduction_pct
+        out.loc[level, "paper_peak_ok"] = peak_ref is None or row.peak_reduction_pct >= peak_ref
+        rms_ref = ref.rms_reduction_pct
+        out.loc[level, "paper_rms_ok"] = (
+            not precise or rms_ref is None or row.rms_reduction_pct >= rms_ref
+        )
+        out.loc[level, "settling_ok"] = bool(
+            row.sac_settling_time_s <= ref.sac_settling_time_s and row.settled_pct == 100.0
+        )
+    flags = ["pass", "p95_ok", "paper_peak_ok", "paper_rms_ok", "settling_ok"]
+    for f in flags[1:]:
+        out[f] = out[f].astype(bool)
+    out["all_ok"] = out[flags].all(axis=1)
+    return out
 
 
 def markdown_table(table: Any) -> str:
@@ -129,6 +172,10 @@ def markdown_table(table: Any) -> str:
                 ("final error", r.final_error_ok),
                 ("peak", r.peak_ok),
                 ("RMS", r.rms_ok),
+                ("p95 error", getattr(r, "p95_ok", True)),
+                ("peak < paper's", getattr(r, "paper_peak_ok", True)),
+                ("RMS < paper's", getattr(r, "paper_rms_ok", True)),
+                ("settling", getattr(r, "settling_ok", True)),
             )
             if not ok
         ]
@@ -137,6 +184,11 @@ def markdown_table(table: Any) -> str:
                 "level": int(level),
                 "final error SAC (deg) [paper]": (
                     f"{r.sac_final_error_deg:.2f} [{ref.sac_final_error_text}]"
+                ),
+                "p95 abs final error (deg)": (
+                    f"{r.sac_p95_abs_final_error_deg:.2f}"
+                    if hasattr(r, "sac_p95_abs_final_error_deg")
+                    else "n/a"
                 ),
                 "final error PID (deg) [paper]": (
                     f"{r.pid_final_error_deg:.2f} [{ref.pid_final_error_text}]"
@@ -166,6 +218,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="print the Markdown criteria table of `myoexo "
         "evaluate --controllers pid sac` output in RUN instead",
+    )
+    parser.add_argument(
+        "--controller",
+        default="sac",
+        help="with --table: the controller compared with the PID (default: sac)",
     )
     parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
     parser.add_argument(
@@ -203,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {str(args.out)!r} must end in .md or .csv")
     chosen = None
     if args.table:
-        table = compare_evaluation(args.run)
+        table = compare_evaluation(args.run, sac=args.controller)
         table = table[table.index.isin(levels)]
         print(markdown_table(table))
     else:
