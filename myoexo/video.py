@@ -306,7 +306,7 @@ def write_episode_video(
         ValueError: A bad controller spec, camera, size or file format.
     """
     from myoexo.control.rollout import rollout
-    from myoexo.control.specs import build_controller, parse_controller_spec
+    from myoexo.control.specs import build_controller, parse_controller_spec, spec_env_kwargs
     from myoexo.envs import make_env
     from myoexo.model.params import TwinParams
     from myoexo.viz import TwinRenderer, camera_name
@@ -314,7 +314,7 @@ def write_episode_video(
     cfg = VideoConfig() if config is None else config
     video_format(out)  # fail before building the env
     spec = parse_controller_spec(controller)
-    env = make_env(cfg.level, twin=TwinParams(scene=cfg.scene))
+    env = make_env(cfg.level, twin=TwinParams(scene=cfg.scene), **spec_env_kwargs(spec))
     try:
         base = env.unwrapped
         model = base.model
