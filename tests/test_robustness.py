@@ -113,3 +113,26 @@ def test_bad_settings_raise():
         make_env(0, robustness=RobustnessParams(noise_std=(("nope", 1.0),)))
     with pytest.raises(ValueError, match="robustness"):
         make_env(0, robustness="yes")
+
+
+def test_perturbed_evaluation_is_paired_reproducible_and_kept_apart(tmp_path):
+    from myoexo.evaluation import EvaluationConfig, evaluate
+
+    def run(name, perturbed):
+        config = EvaluationConfig(
+            controllers=("pid",),
+            levels=(2,),
+            subjects=2,
+            episode_duration_s=0.5,
+            perturbed=perturbed,
+        )
+        return evaluate(config, tmp_path / name, workers=1, progress=False).table
+
+    a, b, nominal = run("a", True), run("b", True), run("nominal", False)
+    pd_cols = ["subject_k", "subject_theta_flex_deg"] if "subject_k" in a else ["seed"]
+    assert (a[pd_cols].values == nominal[pd_cols].values).all()  # the same subjects
+    assert (a.peak_interaction_torque_nm.values == b.peak_interaction_torque_nm.values).all()
+    assert (a.peak_interaction_torque_nm.values != nominal.peak_interaction_torque_nm.values).any()
+    # a folder of the nominal twin is never extended with perturbed episodes
+    with pytest.raises(ValueError, match="other settings"):
+        run("nominal", True)
