@@ -294,6 +294,15 @@ def test_contrib_algorithms_train_evaluate_and_resume(algorithm, tmp_path):
     second = resume(run_dir, total_timesteps=600, verbose=0)
     assert second.num_timesteps == 600
     assert ck.read_config(run_dir)["preset"]["algorithm"] == algorithm
+    # its checkpoints act as controllers (numpy actor for TQC, the SB3 model for CrossQ)
+    from myoexo.envs import make_env
+    from myoexo.training.export import load_checkpoint_controller
+
+    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
+    env = make_env(1, episode_duration_s=0.5)
+    obs, info = env.reset(seed=0)
+    action = controller.act(obs, info)
+    assert action.shape == (1,) and abs(float(action[0])) <= 1.0
 
 
 def test_obs_preset_and_algorithm_fields_are_validated():

@@ -146,6 +146,35 @@ def load_checkpoint_actor(
     return actor
 
 
+def load_checkpoint_controller(checkpoint: Path) -> Any:
+    """A checkpoint's deterministic policy as a controller with an ``obs_preset``: its numpy
+    actor (SAC, TQC), or the SB3 model behind its observation statistics (CrossQ, whose
+    batch-renormalized actor has no numpy export)."""
+    try:
+        return load_checkpoint_actor(checkpoint, with_reference=False)
+    except ValueError:
+        pass
+    import pickle
+
+    from myoexo.control.policy import SB3Controller
+    from myoexo.training.presets import algorithm_class
+
+    checkpoint = Path(checkpoint)
+    config = ck.read_config(checkpoint.parent.parent)
+    preset = config.get("preset", {})
+    model = algorithm_class(preset.get("algorithm", "sac")).load(
+        checkpoint / ck.MODEL_FILE, device="cpu"
+    )
+    normalizer = None
+    if (checkpoint / ck.VECNORM_FILE).is_file():
+        with open(checkpoint / ck.VECNORM_FILE, "rb") as f:
+            normalizer = pickle.load(f)
+        normalizer.training = False
+    controller = SB3Controller(model, name=checkpoint.name, obs_normalizer=normalizer)
+    controller.obs_preset = preset.get("obs_preset", "full")  # type: ignore[attr-defined]
+    return controller
+
+
 def export_onnx(actor: MLPActor, path: str | Path, opset: int = 17) -> Path:
     """Write the actor (normalization, MLP, tanh) as ONNX: input ``obs`` (batch, obs_dim)
     float32, output ``action`` (batch, action_dim) in [-1, 1]."""

@@ -42,12 +42,10 @@ def evaluate_checkpoint(
     """Per-level means of a checkpoint's deterministic actor on subjects ``0..subjects-1``."""
     import pandas as pd
 
-    from myoexo.control import CallableController
     from myoexo.evaluation import evaluate_controller
-    from myoexo.training.export import load_checkpoint_actor
+    from myoexo.training.export import load_checkpoint_controller
 
-    actor = load_checkpoint_actor(checkpoint, with_reference=False)
-    controller = CallableController(actor, name=checkpoint.name)
+    controller = load_checkpoint_controller(checkpoint)
     tables = [
         evaluate_controller(controller, lv, subjects, root_seed, label=checkpoint.name)[0]
         for lv in levels
