@@ -146,7 +146,7 @@ def test_a_different_run_in_the_same_folder_is_refused(reference):
 def test_missing_shipped_policy_is_skipped_with_a_message(monkeypatch):
     import myoexo
 
-    def unavailable():
+    def unavailable(name="sac"):
         raise FileNotFoundError("no policy file")
 
     monkeypatch.setattr(myoexo, "load_policy", unavailable)

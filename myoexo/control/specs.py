@@ -99,7 +99,9 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     head, _, tail = text.partition(":")
     if head.lower() == "pid":
         return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
-    if text.lower() in ("sac", "sac_exo"):
+    from myoexo.policies import SHIPPED_POLICIES
+
+    if text.lower() in SHIPPED_POLICIES:
         return ControllerSpec(kind="shipped", label=text.lower(), text=text, path=text.lower())
     if head.lower() == "oracle":
         from myoexo.control.oracle import parse_oracle_options
