@@ -1,4 +1,5 @@
-"""The shipped SAC policy (``myoexo.load_policy``) and the numpy actor it is made of."""
+"""The shipped SAC policies (``myoexo.load_policy("sac" | "sac_exo")``) and the numpy actor
+they are made of."""
 
 from __future__ import annotations
 
@@ -8,7 +9,14 @@ import socket
 import numpy as np
 import pytest
 
-from myoexo.policies import MLPActor, load_actor, load_policy, save_actor, shipped_path
+from myoexo.policies import (
+    SHIPPED_POLICIES,
+    MLPActor,
+    load_actor,
+    load_policy,
+    save_actor,
+    shipped_path,
+)
 
 
 @pytest.fixture
@@ -29,15 +37,19 @@ def _fixed_obs(policy: MLPActor) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- shipped
-def test_shipped_policy_loads_offline_and_is_small(no_network):
-    policy = load_policy()
+@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
+def test_shipped_policy_loads_offline_and_is_small(no_network, name):
+    policy = load_policy(name)
     assert isinstance(policy, MLPActor)
     assert policy.action_dim == 1 and policy.activation == "gelu"
     assert [w.shape[0] for w, _ in policy.weights[:-1]] == [64, 64]  # the paper's actor
-    npz = shipped_path().with_suffix(".npz")
+    npz = shipped_path(name).with_suffix(".npz")
     assert npz.stat().st_size < 100_000
-    for key in ("env_id", "preset", "seed", "num_timesteps", "obs_keys"):
+    keys = ("env_id", "preset", "seed", "num_timesteps", "obs_keys", "obs_preset")
+    for key in (*keys, "selection_root_seed", "reward_weights"):
         assert policy.metadata.get(key) is not None, key
+    assert policy.obs_preset == {"sac": "full", "sac_exo": "exo"}[name]
+    assert policy.metadata["algorithm"] == name.split("_")[0]  # "sac", "tqc"
 
 
 def test_shipped_policy_actions_are_stable(no_network):
@@ -53,13 +65,14 @@ def test_shipped_policy_actions_are_stable(no_network):
     np.testing.assert_array_equal(action, first[0])
 
 
-def test_shipped_policy_fits_the_env():
+@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
+def test_shipped_policy_fits_the_env(name):
     import gymnasium as gym
 
     import myoexo
 
-    policy = myoexo.load_policy()
-    env = gym.make(policy.metadata["env_id"])
+    policy = myoexo.load_policy(name)
+    env = gym.make(policy.metadata["env_id"], obs_preset=policy.obs_preset)
     try:
         assert env.observation_space.shape == (policy.obs_dim,)
         assert list(env.unwrapped.obs_keys) == policy.metadata["obs_keys"]
@@ -68,14 +81,15 @@ def test_shipped_policy_fits_the_env():
 
 
 @pytest.mark.slow
-def test_shipped_policy_extends_the_knee_at_level_1():
-    """One full 8-s episode: the shipped policy brings the knee from 90 deg near 7 deg."""
+@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
+def test_shipped_policy_extends_the_knee_at_level_1(name):
+    """One full 8-s episode: each shipped policy brings the knee from 90 deg near 7 deg."""
     import gymnasium as gym
 
     import myoexo
 
-    policy = myoexo.load_policy()
-    env = gym.make("MyoExoKnee-v1")
+    policy = myoexo.load_policy(name)
+    env = gym.make("MyoExoKnee-v1", obs_preset=policy.obs_preset)
     obs, info = env.reset(seed=11)
     start_error = info["error_deg"]
     done = False
@@ -94,7 +108,7 @@ def test_shipped_policy_rejects_bad_input():
         policy(np.zeros(policy.obs_dim + 1))
     with pytest.raises(ValueError, match="deterministic"):
         policy.predict(np.zeros(policy.obs_dim), deterministic=False)
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="accepted"):
         load_policy("no_such_policy")
 
 
