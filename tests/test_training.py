@@ -314,10 +314,16 @@ def test_obs_preset_and_algorithm_fields_are_validated():
         get_preset("cpu", algorithm="ppo")
 
 
-def test_exo_preset_reaches_the_training_envs():
+def test_exo_preset_and_robustness_reach_the_training_envs():
     from myoexo.training.train import make_vec_env
 
-    venv = make_vec_env(_tiny_preset(obs_preset="exo", n_envs=1), seed=0)
+    venv = make_vec_env(_tiny_preset(obs_preset="exo", robustness=True, n_envs=1), seed=0)
     assert venv.get_attr("obs_preset")[0] == "exo"
+    assert venv.get_attr("robustness")[0] is not None  # a perturbed twin per episode
     assert venv.observation_space.shape == (18,)
     venv.close()
+    plain = make_vec_env(_tiny_preset(n_envs=1), seed=0)
+    assert plain.get_attr("robustness")[0] is None
+    plain.close()
+    key, value = parse_override("robustness=true")
+    assert get_preset("cpu", **{key: value}).robustness is True

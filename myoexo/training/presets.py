@@ -130,6 +130,10 @@ class SACPreset:
             envs only.
         obs_preset: Observation preset of the MyoExoKnee envs (``"full"``: the twin's whole
             state; ``"exo"``: only what the exoskeleton measures, a deployable policy).
+        robustness: Train on perturbed twins (``make_env(..., robustness=True)``: strap
+            stiffness/damping, masses, friction, motor constant, sensor noise and latency
+            drawn per episode, :mod:`myoexo.envs.robustness`); the periodic evaluation stays
+            on the nominal twin.
         algorithm: ``"sac"`` (stable-baselines3), or from sb3-contrib (the ``contrib``
             extra) ``"tqc"`` (truncated quantile critics, Kuznetsov 2020) or ``"crossq"``
             (batch-renormalized critics without target networks, Bhatt 2024; ``tau`` is not
@@ -167,6 +171,7 @@ class SACPreset:
     eval_levels: tuple[int, ...] = VALID_LEVELS
     reward_weights: tuple[tuple[str, float], ...] = ()
     obs_preset: str = "full"
+    robustness: bool = False
     algorithm: str = "sac"
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (

@@ -98,8 +98,9 @@ class _EnvFactory:
     rank: int
     episode_duration_s: float | None
     reward_weights: tuple[tuple[str, float], ...] = ()
-    in_worker: bool = False
-    obs_preset: str = "full"  # called in a SubprocVecEnv worker
+    in_worker: bool = False  # called in a SubprocVecEnv worker
+    obs_preset: str = "full"
+    robustness: bool = False  # a perturbed twin per episode
 
     def __call__(self) -> Any:
         import gymnasium as gym
@@ -114,19 +115,23 @@ class _EnvFactory:
         if is_myoexo_env(self.env_id):
             from myoexo.envs import make_env
 
+            extra: dict[str, Any] = {"robustness": True} if self.robustness else {}
             env = make_env(
                 self.env_id,
                 episode_duration_s=self.episode_duration_s,
                 reward_weights=dict(self.reward_weights),
                 obs_preset=self.obs_preset,
+                **extra,
             )
         elif (
-            self.episode_duration_s is not None or self.reward_weights or self.obs_preset != "full"
+            self.episode_duration_s is not None
+            or self.reward_weights
+            or self.obs_preset != "full"
+            or self.robustness
         ):
             raise ValueError(
-                "episode_duration_s, reward_weights and obs_preset apply to the MyoExoKnee "
-                "envs only, "
-                f"not {self.env_id!r}"
+                "episode_duration_s, reward_weights, obs_preset and robustness apply to the "
+                f"MyoExoKnee envs only, not {self.env_id!r}"
             )
         else:
             env = gym.make(self.env_id)
@@ -147,6 +152,7 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
             preset.reward_weights,
             subproc,
             preset.obs_preset,
+            preset.robustness,
         )
         for i in range(preset.n_envs)
     ]
