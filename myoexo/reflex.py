@@ -287,6 +287,19 @@ class DelayLine:
         """Forget the history (start of an episode)."""
         self._count = 0
 
+    def state(self) -> tuple[tuple[float, ...], tuple[float, ...], int]:
+        """The whole history, for :meth:`set_state` (e.g. to replay from here in a planner)."""
+        return tuple(self._theta), tuple(self._vel), self._count
+
+    def set_state(self, state: tuple[tuple[float, ...], tuple[float, ...], int]) -> None:
+        """Restore a history taken by :meth:`state` of a line of the same delay."""
+        theta, vel, count = state
+        if len(theta) != self._size or len(vel) != self._size:
+            raise ValueError(
+                f"a history of {len(theta)} samples does not fit a line of {self._size}"
+            )
+        self._theta[:], self._vel[:], self._count = theta, vel, int(count)
+
     def push(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
         """Store the present state; return the delayed one ``(theta_deg, vel_rad_s)``."""
         n = self._size

@@ -606,6 +606,25 @@ class SpasticityStage:
         self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
         self._model = model
 
+    def planning_copy(self, model: Any, control_period_s: float) -> SpasticityStage:
+        """A copy of this stage (bound to *model* first if it is not yet) with the same
+        subject and a delay line of its own: it can be run ahead on another ``MjData`` of
+        the model and reset to this stage's history (:attr:`delay_line` ``.state()``)
+        without touching this stage."""
+        import copy
+
+        if self._model is not model:
+            self.bind(model, control_period_s)
+        twin = copy.copy(self)
+        twin._delay = copy.deepcopy(self._delay)
+        twin._data_views = None
+        return twin
+
+    @property
+    def delay_line(self) -> DelayLine:
+        """The reflex's transmission delay line (the delayed knee states)."""
+        return self._delay
+
     @property
     def actuator_ids(self) -> np.ndarray:
         """Actuator ids of the driven muscles in the bound model (after the first step)."""

@@ -46,3 +46,6 @@ def test_unknown_preset_raises():
     with pytest.raises(ValueError, match="obs_preset"):
         make_env(0, obs_preset="nope")
     assert set(OBS_PRESETS) == {"full", "exo"}
+    from myoexo.training.presets import OBS_PRESET_NAMES
+
+    assert set(OBS_PRESET_NAMES) == set(OBS_PRESETS)  # the presets' light copy of the names

@@ -167,3 +167,17 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
     assert states[0] != states[1]  # the models differ
     custom = dataclasses.replace(REFLEX_PRESETS["stretch"], delay_s=0.0)
     assert gym.make("MyoExoKnee-v1", reflex=custom).unwrapped.spasticity.reflex.delay_s == 0.0
+
+
+def test_delay_line_history_can_be_taken_and_restored():
+    from myoexo.reflex import DelayLine
+
+    line = DelayLine(2)
+    for k in range(3):
+        line.push(float(k), -float(k))
+    saved = line.state()
+    ahead = [line.push(10.0 + k, 0.0) for k in range(4)]
+    line.set_state(saved)
+    assert [line.push(10.0 + k, 0.0) for k in range(4)] == ahead
+    with pytest.raises(ValueError, match="does not fit"):
+        DelayLine(1).set_state(saved)

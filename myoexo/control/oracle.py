@@ -23,7 +23,6 @@ per level (``myoexo evaluate --controllers oracle --subjects 10``).
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -31,6 +30,8 @@ from typing import Any
 
 import mujoco
 import numpy as np
+
+from myoexo.spasticity import SpasticityStage
 
 
 @dataclass(frozen=True)
@@ -169,11 +170,10 @@ class OracleMPC:
         self.plans = 0
 
     # ------------------------------------------------------------------ planning
-    def _rollout_cost(self, plan: np.ndarray, stage: Any, delay: tuple) -> float:
+    def _rollout_cost(self, plan: np.ndarray, stage: SpasticityStage, delay: tuple) -> float:
         m, d = self._model, self._data
         mujoco.mj_setState(m, d, self._state, self._state_spec)
-        line = stage._delay
-        line._theta[:], line._vel[:], line._count = delay[0], delay[1], delay[2]
+        stage.delay_line.set_state(delay)
         ctrl, host = self._ctrl, self._host
         cost = 0.0
         tw = self.config.torque_weight
@@ -190,14 +190,9 @@ class OracleMPC:
 
     def _plan_now(self) -> None:
         e, cfg = self.env, self.config
-        if e.spasticity._model is not e.model:  # bound at its first step: bind it now
-            e.spasticity.bind(e.model, e.dt)
         mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
-        stage = copy.copy(e.spasticity)
-        stage._delay = copy.deepcopy(e.spasticity._delay)
-        stage._data_views = None
-        line = e.spasticity._delay
-        delay = (list(line._theta), list(line._vel), line._count)
+        stage = e.spasticity.planning_copy(e.model, e.dt)
+        delay = e.spasticity.delay_line.state()
         # the best plan so far, shifted by the steps it has run
         shift = self._step_in_plan / max(self._steps - 1, 1) * (cfg.knots - 1)
         grid = np.arange(cfg.knots) + shift

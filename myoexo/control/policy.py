@@ -63,6 +63,8 @@ class SB3Controller:
         model: Object with ``predict(obs, deterministic=...) -> (action, state)``.
         deterministic: Use the mean action (evaluation) rather than a sample.
         name: Label used in error messages and tables.
+        obs_normalizer: SB3 ``VecNormalize`` statistics applied to each observation.
+        obs_preset: Observation preset of the model's env (``make_env(..., obs_preset=)``).
     """
 
     def __init__(
@@ -71,6 +73,7 @@ class SB3Controller:
         deterministic: bool = True,
         name: str | None = None,
         obs_normalizer: Any = None,
+        obs_preset: str = "full",
     ) -> None:
         if not callable(getattr(model, "predict", None)):
             raise ValueError(f"{type(model).__name__} has no predict(obs, deterministic=...)")
@@ -79,6 +82,8 @@ class SB3Controller:
         self.name = name or type(model).__name__
         #: SB3 ``VecNormalize`` statistics the model was trained with (``None``: raw obs).
         self.obs_normalizer = obs_normalizer
+        #: Observation preset of the env the model was trained on.
+        self.obs_preset = obs_preset
 
     def reset(self, seed: int | None = None) -> None:
         """Seed the model's RNG for stochastic evaluation (no effect when deterministic)."""

@@ -176,17 +176,21 @@ def load_shipped_policy(name: str = "sac") -> Any:
         ) from exc
 
 
-def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
-    """Load a stable-baselines3 model file on the CPU; ``ValueError`` if it is unreadable."""
+def sb3_class(algorithm: str) -> Any:
+    """The class of an SB3 algorithm name (``"SAC"``, ``"TD3"``, ...; ``"TQC"`` and
+    ``"CrossQ"`` from sb3-contrib); ``ValueError`` naming the extra to install."""
     import importlib
 
     module = "sb3_contrib" if algorithm in _CONTRIB_ALGORITHMS else "stable_baselines3"
     try:
-        cls = getattr(importlib.import_module(module), algorithm)
+        return getattr(importlib.import_module(module), algorithm)
     except ImportError:
-        raise ValueError(
-            f"loading a {algorithm} model needs {module} (pip install 'myoexo[contrib]')"
-        ) from None
+        raise ValueError(f"{algorithm} needs {module} (pip install 'myoexo[contrib]')") from None
+
+
+def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
+    """Load a stable-baselines3 model file on the CPU; ``ValueError`` if it is unreadable."""
+    cls = sb3_class(algorithm)
     try:
         return cls.load(path, device="cpu")
     except Exception as exc:  # zip, pickle and torch errors all mean "not a usable model"

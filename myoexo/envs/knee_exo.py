@@ -688,7 +688,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         }
         noise = self.task.start_angle_noise_deg
         start = self.task.start_angle_deg + float(self.np_random.uniform(-noise, noise))
-        if seed is not None:  # the perturbed twin: its own stream, so subjects stay the same
+        if self.robustness is not None and seed is not None:
+            # the perturbed twin has its own stream, so subjects stay those of the nominal env
             self._robust_rng = np.random.default_rng([int(seed), 0x0B057])
         if self.twin_perturbation is not None:
             self.twin_draw = self.twin_perturbation.apply(self._robust_rng)
@@ -720,9 +721,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         """
         at = self._at
         knee_deg = math.degrees(values[at["knee_angle_rad"]])
+        exo_deg = math.degrees(values[at["exo_angle_rad"]])
         if self._sensor is None:
-            measured_knee_deg = knee_deg
-            measured_exo_deg = math.degrees(values[at["exo_angle_rad"]])
+            measured_knee_deg, measured_exo_deg = knee_deg, exo_deg
         else:
             measured_knee_deg = math.degrees(sensed.item(at["knee_angle_rad"]))
             measured_exo_deg = math.degrees(sensed.item(at["exo_angle_rad"]))
@@ -733,7 +734,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             time_s=values[at["time"]],
             knee_angle_deg=knee_deg,
             knee_vel_rad_s=values[at["knee_vel_rad_s"]],
-            exo_angle_deg=math.degrees(values[at["exo_angle_rad"]]),
+            exo_angle_deg=exo_deg,
             measured_knee_angle_deg=measured_knee_deg,
             measured_exo_angle_deg=measured_exo_deg,
             target_angle_deg=target_deg,

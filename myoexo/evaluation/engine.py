@@ -200,9 +200,11 @@ def plan_chunks(specs: Sequence[ControllerSpec], config: EvaluationConfig) -> li
 
 
 #: Per-process caches of the workers: one env per env id, duration and env keyword arguments
-#: (a policy's observation preset), one controller per spec.
+#: (a policy's observation preset), one controller per spec, the env keyword arguments of
+#: each spec.
 _ENVS: dict[tuple[str, float | None, str, str], Any] = {}
 _CONTROLLERS: dict[str, Controller] = {}
+_SPEC_ENV_KWARGS: dict[str, dict[str, Any]] = {}
 
 
 def _init_worker(parent_pid: int | None = None) -> None:
@@ -222,13 +224,17 @@ def _close_worker_state() -> None:
         env.close()
     _ENVS.clear()
     _CONTROLLERS.clear()
+    _SPEC_ENV_KWARGS.clear()
 
 
 def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chunk, int]:
     """Run one chunk and store it atomically; returns ``(chunk, episodes run)``."""
     from myoexo.envs import make_env
 
-    env_kwargs = {**config.env_kwargs, **spec_env_kwargs(chunk.spec)}
+    spec_kwargs = _SPEC_ENV_KWARGS.get(chunk.spec.text)
+    if spec_kwargs is None:  # reads the policy's files: once per worker, not per chunk
+        spec_kwargs = _SPEC_ENV_KWARGS[chunk.spec.text] = spec_env_kwargs(chunk.spec)
+    env_kwargs = {**config.env_kwargs, **spec_kwargs}
     # the oracle plans on a copy of its env: it gets an env of its own, per level
     owner = chunk.spec.text if chunk.spec.kind == "oracle" else ""
     env_id = config.level_env_id(chunk.level)

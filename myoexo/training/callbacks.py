@@ -241,7 +241,9 @@ class PaperMetricsEvalCallback(BaseCallback):
         Raises:
             EvaluationAborted: Training is stopping (the evaluation was given up).
         """
-        actor = self._deterministic_actor()
+        from myoexo.training.export import deterministic_controller
+
+        actor = deterministic_controller(self.model)
         t0 = time.perf_counter()
         sac = {
             lv: _level_means(actor, lv, self.spec, self._env(lv), self.stop)
@@ -266,18 +268,6 @@ class PaperMetricsEvalCallback(BaseCallback):
             errs = " ".join(f"L{lv}:{m['abs_final_error_deg']:.2f}" for lv, m in sac.items())
             print(f"[eval] step {self.num_timesteps}: score {score:+.3f}, |final err| deg {errs}")
         return score
-
-    def _deterministic_actor(self) -> Any:
-        """The model's deterministic policy: the numpy actor (SAC, TQC), or the model itself
-        behind its observation normalization (CrossQ's batch-renormalized actor)."""
-        from myoexo.control.policy import SB3Controller
-        from myoexo.training.export import actor_from_sac
-
-        try:
-            return actor_from_sac(self.model)
-        except (ValueError, AttributeError):
-            vn = self.model.get_vec_normalize_env()
-            return SB3Controller(self.model, name=type(self.model).__name__, obs_normalizer=vn)
 
     def _append_rows(self, rows: list[dict[str, Any]], score: float) -> None:
         path = self.run_dir / ck.EVAL_FILE

@@ -94,17 +94,40 @@ def reference_pairs(
     }
 
 
-def load_checkpoint_actor(
-    checkpoint: Path, with_reference: bool = True, selection_root_seed: int | None = None
-) -> MLPActor:
-    """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs.
+def deterministic_controller(
+    model: Any,
+    vec_normalize: Any = None,
+    metadata: dict[str, Any] | None = None,
+    name: str | None = None,
+) -> Any:
+    """A trained model's deterministic policy as a controller: its numpy actor
+    (:func:`actor_from_sac`: SAC, TQC), or, for an actor the export does not cover (CrossQ's
+    batch-renormalized layers), the SB3 model behind its observation statistics.
 
     Args:
-        checkpoint: A ``checkpoints/step_*`` folder of a ``myoexo train`` run.
-        with_reference: Store (and check) reference observation/action pairs.
-        selection_root_seed: Root seed of the subjects that selected this checkpoint
-            (``myoexo select``), recorded so that an evaluation on that root is refused.
+        model: The SB3 model.
+        vec_normalize: Its ``VecNormalize`` (``None``: the model's own, if any).
+        metadata: Provenance; its ``obs_preset`` names the env the controller needs.
+        name: Label of the SB3 fallback (default: the model's class name).
     """
+    from myoexo.control.policy import SB3Controller
+
+    try:
+        return actor_from_sac(model, vec_normalize, metadata=metadata)
+    except (ValueError, AttributeError):
+        vn = vec_normalize if vec_normalize is not None else model.get_vec_normalize_env()
+        return SB3Controller(
+            model,
+            name=name,
+            obs_normalizer=vn,
+            obs_preset=str((metadata or {}).get("obs_preset") or "full"),
+        )
+
+
+def _checkpoint_parts(
+    checkpoint: Path, selection_root_seed: int | None = None
+) -> tuple[Any, Any, dict[str, Any]]:
+    """``(model, VecNormalize or None, provenance)`` of a checkpoint folder."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     from myoexo.training.presets import algorithm_class
@@ -112,7 +135,8 @@ def load_checkpoint_actor(
     checkpoint = Path(checkpoint)
     run_dir = checkpoint.parent.parent
     config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
-    algorithm = config.get("preset", {}).get("algorithm", "sac")
+    preset = config.get("preset", {})
+    algorithm = preset.get("algorithm", "sac")
     model = algorithm_class(algorithm).load(checkpoint / ck.MODEL_FILE, device="cpu")
     vn = None
     if (checkpoint / ck.VECNORM_FILE).is_file():
@@ -123,7 +147,6 @@ def load_checkpoint_actor(
         if not isinstance(vn, VecNormalize):
             raise ValueError(f"{checkpoint / ck.VECNORM_FILE} is not a VecNormalize pickle")
     state = ck.read_state(checkpoint)
-    preset = config.get("preset", {})
     meta = {
         "env_id": config.get("env_id"),
         "obs_keys": config.get("obs_keys"),
@@ -139,6 +162,21 @@ def load_checkpoint_actor(
         "checkpoint": f"{run_dir.name}/{ck.CHECKPOINTS_DIR}/{checkpoint.name}",
         "versions": config.get("versions"),
     }
+    return model, vn, meta
+
+
+def load_checkpoint_actor(
+    checkpoint: Path, with_reference: bool = True, selection_root_seed: int | None = None
+) -> MLPActor:
+    """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs.
+
+    Args:
+        checkpoint: A ``checkpoints/step_*`` folder of a ``myoexo train`` run.
+        with_reference: Store (and check) reference observation/action pairs.
+        selection_root_seed: Root seed of the subjects that selected this checkpoint
+            (``myoexo select``), recorded so that an evaluation on that root is refused.
+    """
+    model, vn, meta = _checkpoint_parts(checkpoint, selection_root_seed)
     actor = actor_from_sac(model, vn, metadata=meta)
     if with_reference:
         actor.metadata["reference"] = reference_pairs(actor, model, vn)
@@ -147,32 +185,10 @@ def load_checkpoint_actor(
 
 
 def load_checkpoint_controller(checkpoint: Path) -> Any:
-    """A checkpoint's deterministic policy as a controller with an ``obs_preset``: its numpy
-    actor (SAC, TQC), or the SB3 model behind its observation statistics (CrossQ, whose
-    batch-renormalized actor has no numpy export)."""
-    try:
-        return load_checkpoint_actor(checkpoint, with_reference=False)
-    except ValueError:
-        pass
-    import pickle
-
-    from myoexo.control.policy import SB3Controller
-    from myoexo.training.presets import algorithm_class
-
-    checkpoint = Path(checkpoint)
-    config = ck.read_config(checkpoint.parent.parent)
-    preset = config.get("preset", {})
-    model = algorithm_class(preset.get("algorithm", "sac")).load(
-        checkpoint / ck.MODEL_FILE, device="cpu"
-    )
-    normalizer = None
-    if (checkpoint / ck.VECNORM_FILE).is_file():
-        with open(checkpoint / ck.VECNORM_FILE, "rb") as f:
-            normalizer = pickle.load(f)
-        normalizer.training = False
-    controller = SB3Controller(model, name=checkpoint.name, obs_normalizer=normalizer)
-    controller.obs_preset = preset.get("obs_preset", "full")  # type: ignore[attr-defined]
-    return controller
+    """A checkpoint's deterministic policy as a controller with an ``obs_preset``
+    (:func:`deterministic_controller`)."""
+    model, vn, meta = _checkpoint_parts(checkpoint)
+    return deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
 
 
 def export_onnx(actor: MLPActor, path: str | Path, opset: int = 17) -> Path:

@@ -52,27 +52,18 @@ from myoexo.spasticity import VALID_LEVELS
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
 _VEC_ENVS = ("dummy", "subproc")
-#: Off-policy algorithms a preset can name: name -> (module, class).
-ALGORITHMS: dict[str, tuple[str, str]] = {
-    "sac": ("stable_baselines3", "SAC"),
-    "tqc": ("sb3_contrib", "TQC"),
-    "crossq": ("sb3_contrib", "CrossQ"),
-}
+#: Off-policy algorithms a preset can name: name -> SB3 class name (TQC and CrossQ are
+#: sb3-contrib's, the ``contrib`` extra).
+ALGORITHMS: dict[str, str] = {"sac": "SAC", "tqc": "TQC", "crossq": "CrossQ"}
 
 
 def algorithm_class(name: str) -> Any:
     """The SB3 class of an algorithm name; ``ValueError`` naming the extra to install."""
-    import importlib
+    from myoexo.control.specs import sb3_class
 
     if name not in ALGORITHMS:
         raise ValueError(f"algorithm = {name!r}; accepted: {sorted(ALGORITHMS)}")
-    module, cls = ALGORITHMS[name]
-    try:
-        return getattr(importlib.import_module(module), cls)
-    except ImportError:
-        raise ValueError(
-            f"algorithm {name!r} needs {module} (pip install 'myoexo[contrib]')"
-        ) from None
+    return sb3_class(ALGORITHMS[name])
 
 
 #: Names of the env's observation presets (``myoexo.envs.knee_exo.OBS_PRESETS``).
