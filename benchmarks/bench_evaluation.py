@@ -13,7 +13,7 @@ a SAC episode costing a PID episode plus 800 policy decisions).
 
 With ``--backends N`` it instead compares the two backends of ``evaluate`` on one protocol,
 PID at levels 0 and 3 with N subjects each, on ``--workers`` CPUs: the process pool, then
-Ray on a local cluster of as many CPUs (``myoexo.ray_cluster.ray_session``). Ray's
+Ray on a local cluster of as many CPUs (``myoexo.runtime.ray_cluster.ray_session``). Ray's
 start-up (``ray.init``) and shutdown are timed apart from the evaluation; the overhead is
 Ray's evaluation wall time against the process pool's (each including its own worker
 start-up: processes spawned, or tasks' first imports), then with Ray's start-up added. The
@@ -99,7 +99,7 @@ def compare_backends(subjects: int, workers: int, repeats: int) -> None:
     """Print the process pool's and Ray's wall times on one protocol (module docstring)."""
     import pandas as pd
 
-    from myoexo.ray_cluster import ray_session
+    from myoexo.runtime.ray_cluster import ray_session
 
     config = EvaluationConfig(controllers=("pid",), levels=COMPARE_LEVELS, subjects=subjects)
     quiet = {"progress": False, "log": lambda s: None}

@@ -24,19 +24,22 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from myoexo.lifecycle import SIGNAL_EXIT_BASE
+from myoexo.runtime.lifecycle import SIGNAL_EXIT_BASE
 
 #: sub-command -> (module implementing it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("myoexo.demo", "run the main job on built-in defaults and print where results are"),
+    "demo": (
+        "myoexo.evaluation.demo",
+        "run the main job on built-in defaults and print where results are",
+    ),
     "export-model": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
-    "plot-spasticity": ("myoexo.spasticity_plots", "draw Fig. 2b and the stretch-test curves"),
-    "stretch-test": ("myoexo.stretch_test", "simulate the passive Tardieu stretch per level"),
+    "plot-spasticity": ("myoexo.clinical.figures", "draw Fig. 2b and the stretch-test curves"),
+    "stretch-test": ("myoexo.clinical.stretch", "simulate the passive Tardieu stretch per level"),
     "tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
     "pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),
     "mas-exam": ("myoexo.clinical.mas", "Modified Ashworth examination: resistance profile"),
     "calibrate": (
-        "myoexo.calibration",
+        "myoexo.spasticity.calibrate",
         "fit the stretch reflex so that the paper's PID behaves as in the study",
     ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
@@ -48,7 +51,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Ray Tune over training configurations, ranked on the acceptance criteria",
     ),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
-    "video": ("myoexo.video", "render an episode of a controller to MP4 or GIF"),
+    "video": ("myoexo.viz.video", "render an episode of a controller to MP4 or GIF"),
     "select": (
         "myoexo.training.select",
         "pick the checkpoint of a run that best meets the acceptance criteria",

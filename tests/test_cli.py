@@ -80,13 +80,13 @@ def test_debug_shows_the_traceback_of_user_errors(monkeypatch):
 
 @pytest.mark.parametrize("exc", [KeyError("x"), RuntimeError("bug"), TypeError("bug")])
 def test_bugs_keep_their_traceback(monkeypatch, exc):
-    import myoexo.stretch_test
+    import myoexo.clinical.stretch
 
     def broken(args):
         raise exc
 
     monkeypatch.delenv("MYOEXO_DEBUG", raising=False)
-    monkeypatch.setattr(myoexo.stretch_test, "run", broken)
+    monkeypatch.setattr(myoexo.clinical.stretch, "run", broken)
     with pytest.raises(type(exc)):
         main(["stretch-test"])
 
@@ -101,12 +101,12 @@ def test_missing_shipped_policy_is_a_user_error():
 
 
 def test_a_multi_line_message_is_printed_on_one_line(monkeypatch, capsys):
-    import myoexo.stretch_test
+    import myoexo.clinical.stretch
 
     def fails(args):
         raise FileNotFoundError("first line\n  second line\n")
 
     monkeypatch.delenv("MYOEXO_DEBUG", raising=False)
-    monkeypatch.setattr(myoexo.stretch_test, "run", fails)
+    monkeypatch.setattr(myoexo.clinical.stretch, "run", fails)
     assert main(["stretch-test"]) == 2
     assert capsys.readouterr().err == "myoexo stretch-test: error: first line second line\n"

@@ -1,7 +1,7 @@
 """Tests of the clinical tests on the twin (myoexo.clinical): Tardieu, pendulum, MAS exam.
 
 Every simulated test runs once per reflex model (module-scoped fixtures, about a second per
-model and test). The reflex calibration (``myoexo.reflex.CALIBRATION``) is being re-fitted,
+model and test). The reflex calibration (``myoexo.spasticity.reflex.CALIBRATION``) is being re-fitted,
 so the assertions are orderings and physical sense, each with its reason, not fitted values.
 The ``"uniform"`` model ignores the calibration, so its orderings are pinned more tightly.
 """
@@ -89,7 +89,7 @@ def test_tardieu_orderings_per_reflex_model(tardieu) -> None:
         assert (t.loc[list(SPASTIC), "r1_deg"] > 80.0).all(), t
     else:
         # the calibration moves the flexors' angle threshold into the range at levels 2-3
-        # (myoexo.reflex): the slow stretch meets tonic flexor resistance, so the passive
+        # (myoexo.spasticity.reflex): the slow stretch meets tonic flexor resistance, so the passive
         # range ends earlier than at level 0
         assert (t.loc[[2, 3], "r2_deg"] > t.loc[0, "r2_deg"] + 3.0).all(), t
 

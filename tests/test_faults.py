@@ -28,7 +28,7 @@ from myoexo.cli import EXIT_NO_SPACE
 from myoexo.cli import main as cli_main
 from myoexo.evaluation import EvaluationConfig, evaluate
 from myoexo.evaluation.storage import chunk_done
-from myoexo.lifecycle import LOCK_FILE, FolderLock, StopSignals, signal_exit_status
+from myoexo.runtime.lifecycle import LOCK_FILE, FolderLock, StopSignals, signal_exit_status
 from myoexo.training import checkpoints as ck
 from myoexo.training import get_preset, resume, train
 
@@ -361,7 +361,7 @@ def test_a_folder_in_use_is_refused_with_the_holder_and_freed_by_its_death(
         [
             sys.executable,
             "-c",
-            "import sys, time; from myoexo.lifecycle import FolderLock; "
+            "import sys, time; from myoexo.runtime.lifecycle import FolderLock; "
             "FolderLock(sys.argv[1], command='holder for the test').acquire(); "
             "print('locked', flush=True); time.sleep(600)",
             str(folder),
@@ -561,7 +561,7 @@ def test_a_stale_temporary_and_a_cut_line_are_cleaned_on_resume(tmp_path):
     (tmp_path / ck.CHECKPOINTS_DIR / ".tmp_abc" / ck.MODEL_FILE).write_bytes(b"half")
     (tmp_path / ".tmp-latest.json.xyz").write_text("{")
     (tmp_path / ck.SESSIONS_FILE).write_text('{"session": 0}\n{"sess')
-    assert ck.remove_stale_temporaries(tmp_path) == 3
+    assert ck.clean_interrupted_writes(tmp_path) == 3
     assert not _temporaries(tmp_path)
     assert (tmp_path / ck.SESSIONS_FILE).read_text() == '{"session": 0}\n'
 

@@ -120,7 +120,7 @@ def wait_for(condition, proc: subprocess.Popen, what: str) -> None:
 # ----------------------------------------------------------------------------- optional
 def test_importing_myoexo_does_not_import_ray():
     code = (
-        "import sys, myoexo, myoexo.evaluation, myoexo.training, myoexo.ray_cluster\n"
+        "import sys, myoexo, myoexo.evaluation, myoexo.training, myoexo.runtime.ray_cluster\n"
         "import myoexo.evaluation.ray_backend, myoexo.training.sweep\n"
         "from myoexo.cli import build_parser\n"
         "build_parser()\n"
@@ -180,7 +180,7 @@ def test_tables_are_bit_identical_across_backends_and_workers(tmp_path):
 @pytest.mark.slow
 def test_a_task_error_is_raised_as_the_tasks_own():
     from myoexo.evaluation.ray_backend import _get
-    from myoexo.ray_cluster import ray_session
+    from myoexo.runtime.ray_cluster import ray_session
 
     def fails():
         raise ValueError("bad chunk")

@@ -1,4 +1,4 @@
-"""Tests of the reflex models (myoexo.reflex) and their stage in MyoSuite's pipeline: the
+"""Tests of the reflex models (myoexo.spasticity.reflex) and their stage in MyoSuite's pipeline: the
 stretch reflex decomposes the paper's SC_total by muscle group, the torch twin agrees and
 differentiates, the delay line delays, and the stage drives each group with its own part."""
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from myoexo.reflex import (
+from myoexo.spasticity.reflex import (
     CALIBRATION,
     REFLEX_PRESETS,
     UNCALIBRATED,
@@ -170,7 +170,7 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
 
 
 def test_delay_line_history_can_be_taken_and_restored():
-    from myoexo.reflex import DelayLine
+    from myoexo.spasticity.reflex import DelayLine
 
     line = DelayLine(2)
     for k in range(3):

@@ -31,7 +31,7 @@ from myoexo.model.scene import (
     MuscleColorizer,
     MuscleColors,
 )
-from myoexo.video import VideoWriter, draw_overlay, overlay_lines
+from myoexo.viz.video import VideoWriter, draw_overlay, overlay_lines
 from myoexo.viz import CAMERAS, VIEWS, knee_camera
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""Tests of the simulated Tardieu stretch test (myoexo.stretch_test) and its figures."""
+"""Tests of the simulated Tardieu stretch test (myoexo.clinical.stretch) and its figures."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from myoexo.stretch_test import StretchTestParams, reference_profile, run_stretch_test
+from myoexo.clinical.stretch import StretchTestParams, reference_profile, run_stretch_test
 
 SLOW, FAST = 0.2, 3.0
 
@@ -48,7 +48,7 @@ def test_params_reject_bad_values() -> None:
 
 @pytest.fixture(scope="module", params=["stretch", "uniform"])
 def reflex(request) -> str:
-    """Both reflex models (myoexo.reflex): the stretch reflex (default) and the uniform one."""
+    """Both reflex models (myoexo.spasticity.reflex): the stretch reflex (default) and the uniform one."""
     return request.param
 
 

@@ -11,13 +11,13 @@ function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
   examination's resistance profile (:mod:`myoexo.clinical.mas`).
 
 Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
-:class:`~myoexo.reflex.ReflexConfig`) so the reflex models can be compared side by side, and
-runs the nominal Table I subject of each level unless ``subjects`` gives individual ones.
+:class:`~myoexo.spasticity.ReflexConfig`) so the reflex models can be compared side by side,
+and runs the nominal Table I subject of each level unless ``subjects`` gives individual ones.
 The shared machinery (the exo-driven knee, checks, CLI options) is
-:mod:`myoexo.clinical.common`, which :mod:`myoexo.stretch_test` uses too.
+:mod:`myoexo.clinical.common`, which :mod:`myoexo.clinical.stretch` uses too.
 
 The submodules are imported on first use (``myoexo.clinical.run_tardieu`` works), so
-importing this package stays cheap and free of import cycles with :mod:`myoexo.stretch_test`.
+importing this package stays cheap and free of import cycles with :mod:`myoexo.clinical.stretch`.
 """
 
 from __future__ import annotations

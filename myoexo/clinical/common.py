@@ -5,7 +5,7 @@ The core is :func:`simulate_drive`: the relaxed twin (muscles get the spastic re
 :class:`~myoexo.spasticity.SpasticityStage` in the muscle-command pipeline, at every 10 ms
 control step like the envs) with the exo motor either running a stiff PD that makes the
 knee follow a reference (``powered``) or commanded to zero (the exo's mass, damping, range
-stops and straps stay: it is worn, switched off). :func:`myoexo.stretch_test.simulate_stretch`
+stops and straps stay: it is worn, switched off). :func:`myoexo.clinical.stretch.simulate_stretch`
 (the Tardieu stretch and the MAS examination) and the pendulum test are built on it.
 """
 
@@ -25,8 +25,9 @@ import numpy as np
 from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.model.leg import KNEE_JOINT
-from myoexo.reflex import REFLEX_PRESETS, ReflexConfig, reflex_config
-from myoexo.spasticity import VALID_LEVELS, SpasticityParams, SpasticityStage, sample_subject
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams, sample_subject
+from myoexo.spasticity.reflex import REFLEX_PRESETS, ReflexConfig, reflex_config
+from myoexo.spasticity.stage import SpasticityStage, StageHost
 
 if TYPE_CHECKING:
     import mujoco
@@ -39,7 +40,6 @@ __all__ = [
     "DRIVE_COLUMNS",
     "DriveParams",
     "PoseFn",
-    "ReflexHost",
     "add_common_arguments",
     "check_levels",
     "check_positive",
@@ -101,17 +101,6 @@ class DriveParams:
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"DriveParams.{name} must be >= 0, got {value!r}.")
         check_positive("DriveParams.control_period_s", self.control_period_s, "s")
-
-
-class ReflexHost:
-    """What :meth:`SpasticityStage.apply` needs of an env: model, data, an RNG and the control
-    period ``dt`` (s) of the apply calls (it sizes the reflex's delay line)."""
-
-    def __init__(
-        self, model: mujoco.MjModel, data: mujoco.MjData, dt: float, seed: int = 0
-    ) -> None:
-        self.model, self.data, self.dt = model, data, float(dt)
-        self.np_random = np.random.default_rng(seed)
 
 
 # ----------------------------------------------------------------------------- checks
@@ -244,7 +233,7 @@ def simulate_drive(
         start_deg: Knee angle of the initial (static) pose, deg.
         powered: Per step, whether the PD drives the exo (default: every step).
         drive: Controller gains, control period and joint names.
-        reflex: Reflex model (preset name or :class:`~myoexo.reflex.ReflexConfig`).
+        reflex: Reflex model (preset name or :class:`~myoexo.spasticity.reflex.ReflexConfig`).
         subject: Individual reflex parameters (default: the level's Table I values).
 
     Returns:
@@ -277,7 +266,7 @@ def simulate_drive(
 
     data = mujoco.MjData(model)
     pose(model, data, knee_angle_deg=start_deg)
-    host = ReflexHost(model, data, dt)
+    host = StageHost(model, data, dt)
     stage = SpasticityStage(level, subject_noise=False, reflex=reflex)
     if subject is not None:
         stage.set_subject(subject)

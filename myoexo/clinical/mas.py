@@ -3,10 +3,11 @@
 The examiner moves the relaxed knee through its range in about one second: here the exo
 drives it from 90 deg of flexion to ``end_deg`` along a minimum-jerk profile (Flash and
 Hogan 1985: the smooth, bell-shaped speed of a hand movement; peak speed 1.875 times the
-mean, 2.6 rad/s for the default 80 deg in 1 s) with the stiff PD of :mod:`myoexo.stretch_test`. The
-resisting torque is the exo's torque along the motion, what the examiner's hand feels: the
-limb's weight and inertia, the passive muscles and the reflex. The MAS grades the *increase*
-of that resistance over a normal limb (Bohannon and Smith 1987):
+mean, 2.6 rad/s for the default 80 deg in 1 s) with the stiff PD of
+:mod:`myoexo.clinical.stretch`. The resisting torque is the exo's torque along the motion,
+what the examiner's hand feels: the limb's weight and inertia, the passive muscles and the
+reflex. The MAS grades the *increase* of that resistance over a normal limb (Bohannon and Smith
+1987):
 
 * 1: a catch and release, or minimal resistance at the end of the range;
 * 1+: a catch followed by minimal resistance through less than half of the range;
@@ -61,8 +62,8 @@ from myoexo.clinical.common import (
     subjects_from_args,
     write_outputs,
 )
-from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.reflex import ReflexConfig
 
 if TYPE_CHECKING:
     import mujoco
@@ -264,7 +265,7 @@ def run_mas_exam(
     Args:
         params: Exam parameters.
         reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.reflex.ReflexConfig`.
+            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
         subjects: Individual reflex parameters per level (default: nominal Table I; the
             level-0 reference stays nominal unless given).
         model: The twin (default: the seated twin, ``TwinParams()``).
@@ -302,7 +303,7 @@ def plot_mas_exam(result: MASExamResult) -> Figure:
     """Resisting torque, and its excess over level 0, vs range position per level."""
     from matplotlib.figure import Figure
 
-    from myoexo.spasticity_plots import LEVEL_COLORS
+    from myoexo.clinical.figures import LEVEL_COLORS
 
     p = result.params
     fig = Figure(figsize=(11, 4), constrained_layout=True)

@@ -77,8 +77,8 @@ from myoexo.clinical.common import (
     twin_model,
     write_outputs,
 )
-from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.reflex import ReflexConfig
 
 if TYPE_CHECKING:
     import mujoco
@@ -292,7 +292,7 @@ def run_pendulum(
     Args:
         params: Test parameters (:data:`SEATED`, :data:`RECLINED` or your own).
         reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.reflex.ReflexConfig`.
+            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
         subjects: Individual reflex parameters per level (default: nominal Table I).
         twin: Twin parameters (default ``TwinParams()``); their hip flexion is replaced by
             ``params.hip_flexion_deg``.
@@ -365,7 +365,7 @@ def plot_pendulum(result: PendulumResult) -> Figure:
     peak velocity per level next to the published values."""
     from matplotlib.figure import Figure
 
-    from myoexo.spasticity_plots import LEVEL_COLORS
+    from myoexo.clinical.figures import LEVEL_COLORS
 
     fig = Figure(figsize=(13, 3.8), constrained_layout=True)
     ax_t, ax_r, ax_v = fig.subplots(1, 3, gridspec_kw={"width_ratios": [2.2, 1, 1]})

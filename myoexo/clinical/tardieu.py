@@ -2,7 +2,7 @@
 
 The exo extends the relaxed knee from 90 deg of flexion toward full extension (stretching the
 hamstrings and gastrocnemii) once slowly (V1, 0.2 rad/s) and once fast (V3, 3 rad/s), with
-the stiff PD of :mod:`myoexo.stretch_test` on a trapezoidal-velocity ramp. As in the
+the stiff PD of :mod:`myoexo.clinical.stretch` on a trapezoidal-velocity ramp. As in the
 clinic (Tardieu; Boyd and Graham 1999) the test reports, per level:
 
 ``r1_deg`` (R1, the angle of catch at V3)
@@ -68,9 +68,9 @@ from myoexo.clinical.common import (
     subjects_from_args,
     write_outputs,
 )
-from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import VALID_LEVELS, SpasticityParams
-from myoexo.stretch_test import StretchTestParams, simulate_stretch
+from myoexo.clinical.stretch import StretchTestParams, simulate_stretch
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.reflex import ReflexConfig
 
 if TYPE_CHECKING:
     import mujoco
@@ -173,7 +173,7 @@ class TardieuResult:
     Attributes:
         summary: One row per level (see :meth:`table`).
         traces: One row per control step of every stretch: ``level, speed ("slow"/"fast"),
-            vel_rad_s`` and the stretch-test columns (:class:`myoexo.stretch_test
+            vel_rad_s`` and the stretch-test columns (:class:`myoexo.clinical.stretch
             .StretchTestResult`) plus ``muscle_resisting_nm`` (the muscles' torque against
             the extension).
         params: The test parameters.
@@ -254,7 +254,7 @@ def run_tardieu(
     Args:
         params: Test parameters.
         reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.reflex.ReflexConfig`.
+            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
         subjects: Individual reflex parameters per level (default: the nominal Table I
             subjects; :func:`~myoexo.clinical.common.draw_subjects` draws some).
         model: The twin (default: the seated twin, ``TwinParams()``).
@@ -297,7 +297,7 @@ def plot_tardieu(result: TardieuResult) -> Figure:
     (the catch, on the fast curve) and R2 (the end-feel, on the slow curve) marked."""
     from matplotlib.figure import Figure
 
-    from myoexo.spasticity_plots import LEVEL_COLORS
+    from myoexo.clinical.figures import LEVEL_COLORS
 
     p = result.params
     summary = result.summary.set_index("level")

@@ -31,7 +31,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from myoexo.spasticity import SpasticityStage
+from myoexo.spasticity.stage import SpasticityStage, StageHost
 
 
 @dataclass(frozen=True)
@@ -106,13 +106,6 @@ def parse_oracle_options(text: str) -> dict[str, Any]:
     return options
 
 
-class _PlanHost:
-    """What the reflex stage reads: a model, the planner's data and the control period."""
-
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, dt: float) -> None:
-        self.model, self.data, self.dt = model, data, dt
-
-
 class OracleMPC:
     """Sampling-based MPC on a copy of the twin (see the module docstring).
 
@@ -131,7 +124,7 @@ class OracleMPC:
         e = self.env
         self._model = e.model
         self._data = mujoco.MjData(e.model)
-        self._host = _PlanHost(e.model, self._data, e.dt)
+        self._host = StageHost(e.model, self._data, e.dt)
         self._frame_skip = int(e.frame_skip)
         self._exo_act = int(e._exo_act)
         self._knee_qadr = int(e._knee_qadr)

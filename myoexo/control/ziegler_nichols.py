@@ -41,7 +41,7 @@ import numpy as np
 
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.rollout import rollout
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Classic Ziegler-Nichols closed-loop PID table: Kp = a Ku, Ti = Tu / b, Td = Tu / c.
 ZN_KP_FACTOR = 0.6

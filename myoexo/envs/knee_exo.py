@@ -89,8 +89,9 @@ from myoexo.model import (
 )
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
-from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import SPASTIC_MUSCLES, SpasticityStage
+from myoexo.spasticity.levels import SPASTIC_MUSCLES
+from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.stage import SpasticityStage
 
 #: Cuff sensors of the twin: obs key (sensor name + unit) -> sensor name.
 CUFF_OBS_KEYS: dict[str, str] = {f"{name}_{unit}": name for name, unit in CUFF_SENSORS.items()}
@@ -191,8 +192,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         weighted_reward_keys: Shortcut overriding ``reward.weights``.
         subject_noise: Draw an individual subject (10 % variability) at every reset;
             ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
-        reflex: Reflex model (:mod:`myoexo.reflex`): ``"stretch"`` (the calibrated stretch
-            reflex with a 20 ms delay, default), ``"uniform"`` (the paper's ``SC_total`` on
+        reflex: Reflex model (:mod:`myoexo.spasticity.reflex`): ``"stretch"`` (the calibrated
+            stretch reflex with a 20 ms delay, default), ``"uniform"`` (the paper's ``SC_total`` on
             all 11 muscles, no delay: the first reading) or a ``ReflexConfig``.
         robustness: Draw the twin's uncertain parts (strap stiffness and damping, masses,
             slide friction, motor torque constant) and sensor noise and latency at every

@@ -21,7 +21,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
-from myoexo.spasticity import RANDOM_LEVEL, VALID_LEVELS
+from myoexo.spasticity.levels import RANDOM_LEVEL, VALID_LEVELS
 
 ENTRY_POINT = "myoexo.envs.knee_exo:MyoExoKneeEnv"
 #: Id of the env whose level is drawn uniformly at every reset (the paper's training).
@@ -94,7 +94,7 @@ def make_env(
     """
     import gymnasium as gym
 
-    import myoexo  # noqa: F401  (registers the ids)
+    register_envs()  # a no-op after ``import myoexo``; here for ``myoexo.envs`` alone
 
     env_name = env if isinstance(env, str) and env != RANDOM_LEVEL else env_id(env)
     if episode_duration_s is not None:

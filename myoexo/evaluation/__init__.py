@@ -7,22 +7,18 @@ Markdown report (``myoexo evaluate``, ``myoexo report``).
     run.table.groupby(["controller", "level"]).peak_interaction_torque_nm.mean()
 
 Modules: :mod:`.config` (what a run is, subject seeds, ``config.json``), :mod:`.engine`
-(episodes, chunks, workers), :mod:`.ray_backend` (the chunks as Ray tasks, on a cluster:
-``docs/cluster.md``), :mod:`.storage` (chunk, table and trace files),
+(episodes, chunks), :mod:`.backends` (in-process, worker processes) and :mod:`.ray_backend`
+(the chunks as Ray tasks, on a cluster: ``docs/cluster.md``), :mod:`.runner` (a whole run:
+:func:`evaluate`), :mod:`.storage` (chunk, table and trace files),
 :mod:`.metrics`, :mod:`.criteria` (the acceptance criteria), :mod:`.paper` (the study's
 numbers), :mod:`.figures`, :mod:`.report`.
 """
 
+from myoexo.evaluation.backends import available_cores
 from myoexo.evaluation.config import EvaluationConfig, load_config, subject_seed
-from myoexo.evaluation.engine import (
-    EpisodeResult,
-    EvaluationRun,
-    available_cores,
-    evaluate,
-    evaluate_controller,
-    run_episode,
-)
+from myoexo.evaluation.engine import EpisodeResult, evaluate_controller, run_episode
 from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
+from myoexo.evaluation.runner import EvaluationRun, evaluate
 from myoexo.evaluation.storage import Traces, load_table, load_traces
 
 __all__ = [

@@ -21,10 +21,10 @@ import signal
 import sys
 from pathlib import Path
 
+from myoexo.evaluation.backends import available_cores
 from myoexo.evaluation.config import EvaluationConfig
-from myoexo.evaluation.engine import available_cores
 from myoexo.evaluation.ray_backend import BACKENDS
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
 DEFAULT_OUT = Path("results") / "evaluation"
@@ -116,7 +116,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments or a folder in use,
     128 + the signal number when stopped by SIGINT / SIGTERM."""
-    from myoexo.evaluation.engine import evaluate
+    from myoexo.evaluation.runner import evaluate
 
     try:
         config = EvaluationConfig(
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
         return 2
     if result.stopped_by is not None:
-        from myoexo.lifecycle import signal_exit_status
+        from myoexo.runtime.lifecycle import signal_exit_status
 
         print(
             f"myoexo evaluate: stopped by {result.stopped_by}: {result.stored} of "

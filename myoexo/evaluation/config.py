@@ -29,8 +29,8 @@ import numpy as np
 
 from myoexo.control.specs import ControllerSpec
 from myoexo.envs.config import TaskParams
-from myoexo.io import package_versions, write_json_atomic
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.runtime.files import package_versions, write_json_atomic
+from myoexo.spasticity.levels import VALID_LEVELS
 
 CONFIG_FILE = "config.json"
 

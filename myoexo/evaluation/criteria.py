@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from myoexo.evaluation.paper import PAPER_RESULTS
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 
 #: The per-episode metrics the criteria use (columns of the evaluation table).
 CRITERIA_METRICS: tuple[str, ...] = (

@@ -12,7 +12,7 @@ On a cluster the output folder must be on a filesystem every node sees at the sa
 (``docs/cluster.md``).
 
 How the driver connects and what happens to its cluster when it dies:
-:mod:`myoexo.ray_cluster`. Importing this module does not import Ray.
+:mod:`myoexo.runtime.ray_cluster`. Importing this module does not import Ray.
 """
 
 from __future__ import annotations
@@ -21,11 +21,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from myoexo.evaluation.engine import Chunk, init_worker, run_chunk
+
 if TYPE_CHECKING:
     from myoexo.evaluation.config import EvaluationConfig
-    from myoexo.evaluation.engine import Chunk
 
-#: Backends of :func:`myoexo.evaluation.engine.evaluate`.
+#: Backends of :func:`myoexo.evaluation.runner.evaluate`.
 BACKENDS: tuple[str, ...] = ("process", "ray")
 
 #: Seconds between two looks at the finished tasks (the driver's signal handlers and
@@ -44,17 +45,15 @@ def check_backend(backend: str, address: str | None) -> None:
     if backend != "ray" and address:
         raise ValueError(f"--address {address!r} needs --backend ray")
     if backend == "ray":
-        from myoexo.ray_cluster import require_ray
+        from myoexo.runtime.ray_cluster import require_ray
 
         require_ray("--backend ray")
 
 
 def _chunk_task(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chunk, int]:
     """Body of a Ray task: one thread, then the engine's own chunk runner."""
-    from myoexo.evaluation import engine
-
-    engine._init_worker()
-    return engine.run_chunk(chunk, config, out_dir)
+    init_worker()
+    return run_chunk(chunk, config, out_dir)
 
 
 def run_chunks(
@@ -75,8 +74,8 @@ def run_chunks(
         bar: tqdm bar, advanced as tasks finish.
         workers: CPUs of a local cluster; on a joined cluster, the most chunks in flight at
             once (``None``: every CPU of the cluster).
-        address: Cluster to join (:func:`myoexo.ray_cluster.resolve_address`).
-        stop: A :class:`~myoexo.lifecycle.StopSignals`: once it has received a signal, no
+        address: Cluster to join (:func:`myoexo.runtime.ray_cluster.resolve_address`).
+        stop: A :class:`~myoexo.runtime.lifecycle.StopSignals`: once it has received a signal, no
             chunk is submitted any more and the running ones are finished and stored.
 
     Raises:
@@ -84,7 +83,7 @@ def run_chunks(
     """
     if not todo:
         return 0
-    from myoexo.ray_cluster import ray_session
+    from myoexo.runtime.ray_cluster import ray_session
 
     with ray_session(workers, address, "--backend ray") as ray:
         task = ray.remote(num_cpus=CPUS_PER_CHUNK)(_chunk_task)

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.specs import controller_slug
-from myoexo.io import atomic_path, savez_atomic
+from myoexo.runtime.files import atomic_path, savez_atomic
 
 TABLE_STEM = "episodes"
 TRACES_DIR = "traces"

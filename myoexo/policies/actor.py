@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.io import atomic_path, write_json_atomic
+from myoexo.runtime.files import atomic_path, write_json_atomic
 
 #: Version of the file format written by :func:`save_actor`.
 FORMAT_VERSION = 1

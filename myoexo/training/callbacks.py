@@ -10,7 +10,7 @@
   step counter every ``every_s`` seconds or ``every_steps`` transitions, whichever comes
   first, a first one soon after learning starts, and at the end of training.
 * :class:`StopOnSignalCallback`: ends ``learn`` at the next step once SIGTERM / SIGINT was
-  received (:class:`myoexo.lifecycle.StopSignals`); the checkpoint callback then writes
+  received (:class:`myoexo.runtime.lifecycle.StopSignals`); the checkpoint callback then writes
   the final checkpoint.
 """
 
@@ -32,9 +32,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.criteria import CRITERIA_METRICS
-from myoexo.io import write_json_atomic
-from myoexo.lifecycle import StopSignals
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.runtime.files import write_json_atomic
+from myoexo.runtime.lifecycle import StopSignals
+from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
 #: Reward-dict entries that are not reward terms.
@@ -168,7 +168,7 @@ class PaperMetricsEvalCallback(BaseCallback):
         run_dir: Run folder.
         every_steps: Transitions between evaluations.
         spec: Levels, subjects and bounds.
-        stop: The training's stop flag (:class:`~myoexo.lifecycle.StopSignals`).
+        stop: The training's stop flag (:class:`~myoexo.runtime.lifecycle.StopSignals`).
     """
 
     def __init__(

@@ -35,7 +35,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from myoexo.io import write_json_atomic
+from myoexo.runtime.files import remove_stale_temporaries, write_json_atomic
 
 CONFIG_FILE = "config.json"
 SESSIONS_FILE = "sessions.jsonl"
@@ -208,9 +208,10 @@ def set_aside(checkpoint: Path, reason: str) -> Path:
     return aside
 
 
-def remove_stale_temporaries(run_dir: Path) -> int:
+def clean_interrupted_writes(run_dir: Path) -> int:
     """Delete what writes cut short by a kill left in a run folder (temporary checkpoint
-    folders, temporary files); returns how many. Call it while holding the folder's lock."""
+    folders, temporary files, a partial last log line); returns how many. Call it while
+    holding the folder's lock."""
     run_dir = Path(run_dir)
     n = 0
     root = run_dir / CHECKPOINTS_DIR
@@ -220,10 +221,7 @@ def remove_stale_temporaries(run_dir: Path) -> int:
                 shutil.rmtree(stale, ignore_errors=True)
                 n += 1
     for pattern in (".tmp-*", f"{CHECKPOINTS_DIR}/.tmp-*"):
-        for stale in run_dir.glob(pattern):
-            if stale.is_file():
-                stale.unlink(missing_ok=True)
-                n += 1
+        n += remove_stale_temporaries(run_dir, pattern)
     for name in (SESSIONS_FILE, EVAL_FILE):
         n += trim_partial_line(run_dir / name)
     return n

@@ -66,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo train``: 0 when the step budget is reached, 128 + the signal number when
     stopped by SIGINT / SIGTERM (a checkpoint is written)."""
-    from myoexo.lifecycle import signal_exit_status
+    from myoexo.runtime.lifecycle import signal_exit_status
     from myoexo.training.train import restart, resume, train
 
     progress = not args.no_progress

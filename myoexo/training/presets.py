@@ -46,7 +46,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Env every preset trains on (level drawn uniformly at every reset, as the paper trains).
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"

@@ -14,7 +14,7 @@ from typing import Any
 
 from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.criteria import compare, level_means, shortfall
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 
 

@@ -66,7 +66,7 @@ from typing import Any
 
 from myoexo.evaluation import criteria
 from myoexo.evaluation.criteria import CRITERIA_METRICS
-from myoexo.io import write_json_atomic
+from myoexo.runtime.files import write_json_atomic
 from myoexo.training import checkpoints as ck
 from myoexo.training.presets import PRESETS, SACPreset, get_preset, parse_override
 from myoexo.training.train import is_myoexo_env
@@ -632,7 +632,7 @@ def results_table(spec: SweepSpec, sweep_dir: Path, trials: Sequence[Mapping[str
 
 def write_results(sweep_dir: Path, table: Any, spec: SweepSpec) -> tuple[Path, Path]:
     """``results.parquet`` and ``results.md`` (the table under a short heading)."""
-    from myoexo.io import atomic_path, write_text_atomic
+    from myoexo.runtime.files import atomic_path, write_text_atomic
 
     parquet = sweep_dir / f"{RESULTS_STEM}.parquet"
     with atomic_path(parquet) as tmp:
@@ -716,11 +716,11 @@ def run_sweep(
     Args:
         spec: The sweep (:func:`read_sweep_file`).
         out: Parent folder; the sweep lives in ``out/spec.name``.
-        address: Ray cluster to join (:func:`myoexo.ray_cluster.resolve_address`).
+        address: Ray cluster to join (:func:`myoexo.runtime.ray_cluster.resolve_address`).
         num_cpus: CPUs of a local cluster (default: every core).
         verbose: 0 quiet, 1 Tune's status and each trial's evaluations, 2 more.
     """
-    from myoexo.ray_cluster import ray_session, require_ray
+    from myoexo.runtime.ray_cluster import ray_session, require_ray
 
     require_ray("myoexo sweep")
     sweep_dir = Path(out).resolve() / spec.name

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.io import package_versions, write_json_atomic
-from myoexo.lifecycle import FolderLock, StopSignals, ignore_signals
+from myoexo.runtime.files import package_versions, write_json_atomic
+from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
 from myoexo.training.presets import SACPreset, algorithm_class, preset_from_dict
 
@@ -368,7 +368,7 @@ def train(
 
     Raises:
         ValueError: A bad seed, a folder that already holds a run, or a folder in use by
-            another process (:class:`~myoexo.lifecycle.FolderInUseError`).
+            another process (:class:`~myoexo.runtime.lifecycle.FolderInUseError`).
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed = {seed!r} must be an integer >= 0")
@@ -394,7 +394,7 @@ def _start(
     callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """A new run in ``run_dir`` (locked by the caller): ``config.json``, then ``learn``."""
-    ck.remove_stale_temporaries(run_dir)
+    ck.clean_interrupted_writes(run_dir)
     venv = make_vec_env(preset, seed)
     try:
         try:
@@ -518,7 +518,7 @@ def resume(
         config = ck.read_config(run_dir)
         preset = preset_from_dict(config["preset"])
         seed = int(config["seed"])
-        ck.remove_stale_temporaries(run_dir)
+        ck.clean_interrupted_writes(run_dir)
         model, venv, last = _restore_newest(run_dir, preset, seed)
         try:
             state = ck.read_state(last)

@@ -6,18 +6,19 @@ by 6.3 deg at level 2 and 9.3 deg at level 3 (docs/reference.md section 5). Thos
 are the calibration targets; the paper's SAC results are *not* used, so on the calibrated twin
 they are predictions.
 
-What is fitted (:class:`~myoexo.reflex.LevelCalibration`): per level 2 and 3, the shift of the
-flexors' extension-side angle threshold (Table I's ``theta_ext`` lies outside the motion). The
-PID's mean final error grows monotonically with the shift (a threshold further inside the
-range stops the knee earlier), so each level is a one-dimensional root search (bisection) on
-fixed subjects (the same seeds at every trial: the objective is deterministic). Levels 0 and 1
+What is fitted (:class:`~myoexo.spasticity.reflex.LevelCalibration`): per level 2 and 3, the
+shift of the flexors' extension-side angle threshold (Table I's ``theta_ext`` lies outside
+the motion). The PID's mean final error grows monotonically with the shift (a threshold further
+inside the range stops the knee earlier), so each level is a one-dimensional root search
+(bisection) on fixed subjects (the same seeds at every trial: the objective is deterministic).
+Levels 0 and 1
 are not fitted; they are checked (overshoot, final error < 1 deg). Gains stay 1 unless given.
 
     myoexo calibrate --subjects 40 --verify-subjects 200 --out results/calibration
 
-prints the fitted :class:`~myoexo.reflex.StretchCalibration` (to paste into
-:data:`myoexo.reflex.CALIBRATION`) and the verification table: PID final error and overshoot
-per level next to the paper's, on ``--verify-subjects`` subjects per level.
+prints the fitted :class:`~myoexo.spasticity.reflex.StretchCalibration` (to paste into
+:data:`myoexo.spasticity.reflex.CALIBRATION`) and the verification table: PID final error and
+overshoot per level next to the paper's, on ``--verify-subjects`` subjects per level.
 """
 
 from __future__ import annotations
@@ -34,8 +35,13 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.reflex import STRETCH_DELAY_S, LevelCalibration, ReflexConfig, StretchCalibration
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
+from myoexo.spasticity.reflex import (
+    STRETCH_DELAY_S,
+    LevelCalibration,
+    ReflexConfig,
+    StretchCalibration,
+)
 
 
 @dataclass(frozen=True)
@@ -234,7 +240,7 @@ class CalibrationResult:
         return pd.DataFrame(rows)
 
     def snippet(self) -> str:
-        """The fitted calibration as Python, for :data:`myoexo.reflex.CALIBRATION`."""
+        """The fitted calibration as Python, for :data:`myoexo.spasticity.reflex.CALIBRATION`."""
         lines = ["{"]
         for level, c in sorted(self.calibration.levels.items()):
             lines.append(
@@ -341,13 +347,13 @@ def run(args: argparse.Namespace) -> int:
     table = result.table()
     text = (
         f"# Calibration of the stretch reflex\n\n{result.calibration.note}\n\n"
-        f"Fitted levels (paste into myoexo.reflex.CALIBRATION):\n\n```python\n"
+        f"Fitted levels (paste into myoexo.spasticity.reflex.CALIBRATION):\n\n```python\n"
         f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
         f"Wall time {result.wall_time_s:.0f} s.\n"
     )
     print(text)
     if args.out is not None:
-        from myoexo.io import atomic_path, write_text_atomic
+        from myoexo.runtime.files import atomic_path, write_text_atomic
 
         write_text_atomic(args.out / "calibration.md", text)
         with atomic_path(args.out / "calibration.csv") as path:

@@ -18,12 +18,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from myoexo.spasticity import LEVELS, sample_subject, sc_angle, sc_velocity
+from myoexo.spasticity.coefficients import sc_angle, sc_velocity
+from myoexo.spasticity.levels import LEVELS, sample_subject
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from myoexo.stretch_test import StretchTestResult
+    from myoexo.clinical.stretch import StretchTestResult
 
 __all__ = ["add_arguments", "plot_sc_curves", "plot_stretch_test", "run", "subject_band"]
 
@@ -161,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     fig.savefig(path, dpi=args.dpi)
     print(f"wrote {path}")
     if not args.no_stretch:
-        from myoexo.stretch_test import run_stretch_test
+        from myoexo.clinical.stretch import run_stretch_test
 
         result = run_stretch_test(progress=True)
         fig = plot_stretch_test(result)

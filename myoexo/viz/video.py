@@ -309,7 +309,7 @@ def write_episode_video(
     from myoexo.control.specs import build_controller, parse_controller_spec, spec_env_kwargs
     from myoexo.envs import make_env
     from myoexo.model.params import TwinParams
-    from myoexo.viz import TwinRenderer, camera_name
+    from myoexo.viz.render import TwinRenderer, camera_name
 
     cfg = VideoConfig() if config is None else config
     video_format(out)  # fail before building the env

@@ -40,15 +40,13 @@ import numpy as np
 from myoexo.clinical.common import (
     DriveParams,
     PoseFn,
-    ReflexHost,
     control_substeps,
-    default_twin,
-    motor_nm_per_ctrl,
     resolve_twin,
     simulate_drive,
 )
-from myoexo.reflex import ReflexConfig
-from myoexo.spasticity import KNEE_JOINT, LEVELS, VALID_LEVELS, SpasticityParams
+from myoexo.model.leg import KNEE_JOINT
+from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.reflex import ReflexConfig
 
 if TYPE_CHECKING:
     import mujoco
@@ -241,15 +239,6 @@ def _motion_duration_s(vel_rad_s: float, params: StretchTestParams) -> float:
     return params.hold_s + span / vel_rad_s + ta + params.end_hold_s
 
 
-# Moved to myoexo.clinical.common (shared with the clinical tests); the old names stay.
-_Host = ReflexHost
-_motor_nm_per_ctrl = motor_nm_per_ctrl
-
-
-def _default_twin() -> tuple[mujoco.MjModel, PoseFn]:
-    return default_twin()
-
-
 def simulate_stretch(
     model: mujoco.MjModel,
     level: int,
@@ -272,7 +261,7 @@ def simulate_stretch(
         subject: Individual reflex parameters (e.g. from
             :func:`~myoexo.spasticity.sample_subject`).
         reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.reflex.ReflexConfig`.
+            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
 
     Returns:
         One row per control step (see :class:`StretchTestResult`); the state columns are at
@@ -360,7 +349,7 @@ def run_stretch_test(
         subjects: Optional individual reflex parameters per level (default: Table I).
         progress: Show a tqdm progress bar.
         reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.reflex.ReflexConfig`.
+            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
 
     Returns:
         Traces and summary (see :class:`StretchTestResult`).

@@ -31,10 +31,11 @@ and ``above = 1 - below``. Two readings of who receives it (docs/reference.md se
 Both models read the knee state through a transmission delay (:data:`STRETCH_DELAY_S`, 20 ms
 for the stretch reflex as SCONE uses at the knee; Falisse et al. 2018 and SpasticMyoElbow use
 30 ms, which made the paper's PID oscillate at level 1 on this twin),
-kept in a fixed ring buffer of past control-step states (:class:`DelayLine`, no allocation per
-step). The functions here are the numpy model and its torch twin (autograd through the inputs
-and every parameter); :class:`~myoexo.spasticity.SpasticityStage` runs them in MyoSuite's
-muscle-command pipeline.
+kept in a fixed ring buffer of past control-step states
+(:class:`~myoexo.spasticity.delay.DelayLine`, no allocation per step). The functions here are the
+numpy model and its torch twin (autograd through the inputs and every parameter);
+:class:`~myoexo.spasticity.stage.SpasticityStage` runs them in MyoSuite's muscle-command
+pipeline.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
+from myoexo.spasticity.coefficients import above, below
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
@@ -189,18 +190,6 @@ def reflex_config(reflex: str | ReflexConfig) -> ReflexConfig:
     )
 
 
-# ----------------------------------------------------------------------------- numpy model
-def below(x: Any, limit: float, k: float) -> Any:
-    """``1 / (1 + exp(k (x - limit)))``: -> 1 below ``limit``, 1/2 at it, -> 0 above
-    (eq. 1's ``phi``, evaluated with tanh: no overflow)."""
-    return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(x, dtype=np.float64) - limit)))
-
-
-def above(x: Any, limit: float, k: float) -> Any:
-    """``1 - below(x, limit, k)``: -> 1 above ``limit``."""
-    return 0.5 * (1.0 + np.tanh(0.5 * k * (np.asarray(x, dtype=np.float64) - limit)))
-
-
 def group_excitations(
     theta_deg: Any, vel_rad_s: Any, params: Any, calibration: LevelCalibration | None = None
 ) -> tuple[Any, Any]:
@@ -247,7 +236,7 @@ def group_excitations_torch(
     cal = calibration if calibration is not None else LevelCalibration()
     k = get(params, "k")
 
-    from myoexo.spasticity import phi_torch  # the same sigmoid (eq. 1) in torch
+    from myoexo.spasticity.coefficients import phi_torch  # the same sigmoid (eq. 1) in torch
 
     def below_t(z: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
         return phi_torch(k, z, limit)
@@ -262,52 +251,3 @@ def group_excitations_torch(
         + get(params, "s_v") * (1.0 - below_t(v, get(params, "v_upper_rad_s")))
     )
     return flex, ext
-
-
-# ----------------------------------------------------------------------------- delay
-class DelayLine:
-    """Fixed-size ring buffer of the knee state, read ``delay_steps`` samples late.
-
-    ``push(theta_deg, vel_rad_s)`` stores the present sample and returns the one
-    ``delay_steps`` pushes ago (before enough history exists: the oldest sample, i.e. the
-    state is held at its start value). Two preallocated lists of floats (scalar access is
-    faster on lists than on numpy arrays); no allocation per step.
-    """
-
-    def __init__(self, delay_steps: int) -> None:
-        if delay_steps < 0:
-            raise ValueError(f"delay_steps = {delay_steps} must be >= 0")
-        self.delay_steps = int(delay_steps)
-        self._size = self.delay_steps + 1
-        self._theta = [0.0] * self._size
-        self._vel = [0.0] * self._size
-        self._count = 0
-
-    def clear(self) -> None:
-        """Forget the history (start of an episode)."""
-        self._count = 0
-
-    def state(self) -> tuple[tuple[float, ...], tuple[float, ...], int]:
-        """The whole history, for :meth:`set_state` (e.g. to replay from here in a planner)."""
-        return tuple(self._theta), tuple(self._vel), self._count
-
-    def set_state(self, state: tuple[tuple[float, ...], tuple[float, ...], int]) -> None:
-        """Restore a history taken by :meth:`state` of a line of the same delay."""
-        theta, vel, count = state
-        if len(theta) != self._size or len(vel) != self._size:
-            raise ValueError(
-                f"a history of {len(theta)} samples does not fit a line of {self._size}"
-            )
-        self._theta[:], self._vel[:], self._count = theta, vel, int(count)
-
-    def push(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
-        """Store the present state; return the delayed one ``(theta_deg, vel_rad_s)``."""
-        n = self._size
-        count = self._count
-        i = count % n
-        self._theta[i] = theta_deg
-        self._vel[i] = vel_rad_s
-        count += 1
-        self._count = count
-        j = (count - n) % n if count >= n else 0
-        return self._theta[j], self._vel[j]

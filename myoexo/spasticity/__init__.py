@@ -1,0 +1,130 @@
+"""Spastic stretch reflex of the knee muscles (paper Table I and eqs. 1-4).
+
+The paper's model and the project's reading of it are in docs/reference.md section 2.
+
+The reflex adds a spasticity coefficient ``SC_total`` (a fraction of maximum isometric force)
+to the excitation of the 11 spastic knee muscles. It is the sum of an angle term and a
+velocity term, each a "soft window" built from two sigmoids::
+
+    phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))                                  (eq. 1)
+    sc_a(theta)   = s_theta [1 - (phi(k, theta, theta_flex) - phi(k, theta, theta_ext))]
+    sc_v(v)       = s_v     [1 - (phi(k, v, v_upper) - phi(k, v, v_lower))]
+    SC_total      = sc_a(theta) + sc_v(v)
+
+with the knee angle ``theta`` in degrees (MyoSuite ``knee_angle_r``, flexion positive) and
+the knee velocity ``v`` in rad/s (flexion positive). Inside a level's range each bracket is
+~0, at a limit it is 1/2 and far outside it tends to 1. The paper's eq. 4 prints the two
+velocity sigmoids in the other order, which read literally gives ``2 s_v`` inside the range;
+we follow the text and eq. 3 (zero inside, ``s_v`` outside). One slope ``k`` per level acts
+on both terms, so with ``k = 0.1`` (level 3) the velocity window is far wider than its range
+and the velocity term stays near ``s_v / 2`` at rest: the "maintained" tone the paper
+describes for levels 2 and 3.
+
+The package, one module per part (each name is re-exported here):
+
+* :mod:`~myoexo.spasticity.levels`: :class:`SpasticityParams` and :data:`LEVELS` (Table I),
+  the spastic muscle groups, :func:`sample_subject` (individual subjects: 10 % Gaussian noise
+  on every parameter);
+* :mod:`~myoexo.spasticity.coefficients`: :func:`phi`, :func:`sc_angle`,
+  :func:`sc_velocity`, :func:`sc_total` (numpy, vectorized) and their torch twins (autograd
+  through the inputs and every parameter);
+* :mod:`~myoexo.spasticity.reflex`: the reflex models (``"stretch"``, ``"uniform"``), their
+  calibration data (:data:`CALIBRATION`) and the torch twin of the stretch model;
+  :mod:`~myoexo.spasticity.delay`: the transmission delay line;
+* :mod:`~myoexo.spasticity.stage`: :class:`SpasticityStage`, the reflex as a stage of
+  MyoSuite's muscle-command pipeline (:mod:`myosuite.envs.muscle_stages`), and
+  :class:`StageHost`, the smallest host it runs on;
+* :mod:`~myoexo.spasticity.wrapper`: :class:`SpasticityWrapper`, a gymnasium wrapper that
+  installs the stage on any MyoSuite env whose model has the 11 muscles and ``knee_angle_r``;
+* :mod:`~myoexo.spasticity.calibrate` (``myoexo calibrate``, fits the stretch reflex to the
+  paper's PID) and :mod:`~myoexo.spasticity.plots` (Fig. 2b).
+
+Example::
+
+    from myosuite.utils import gym
+    from myoexo.spasticity import SpasticityWrapper
+
+    env = SpasticityWrapper(gym.make("myoLegWalk-v0"), level=2)
+    env.reset(seed=0)
+    env.spasticity.subject        # SpasticityParams of the drawn subject
+"""
+
+from myoexo.model.leg import KNEE_JOINT
+from myoexo.spasticity.coefficients import (
+    above,
+    below,
+    phi,
+    phi_torch,
+    sc_angle,
+    sc_angle_torch,
+    sc_total,
+    sc_total_torch,
+    sc_velocity,
+    sc_velocity_torch,
+)
+from myoexo.spasticity.delay import DelayLine
+from myoexo.spasticity.levels import (
+    LEVELS,
+    RANDOM_LEVEL,
+    SPASTIC_EXTENSORS,
+    SPASTIC_FLEXORS,
+    SPASTIC_MUSCLES,
+    SUBJECT_REL_STD,
+    VALID_LEVELS,
+    SpasticityParams,
+    sample_subject,
+)
+from myoexo.spasticity.reflex import (
+    CALIBRATION,
+    REFLEX_MODELS,
+    REFLEX_PRESETS,
+    STRETCH_DELAY_S,
+    UNCALIBRATED,
+    LevelCalibration,
+    ReflexConfig,
+    StretchCalibration,
+    group_excitations,
+    group_excitations_torch,
+    reflex_config,
+)
+from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
+from myoexo.spasticity.wrapper import SpasticityWrapper
+
+__all__ = [
+    "CALIBRATION",
+    "KNEE_JOINT",
+    "LEVELS",
+    "RANDOM_LEVEL",
+    "REFLEX_MODELS",
+    "REFLEX_PRESETS",
+    "SPASTIC_EXTENSORS",
+    "SPASTIC_FLEXORS",
+    "SPASTIC_MUSCLES",
+    "STAGE_NAME",
+    "STRETCH_DELAY_S",
+    "SUBJECT_REL_STD",
+    "UNCALIBRATED",
+    "VALID_LEVELS",
+    "DelayLine",
+    "LevelCalibration",
+    "ReflexConfig",
+    "SpasticityParams",
+    "SpasticityStage",
+    "SpasticityWrapper",
+    "StageHost",
+    "StretchCalibration",
+    "above",
+    "below",
+    "group_excitations",
+    "group_excitations_torch",
+    "phi",
+    "phi_torch",
+    "reflex_config",
+    "sample_subject",
+    "sc_angle",
+    "sc_angle_torch",
+    "sc_total",
+    "sc_total_torch",
+    "sc_velocity",
+    "sc_velocity_torch",
+]
