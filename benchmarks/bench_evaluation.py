@@ -35,7 +35,7 @@ from myoexo.control import PID
 from myoexo.control.specs import PolicyUnavailableError, load_shipped_policy
 from myoexo.envs import TaskParams, make_env
 from myoexo.evaluation import EvaluationConfig, available_cores, evaluate, evaluate_controller
-from myoexo.spasticity import VALID_LEVELS
+from myoexo.spasticity.levels import VALID_LEVELS
 
 FULL_SUBJECTS, FULL_CONTROLLERS = 1000, 2
 

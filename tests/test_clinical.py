@@ -1,7 +1,7 @@
 """Tests of the clinical tests on the twin (myoexo.clinical): Tardieu, pendulum, MAS exam.
 
 Every simulated test runs once per reflex model (module-scoped fixtures, about a second per
-model and test). The reflex calibration (``myoexo.spasticity.reflex.CALIBRATION``) is being re-fitted,
+model and test). The reflex calibration (``myoexo.spasticity.CALIBRATION``) is being re-fitted,
 so the assertions are orderings and physical sense, each with its reason, not fitted values.
 The ``"uniform"`` model ignores the calibration, so its orderings are pinned more tightly.
 """

@@ -11,23 +11,18 @@ import numpy as np
 import pytest
 import torch
 
+from myoexo.spasticity.coefficients import sc_total
+from myoexo.spasticity.delay import DelayLine
+from myoexo.spasticity.levels import LEVELS, SPASTIC_EXTENSORS, SPASTIC_FLEXORS, SpasticityParams
 from myoexo.spasticity.reflex import (
     CALIBRATION,
     REFLEX_PRESETS,
     UNCALIBRATED,
-    DelayLine,
     LevelCalibration,
     ReflexConfig,
     group_excitations,
     group_excitations_torch,
     reflex_config,
-)
-from myoexo.spasticity import (
-    LEVELS,
-    SPASTIC_EXTENSORS,
-    SPASTIC_FLEXORS,
-    SpasticityParams,
-    sc_total,
 )
 
 THETA = np.linspace(-20.0, 110.0, 27)
@@ -170,7 +165,7 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
 
 
 def test_delay_line_history_can_be_taken_and_restored():
-    from myoexo.spasticity.reflex import DelayLine
+    from myoexo.spasticity.delay import DelayLine
 
     line = DelayLine(2)
     for k in range(3):

@@ -31,8 +31,8 @@ from myoexo.model.scene import (
     MuscleColorizer,
     MuscleColors,
 )
-from myoexo.viz.video import VideoWriter, draw_overlay, overlay_lines
 from myoexo.viz import CAMERAS, VIEWS, knee_camera
+from myoexo.viz.video import VideoWriter, draw_overlay, overlay_lines
 
 REPO = Path(__file__).resolve().parents[1]
 

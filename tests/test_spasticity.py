@@ -12,19 +12,15 @@ import numpy as np
 import pytest
 import torch
 
-from myoexo.spasticity import (
+from myoexo.spasticity.coefficients import phi, sc_angle, sc_total, sc_total_torch, sc_velocity
+from myoexo.spasticity.levels import (
     LEVELS,
     SPASTIC_MUSCLES,
     SUBJECT_REL_STD,
     SpasticityParams,
-    SpasticityStage,
-    phi,
     sample_subject,
-    sc_angle,
-    sc_total,
-    sc_total_torch,
-    sc_velocity,
 )
+from myoexo.spasticity.stage import SpasticityStage
 
 FIELDS = SpasticityParams.field_names()
 

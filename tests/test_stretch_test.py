@@ -48,7 +48,7 @@ def test_params_reject_bad_values() -> None:
 
 @pytest.fixture(scope="module", params=["stretch", "uniform"])
 def reflex(request) -> str:
-    """Both reflex models (myoexo.spasticity.reflex): the stretch reflex (default) and the uniform one."""
+    """Both reflex models (myoexo.spasticity.reflex): the stretch reflex (default), the uniform."""
     return request.param
 
 
@@ -98,7 +98,8 @@ def test_resisting_torque_rises_with_level_and_speed(result, reflex) -> None:
 
 
 def test_cli_and_figures(result, tmp_path, monkeypatch) -> None:
-    from myoexo import spasticity_plots, stretch_test
+    from myoexo.clinical import figures as spasticity_plots
+    from myoexo.clinical import stretch as stretch_test
 
     fig = spasticity_plots.plot_stretch_test(result)
     fig.savefig(tmp_path / "stretch.png")
@@ -112,7 +113,7 @@ def test_cli_and_figures(result, tmp_path, monkeypatch) -> None:
 
 
 def test_plot_spasticity_writes_fig2b(tmp_path) -> None:
-    from myoexo import spasticity_plots
+    from myoexo.clinical import figures as spasticity_plots
 
     parser = argparse.ArgumentParser()
     spasticity_plots.add_arguments(parser)
@@ -133,7 +134,7 @@ def test_muscle_knee_torque_follows_the_coupled_knee() -> None:
     except ImportError:  # pragma: no cover
         pytest.skip("myoexo.model.build_model is not available")
     from myoexo.model.joint_torque import CoupledJointTorque
-    from myoexo.spasticity import SPASTIC_EXTENSORS
+    from myoexo.spasticity.levels import SPASTIC_EXTENSORS
 
     model, _ = build_model(TwinParams())
     data = mujoco.MjData(model)

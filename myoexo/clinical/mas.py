@@ -303,7 +303,7 @@ def plot_mas_exam(result: MASExamResult) -> Figure:
     """Resisting torque, and its excess over level 0, vs range position per level."""
     from matplotlib.figure import Figure
 
-    from myoexo.clinical.figures import LEVEL_COLORS
+    from myoexo.viz.colors import LEVEL_COLORS
 
     p = result.params
     fig = Figure(figsize=(11, 4), constrained_layout=True)

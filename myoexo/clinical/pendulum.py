@@ -365,7 +365,7 @@ def plot_pendulum(result: PendulumResult) -> Figure:
     peak velocity per level next to the published values."""
     from matplotlib.figure import Figure
 
-    from myoexo.clinical.figures import LEVEL_COLORS
+    from myoexo.viz.colors import LEVEL_COLORS
 
     fig = Figure(figsize=(13, 3.8), constrained_layout=True)
     ax_t, ax_r, ax_v = fig.subplots(1, 3, gridspec_kw={"width_ratios": [2.2, 1, 1]})

@@ -297,7 +297,7 @@ def plot_tardieu(result: TardieuResult) -> Figure:
     (the catch, on the fast curve) and R2 (the end-feel, on the slow curve) marked."""
     from matplotlib.figure import Figure
 
-    from myoexo.clinical.figures import LEVEL_COLORS
+    from myoexo.viz.colors import LEVEL_COLORS
 
     p = result.params
     summary = result.summary.set_index("level")

@@ -40,18 +40,7 @@ from typing import Any
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
-
-#: SB3 algorithm prefixes accepted before a model path (TQC and CrossQ: sb3-contrib).
-SB3_ALGORITHMS: dict[str, str] = {
-    "sac": "SAC",
-    "td3": "TD3",
-    "ddpg": "DDPG",
-    "ppo": "PPO",
-    "a2c": "A2C",
-    "tqc": "TQC",
-    "crossq": "CrossQ",
-}
-_CONTRIB_ALGORITHMS = ("TQC", "CrossQ")
+from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
 
 _PID_KEYS = ("kp", "ki", "kd", "feedback", "anti_windup", "derivative", "textbook")
 
@@ -109,10 +98,10 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         return ControllerSpec(
             kind="oracle", label=text, text=text, options=parse_oracle_options(tail)
         )
-    algorithm = "SAC"
+    algorithm = ALGORITHMS["sac"].class_name
     path_text = text
-    if head.lower() in SB3_ALGORITHMS and tail:
-        algorithm, path_text = SB3_ALGORITHMS[head.lower()], tail
+    if head.lower() in ALGORITHMS and tail:  # "td3:model.zip"
+        algorithm, path_text = ALGORITHMS[head.lower()].class_name, tail
     path = Path(path_text).expanduser()
     if path.suffix != ".zip":
         raise ValueError(
@@ -173,30 +162,6 @@ def load_shipped_policy(name: str = "sac") -> Any:
     except (ImportError, FileNotFoundError, OSError, AttributeError) as exc:
         raise PolicyUnavailableError(
             f"the shipped policy {name!r} is not available ({type(exc).__name__}: {exc})"
-        ) from exc
-
-
-def sb3_class(algorithm: str) -> Any:
-    """The class of an SB3 algorithm name (``"SAC"``, ``"TD3"``, ...; ``"TQC"`` and
-    ``"CrossQ"`` from sb3-contrib); ``ValueError`` naming the extra to install."""
-    import importlib
-
-    module = "sb3_contrib" if algorithm in _CONTRIB_ALGORITHMS else "stable_baselines3"
-    try:
-        return getattr(importlib.import_module(module), algorithm)
-    except ImportError:
-        raise ValueError(f"{algorithm} needs {module} (pip install 'myoexo[contrib]')") from None
-
-
-def load_sb3_model(path: str, algorithm: str = "SAC") -> Any:
-    """Load a stable-baselines3 model file on the CPU; ``ValueError`` if it is unreadable."""
-    cls = sb3_class(algorithm)
-    try:
-        return cls.load(path, device="cpu")
-    except Exception as exc:  # zip, pickle and torch errors all mean "not a usable model"
-        raise ValueError(
-            f"cannot load {path!r} as a stable-baselines3 {algorithm} model "
-            f"({type(exc).__name__}: {exc})"
         ) from exc
 
 

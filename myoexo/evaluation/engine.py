@@ -26,7 +26,6 @@ from myoexo.control.specs import (
     PolicyUnavailableError,
     build_controller,
     check_no_selection_leak,
-    load_sb3_model,
     load_shipped_policy,
     parse_controller_spec,
     spec_env_kwargs,
@@ -38,6 +37,7 @@ from myoexo.evaluation.storage import (
     chunk_path,
     save_chunk,
 )
+from myoexo.policies.algorithms import load_sb3_model
 from myoexo.runtime.lifecycle import die_with_parent, ignore_signals
 
 #: Signals recorded at full rate for the metrics (traces keep a subset, downsampled).

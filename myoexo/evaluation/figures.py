@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 
 from myoexo.evaluation.storage import Traces
+from myoexo.viz.colors import LEVEL_COLORS  # the paper's Fig. 5 caption: green, yellow, orange, red
 
-#: Level colours of the paper's Fig. 5 caption (green, yellow, orange, red).
-LEVEL_COLORS: dict[int, str] = {0: "#2ca02c", 1: "#e6b800", 2: "#ff7f0e", 3: "#d62728"}
 #: Controller colours: the PID in black/grey as in the paper, others from this cycle.
 PID_COLOR = "#222222"
 OTHER_COLORS: tuple[str, ...] = ("#f0a30a", "#1f77b4", "#9467bd", "#17becf", "#8c564b")

@@ -130,7 +130,7 @@ def _checkpoint_parts(
     """``(model, VecNormalize or None, provenance)`` of a checkpoint folder."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from myoexo.training.presets import algorithm_class
+    from myoexo.policies.algorithms import algorithm_class
 
     checkpoint = Path(checkpoint)
     run_dir = checkpoint.parent.parent

@@ -46,26 +46,13 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from myoexo.policies.algorithms import get_algorithm
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Env every preset trains on (level drawn uniformly at every reset, as the paper trains).
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
 _VEC_ENVS = ("dummy", "subproc")
-#: Off-policy algorithms a preset can name: name -> SB3 class name (TQC and CrossQ are
-#: sb3-contrib's, the ``contrib`` extra).
-ALGORITHMS: dict[str, str] = {"sac": "SAC", "tqc": "TQC", "crossq": "CrossQ"}
-
-
-def algorithm_class(name: str) -> Any:
-    """The SB3 class of an algorithm name; ``ValueError`` naming the extra to install."""
-    from myoexo.control.specs import sb3_class
-
-    if name not in ALGORITHMS:
-        raise ValueError(f"algorithm = {name!r}; accepted: {sorted(ALGORITHMS)}")
-    return sb3_class(ALGORITHMS[name])
-
-
 #: Names of the env's observation presets (``myoexo.envs.knee_exo.OBS_PRESETS``).
 OBS_PRESET_NAMES = ("full", "exo")
 _ACTIVATIONS = ("gelu", "relu", "tanh", "elu")
@@ -215,8 +202,7 @@ class SACPreset:
             )
         if self.obs_preset not in OBS_PRESET_NAMES:
             raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {OBS_PRESET_NAMES}")
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm = {self.algorithm!r}; accepted: {sorted(ALGORITHMS)}")
+        get_algorithm(self.algorithm, trainable=True)  # ValueError naming the accepted ones
         if self.vec_env not in _VEC_ENVS:
             raise ValueError(f"vec_env = {self.vec_env!r}; accepted: {_VEC_ENVS}")
         if self.activation not in _ACTIVATIONS:

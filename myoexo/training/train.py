@@ -36,10 +36,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.policies.algorithms import algorithm_class
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
-from myoexo.training.presets import SACPreset, algorithm_class, preset_from_dict
+from myoexo.training.presets import SACPreset, preset_from_dict
 
 
 @dataclass(frozen=True)
