@@ -7,23 +7,45 @@ every reset)::
     import gymnasium as gym
     import myoexo
 
-    env = gym.make("MyoExoKnee-v2")
+    env = gym.make("MyoExoKnee-v2")            # or myoexo.make_env(2, reward_weights=...)
+    policy = myoexo.load_policy("sac")          # a shipped controller
+
+The layers, bottom up: :mod:`myoexo.model` (the twin), :mod:`myoexo.spasticity` (the reflex),
+:mod:`myoexo.envs`, :mod:`myoexo.control` and :mod:`myoexo.policies`,
+:mod:`myoexo.clinical`, :mod:`myoexo.evaluation`, :mod:`myoexo.training`, :mod:`myoexo.viz`;
+:mod:`myoexo.runtime` (files, locks, signals, clusters) serves them all.
 """
 
 from __future__ import annotations
 
-from myoexo.envs.registration import ENV_LEVELS, register_envs
+from typing import TYPE_CHECKING
+
+from myoexo.envs.registration import ENV_LEVELS, make_env, register_envs
+
+if TYPE_CHECKING:
+    from myoexo.policies.actor import MLPActor
 
 __version__ = "0.1.0"
-__all__ = ["ENV_LEVELS", "__version__", "load_policy", "register_envs"]
+__all__ = ["ENV_LEVELS", "__version__", "load_policy", "make_env", "register_envs"]
 
 register_envs()
 
 
-def load_policy(*args, **kwargs):
-    """A SAC policy shipped with the package by name: ``"sac"`` (full state, default) or
-    ``"sac_exo"`` (the exoskeleton's own sensors); see :func:`myoexo.policies.load_policy`
-    and the model cards in ``myoexo/policies/``."""
+def load_policy(name: str = "sac", check: bool = True) -> MLPActor:
+    """A policy shipped with the package, by name: ``"sac"`` (the twin's full state,
+    default) or ``"sac_exo"`` (the exoskeleton's own sensors).
+
+    Args:
+        name: A name of :data:`myoexo.policies.SHIPPED_POLICIES` (or a file stem inside
+            ``myoexo/policies/``).
+        check: Replay the reference (observation, action) pairs stored at export time and
+            raise ``ValueError`` if the loaded actor disagrees.
+
+    Raises:
+        FileNotFoundError: No such shipped policy (the message lists the names).
+
+    See :func:`myoexo.policies.load_policy` and the model cards in ``myoexo/policies/``.
+    """
     from myoexo.policies import load_policy as _load
 
-    return _load(*args, **kwargs)
+    return _load(name, check=check)

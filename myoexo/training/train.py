@@ -24,6 +24,7 @@ first checkpoint.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import platform
 import re
@@ -31,7 +32,7 @@ import signal
 import sys
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -242,35 +243,36 @@ def checkpoint_cadence(preset: SACPreset) -> dict[str, Any]:
     }
 
 
-def _learn(
-    model: Any,
-    preset: SACPreset,
-    run_dir: Path,
-    total_timesteps: int,
-    wall_time_offset_s: float,
-    progress_bar: bool,
-    verbose: int,
-    graceful_stop: bool = True,
-    extra_callbacks: Sequence[Any] = (),
-) -> TrainResult:
-    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks
-    (and ``extra_callbacks`` after them); with ``graceful_stop``, SIGINT / SIGTERM end it
-    early with a checkpoint."""
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList
+@dataclass(frozen=True)
+class SessionOptions:
+    """How a training session runs (the same for :func:`train`, :func:`resume` and
+    :func:`restart`).
 
+    Attributes:
+        progress_bar: Show SB3's tqdm/rich progress bar.
+        verbose: 0 silent, 1 one line per checkpoint/evaluation, 2 also SB3's log tables.
+        graceful_stop: Handle SIGINT / SIGTERM during ``learn`` (main thread only): stop
+            after the current step with a checkpoint (:attr:`TrainResult.stopped_by`).
+        callbacks: More SB3 callbacks, called after the run's own (one returning ``False``
+            stops the session early, with a final resumable checkpoint).
+    """
+
+    progress_bar: bool = False
+    verbose: int = 1
+    graceful_stop: bool = True
+    callbacks: Sequence[Any] = ()
+
+
+def _run_callbacks(
+    preset: SACPreset, run_dir: Path, wall_time_offset_s: float, verbose: int, stop: StopSignals
+) -> tuple[Any, Any]:
+    """The run's periodic evaluator (``None`` without one) and its checkpointer."""
     from myoexo.training.callbacks import (
         PaperMetricsEvalCallback,
         PeriodicCheckpointCallback,
-        RewardTermsCallback,
         SmallEvalSpec,
-        StopOnSignalCallback,
     )
 
-    torch.set_num_threads(preset.torch_threads)
-    session = _next_session(run_dir)
-    model.set_logger(_make_logger(run_dir, session, verbose))
-    stop = StopSignals(enabled=graceful_stop)
     evaluator = None
     if preset.eval_every_steps > 0 and is_myoexo_env(preset.env_id):
         spec = SmallEvalSpec(
@@ -293,13 +295,43 @@ def _learn(
         first_after_steps=preset.first_checkpoint_steps,
         first_after_s=preset.first_checkpoint_s,
     )
+    return evaluator, checkpointer
+
+
+def _utc_now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def _learn(
+    model: Any,
+    preset: SACPreset,
+    run_dir: Path,
+    total_timesteps: int,
+    wall_time_offset_s: float,
+    options: SessionOptions,
+) -> TrainResult:
+    """Run (or continue) ``model.learn`` up to ``total_timesteps`` with the run's callbacks
+    (and ``options.callbacks`` after them); with ``options.graceful_stop``, SIGINT / SIGTERM
+    end it early with a checkpoint. The session is appended to the run's sessions log."""
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from myoexo.training.callbacks import RewardTermsCallback, StopOnSignalCallback
+
+    torch.set_num_threads(preset.torch_threads)
+    session = _next_session(run_dir)
+    model.set_logger(_make_logger(run_dir, session, options.verbose))
+    stop = StopSignals(enabled=options.graceful_stop)
+    evaluator, checkpointer = _run_callbacks(
+        preset, run_dir, wall_time_offset_s, options.verbose, stop
+    )
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
-    record = {
+    record: dict[str, Any] = {
         "session": session,
         "start_step": start_step,
         "target_step": int(total_timesteps),
-        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "started_utc": _utc_now(),
         "argv": sys.argv,
     }
     t0 = time.monotonic()
@@ -310,28 +342,21 @@ def _learn(
                 *([evaluator] if evaluator else []),
                 checkpointer,
                 StopOnSignalCallback(stop),
-                *extra_callbacks,
+                *options.callbacks,
             ]
             model.learn(
                 total_timesteps=remaining,
                 callback=CallbackList(callbacks),
                 reset_num_timesteps=start_step == 0,
-                progress_bar=progress_bar,
+                progress_bar=options.progress_bar,
                 log_interval=max(1, preset.n_envs),
             )
         elapsed = time.monotonic() - t0
-        last = checkpointer.last_checkpoint
-        if last is None or not (last / ck.REPLAY_FILE).is_file():
-            last = ck.latest_checkpoint(run_dir, with_replay=True)
-        if last is None:  # nothing left to do and never checkpointed
-            last = checkpointer.save(with_replay=True)
+        last = _final_checkpoint(run_dir, checkpointer)
     steps = int(model.num_timesteps)
     stopped_by = stop.name if steps < int(total_timesteps) else None
     record.update(
-        end_step=steps,
-        wall_time_s=round(elapsed, 3),
-        ended_utc=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        stopped_by=stopped_by,
+        end_step=steps, wall_time_s=round(elapsed, 3), ended_utc=_utc_now(), stopped_by=stopped_by
     )
     with open(run_dir / ck.SESSIONS_FILE, "a") as f:
         f.write(json.dumps(record) + "\n")
@@ -343,6 +368,26 @@ def _learn(
         session_env_steps_per_s=(steps - start_step) / max(elapsed, 1e-9),
         stopped_by=stopped_by,
     )
+
+
+def _final_checkpoint(run_dir: Path, checkpointer: Any) -> Path:
+    """The session's last resumable checkpoint (one is written if the run has none)."""
+    last = checkpointer.last_checkpoint
+    if last is None or not (last / ck.REPLAY_FILE).is_file():
+        last = ck.latest_checkpoint(run_dir, with_replay=True)
+    if last is None:  # nothing left to do and never checkpointed
+        last = checkpointer.save(with_replay=True)
+    return Path(last)
+
+
+@contextlib.contextmanager
+def _saved_run(run_dir: Path) -> Iterator[tuple[SACPreset, int]]:
+    """Lock an existing run folder and yield its saved ``(preset, seed)``; a folder that is
+    not a run is refused before anything is written (``ValueError``)."""
+    ck.read_config(run_dir)
+    with FolderLock(run_dir, RUN_FOLDER):
+        config = ck.read_config(run_dir)
+        yield preset_from_dict(config["preset"]), int(config["seed"])
 
 
 def train(
@@ -382,18 +427,11 @@ def train(
                 "`myoexo train --resume DIR` (or, if it never wrote a checkpoint, start it "
                 "again with `myoexo train --restart DIR`), or choose another folder"
             )
-        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop, callbacks)
+        options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
+        return _start(preset, run_dir, seed, options)
 
 
-def _start(
-    preset: SACPreset,
-    run_dir: Path,
-    seed: int,
-    progress_bar: bool,
-    verbose: int,
-    graceful_stop: bool,
-    callbacks: Sequence[Any] = (),
-) -> TrainResult:
+def _start(preset: SACPreset, run_dir: Path, seed: int, options: SessionOptions) -> TrainResult:
     """A new run in ``run_dir`` (locked by the caller): ``config.json``, then ``learn``."""
     ck.clean_interrupted_writes(run_dir)
     venv = make_vec_env(preset, seed)
@@ -416,17 +454,7 @@ def _start(
         }
         write_json_atomic(run_dir / ck.CONFIG_FILE, config)
         model = build_sac(preset, venv, seed)
-        return _learn(
-            model,
-            preset,
-            run_dir,
-            preset.total_timesteps,
-            0.0,
-            progress_bar,
-            verbose,
-            graceful_stop,
-            callbacks,
-        )
+        return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, options)
     finally:
         venv.close()
 
@@ -514,11 +542,8 @@ def resume(
             use :func:`restart`); a folder in use by another process.
     """
     run_dir = Path(run_dir)
-    ck.read_config(run_dir)  # not a run folder: refused before anything is written
-    with FolderLock(run_dir, RUN_FOLDER):
-        config = ck.read_config(run_dir)
-        preset = preset_from_dict(config["preset"])
-        seed = int(config["seed"])
+    options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
+    with _saved_run(run_dir) as (preset, seed):
         ck.clean_interrupted_writes(run_dir)
         model, venv, last = _restore_newest(run_dir, preset, seed)
         try:
@@ -532,17 +557,7 @@ def resume(
                     flush=True,
                 )
             total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
-            return _learn(
-                model,
-                preset,
-                run_dir,
-                total,
-                float(state["wall_time_s"]),
-                progress_bar,
-                verbose,
-                graceful_stop,
-                callbacks,
-            )
+            return _learn(model, preset, run_dir, total, float(state["wall_time_s"]), options)
         finally:
             venv.close()
 
@@ -552,6 +567,7 @@ def restart(
     progress_bar: bool = False,
     verbose: int = 1,
     graceful_stop: bool = True,
+    callbacks: Sequence[Any] = (),
 ) -> TrainResult:
     """Start the run in ``run_dir`` again from step 0 with its saved settings.
 
@@ -559,16 +575,20 @@ def restart(
     checkpoint: its outputs (checkpoints, logs, evaluations) are deleted, its
     ``config.json`` (preset, seed) is kept and rewritten.
 
+    Args:
+        run_dir: A folder written by :func:`train`.
+        progress_bar: As in :func:`train`.
+        verbose: As in :func:`train`.
+        graceful_stop: As in :func:`train`.
+        callbacks: As in :func:`train`.
+
     Raises:
         ValueError: Not a run folder; the folder holds an intact resumable checkpoint
             (continue it with :func:`resume`); a folder in use by another process.
     """
     run_dir = Path(run_dir)
-    ck.read_config(run_dir)  # not a run folder: refused before anything is written
-    with FolderLock(run_dir, RUN_FOLDER):
-        config = ck.read_config(run_dir)
-        preset = preset_from_dict(config["preset"])
-        seed = int(config["seed"])
+    options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
+    with _saved_run(run_dir) as (preset, seed):
         intact = [c for c in ck.resumable_checkpoints(run_dir) if ck.checkpoint_problem(c) is None]
         if intact:
             raise ValueError(
@@ -578,4 +598,4 @@ def restart(
         removed = ck.clear_run_outputs(run_dir)
         if verbose:
             print(f"[restart] {run_dir}: removed {removed} output(s) of the failed start")
-        return _start(preset, run_dir, seed, progress_bar, verbose, graceful_stop)
+        return _start(preset, run_dir, seed, options)
