@@ -1,108 +1,190 @@
-"""Training speed of a preset: env steps/s, gradient updates/s, and both inside ``learn``.
+"""Learning speed: each learner on the real env with the same networks, batch and updates per
+transition, against the arithmetic limit of one core.
 
-    python benchmarks/bench_training.py                  # the cpu preset on MyoExoKneeRandom-v0
-    python benchmarks/bench_training.py --preset paper --learn-steps 2000
-    python benchmarks/bench_training.py --algorithms sac tqc crossq   # the same, per algorithm
+    python benchmarks/bench_training.py            # SB3 SAC vs SBX (JAX) SAC/TQC/CrossQ
+    python benchmarks/bench_training.py --quick    # SB3 SAC vs SBX SAC, within ~3 minutes
+    python benchmarks/bench_training.py --learners sac sbx_sac:16 tqc
 
-Measured in one process, one after the other:
+A learner is ``ALGORITHM[:K]``: a preset algorithm (``sac``, ``tqc``, ``crossq``,
+``sbx_sac``, ``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
+``K x n_envs`` gradient updates, i.e. one update per transition for every ``K`` (default 1;
+a larger ``K`` runs many compiled updates per call). Every learner uses the ``cpu`` preset's
+networks (64-64 GELU), batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). Measured in one
+process, one learner after the other:
 
-1. **env**: transitions/s of the preset's vector env (``n_envs`` copies, VecNormalize) under
-   uniformly random actions: the simulator's share.
-2. **updates**: SAC gradient updates/s at the preset's batch size, on a replay buffer filled
-   by (1): the learner's share.
-3. **learn**: ``model.learn`` for ``--learn-steps`` transitions after learning has started,
-   with the run's callbacks minus evaluation/checkpoints: transitions/s and updates/s of a
-   real run, and the projected wall time of the preset's full step budget.
+1. **env**: transitions/s of the vector env under random actions (once: the simulator's
+   share);
+2. **updates**: gradient updates/s of the learner alone on a filled replay buffer;
+3. **learn**: ``model.learn`` after learning has started: transitions/s and updates/s of a
+   real run.
+
+It also prints the FLOPs of one update (matrix products of the actor and both critics,
+forward and backward) against one core's measured float32 matrix-multiply throughput (numpy,
+one thread): the share of the arithmetic limit each learner reaches. The last line is
+``learner speed-up vs SB3 SAC: N.NNx``: the fastest learner's updates/s inside ``learn`` over
+SB3 SAC's, both at one update per transition.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import os
 import time
 
 import numpy as np
 
+FULL_LEARNERS = ("sac", "sbx_sac", "sbx_sac:16", "sbx_sac:64", "sbx_tqc:16", "sbx_crossq:16")
+QUICK_LEARNERS = ("sac", "sbx_sac:16")
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", default="cpu")
-    parser.add_argument("--env-id", default=None, help="override the preset's env id")
-    parser.add_argument("--env-steps", type=int, default=4_000)
-    parser.add_argument("--updates", type=int, default=1_000)
-    parser.add_argument("--learn-steps", type=int, default=8_000)
+    parser.add_argument("--learners", nargs="+", default=None, help="ALGORITHM[:K] ...")
+    parser.add_argument("--quick", action="store_true", help="two learners, short runs")
+    parser.add_argument("--env-steps", type=int, default=None)
+    parser.add_argument("--updates", type=int, default=None)
+    parser.add_argument("--learn-steps", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--algorithms",
-        nargs="+",
-        default=["sac"],
-        help="preset algorithms to measure one after the other (sac, tqc, crossq)",
-    )
     args = parser.parse_args()
-    for algorithm in args.algorithms:
-        measure(args, algorithm)
+    learners = args.learners or (QUICK_LEARNERS if args.quick else FULL_LEARNERS)
+    env_steps = args.env_steps or (1_000 if args.quick else 4_000)
+    updates = args.updates or (300 if args.quick else 1_000)
+    learn_steps = args.learn_steps or (2_000 if args.quick else 8_000)
+    os.environ.setdefault(
+        "XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    )
+
+    gflops = matmul_gflops()
+    print(f"one core, float32 matrix products (numpy, 1 thread): {gflops:.0f} GFLOP/s")
+    rows = []
+    env_sps = None
+    for learner in learners:
+        row = measure(
+            learner, env_steps, updates, learn_steps, args.seed, measure_env=env_sps is None
+        )
+        env_sps = env_sps or row["env_sps"]
+        row["limit_share"] = row["learn_ups"] * row["flop_per_update"] / (gflops * 1e9)
+        rows.append(row)
+    print()
+    print(f"env alone: {env_sps:.0f} transitions/s (4 envs, random actions)")
+    print(
+        f"{'learner':<16}{'upd/transition':>15}{'updates/s':>11}{'learn upd/s':>13}"
+        f"{'learn env steps/s':>19}{'MFLOP/update':>14}{'limit share':>13}"
+    )
+    for r in rows:
+        print(
+            f"{r['learner']:<16}{r['upd_per_transition']:>15.2f}{r['ups']:>11.0f}"
+            f"{r['learn_ups']:>13.0f}{r['learn_sps']:>19.0f}{r['flop_per_update'] / 1e6:>14.1f}"
+            f"{100 * r['limit_share']:>12.1f}%"
+        )
+    base = next((r for r in rows if r["learner"] in ("sac", "sac:1")), None)
+    if base is None:
+        print("learner speed-up vs SB3 SAC: n/a (sac not measured)")
+        return
+    best = max(rows, key=lambda r: r["learn_ups"])
+    print(f"fastest: {best['learner']}")
+    print(f"learner speed-up vs SB3 SAC: {best['learn_ups'] / base['learn_ups']:.2f}x")
 
 
-def measure(args: argparse.Namespace, algorithm: str) -> None:
-    """Print the three measurements for one algorithm."""
+def matmul_gflops(n: int = 512, repeat: int = 20) -> float:
+    """float32 matrix-multiply throughput of one core (best of ``repeat``)."""
+    from threadpoolctl import threadpool_limits
+
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((n, n), dtype=np.float32)
+    b = rng.standard_normal((n, n), dtype=np.float32)
+    best = float("inf")
+    with threadpool_limits(1):
+        a @ b
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            a @ b
+            best = min(best, time.perf_counter() - t0)
+    return 2.0 * n**3 / best / 1e9
+
+
+def update_flops(
+    obs_dim: int, act_dim: int, hidden_pi: tuple, hidden_qf: tuple, batch: int
+) -> float:
+    """Matrix-product FLOPs of one SAC update: the next action (actor forward), both target
+    critics (forward), both critics (forward and backward: x3), the actor through both
+    critics (forward and backward of the actor and the critics: x3)."""
+
+    def mlp(sizes: list[int]) -> float:
+        return 2.0 * sum(a * b for a, b in itertools.pairwise(sizes))
+
+    actor = mlp([obs_dim, *hidden_pi, 2 * act_dim])
+    critic = mlp([obs_dim + act_dim, *hidden_qf, 1])
+    return batch * (actor + 2 * critic + 2 * 3 * critic + 3 * actor + 2 * 3 * critic)
+
+
+def measure(
+    learner: str, env_steps: int, updates: int, learn_steps: int, seed: int, measure_env: bool
+) -> dict:
+    """The three measurements of one learner."""
     import torch
 
     from myoexo.training import get_preset
     from myoexo.training.callbacks import RewardTermsCallback
     from myoexo.training.train import build_sac, make_vec_env
 
-    overrides: dict = {"env_id": args.env_id} if args.env_id else {}
-    overrides["algorithm"] = algorithm
-    preset = get_preset(args.preset, **overrides)
-    torch.set_num_threads(preset.torch_threads)
-    print(
-        f"[{algorithm}] preset {preset.name}: {preset.env_id}, "
-        f"n_envs {preset.n_envs} ({preset.vec_env}), "
-        f"batch {preset.batch_size}, {preset.updates_per_transition:.3g} updates/transition, "
-        f"torch threads {torch.get_num_threads()}"
+    algorithm, _, k = learner.partition(":")
+    k_steps = int(k or 1)
+    base = get_preset("cpu")
+    preset = get_preset(
+        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * base.n_envs
     )
-
-    venv = make_vec_env(preset, args.seed)
-    model = build_sac(preset, venv, args.seed)
+    torch.set_num_threads(preset.torch_threads)
+    venv = make_vec_env(preset, seed)
+    model = build_sac(preset, venv, seed)
     model.learning_starts = 0
+    from stable_baselines3.common.logger import configure
 
-    # 1. env alone (random actions), filling the replay buffer on the way
-    rng = np.random.default_rng(args.seed)
+    model.set_logger(configure(None, []))
+    rng = np.random.default_rng(seed)
     obs = venv.reset()
-    n_vec = max(1, args.env_steps // preset.n_envs)
+    n_vec = max(1, env_steps // preset.n_envs)
     t0 = time.perf_counter()
     for _ in range(n_vec):
         action = rng.uniform(-1.0, 1.0, (preset.n_envs, 1)).astype(np.float32)
         new_obs, reward, done, infos = venv.step(action)
         model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
         obs = new_obs
-    env_sps = n_vec * preset.n_envs / (time.perf_counter() - t0)
-    print(f"env:     {env_sps:8.0f} transitions/s ({n_vec * preset.n_envs} transitions)")
+    env_sps = n_vec * preset.n_envs / (time.perf_counter() - t0) if measure_env else None
 
-    # 2. learner alone
-    from stable_baselines3.common.logger import configure
-
-    model.set_logger(configure(None, []))
-    model.train(gradient_steps=10, batch_size=preset.batch_size)  # warm-up
+    chunk = max(1, preset.gradient_steps)
+    model.train(gradient_steps=chunk, batch_size=preset.batch_size)  # compile / warm up
+    calls = max(1, updates // chunk)
     t0 = time.perf_counter()
-    model.train(gradient_steps=args.updates, batch_size=preset.batch_size)
-    ups = args.updates / (time.perf_counter() - t0)
-    print(f"updates: {ups:8.1f} gradient updates/s at batch {preset.batch_size}")
+    for _ in range(calls):
+        model.train(gradient_steps=chunk, batch_size=preset.batch_size)
+    ups = calls * chunk / (time.perf_counter() - t0)
 
-    # 3. both, inside learn()
+    model.learn(preset.n_envs * preset.train_freq, reset_num_timesteps=False)  # warm up learn
     before = model._n_updates
     t0 = time.perf_counter()
-    model.learn(args.learn_steps, callback=RewardTermsCallback(), reset_num_timesteps=False)
+    model.learn(learn_steps, callback=RewardTermsCallback(), reset_num_timesteps=False)
     dt = time.perf_counter() - t0
-    learn_sps = args.learn_steps / dt
+    learn_sps = learn_steps / dt
     learn_ups = (model._n_updates - before) / dt
-    hours = preset.total_timesteps / learn_sps / 3600
-    print(f"learn:   {learn_sps:8.0f} transitions/s, {learn_ups:.1f} updates/s")
+    obs_dim = int(venv.observation_space.shape[0])
+    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, preset.batch_size)
     print(
-        f"ratios:  env/learn {env_sps / learn_sps:.1f}x; the learner takes "
-        f"{100 * (1 - learn_sps / env_sps):.0f} % of a training step's time"
+        f"[{learner}] updates alone {ups:.0f}/s; learn {learn_sps:.0f} transitions/s, "
+        f"{learn_ups:.0f} updates/s",
+        flush=True,
     )
-    print(f"projected: {preset.total_timesteps:,} transitions in {hours:.1f} h at this rate")
     venv.close()
+    return {
+        "learner": learner,
+        "upd_per_transition": preset.gradient_steps / (preset.train_freq * preset.n_envs),
+        "env_sps": env_sps,
+        "ups": ups,
+        "learn_sps": learn_sps,
+        "learn_ups": learn_ups,
+        "flop_per_update": flop,
+    }
 
 
 if __name__ == "__main__":

@@ -46,6 +46,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
+    "seeds": (
+        "myoexo.training.seeds",
+        "train several seeds of one configuration in parallel; aggregate them with 95 % CIs",
+    ),
     "sweep": (
         "myoexo.training.sweep",
         "Ray Tune over training configurations, ranked on the acceptance criteria",

@@ -202,7 +202,7 @@ def test_controller_specs(tmp_path):
     model = tmp_path / "my_policy.zip"
     model.write_bytes(b"")
     spec = parse_controller_spec(str(model))
-    assert spec.kind == "sb3" and spec.label == "my_policy" and spec.algorithm == "SAC"
+    assert spec.kind == "sb3" and spec.label == "my_policy" and spec.algorithm == "sac"
     assert parse_controller_spec(f"td3:{model}").algorithm == "TD3"
     for bad, match in [
         ("pid:gain=3", "unknown PID option"),

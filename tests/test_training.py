@@ -305,6 +305,47 @@ def test_contrib_algorithms_train_evaluate_and_resume(algorithm, tmp_path):
     assert action.shape == (1,) and abs(float(action[0])) <= 1.0
 
 
+@pytest.mark.slow
+def test_jax_learner_trains_exports_and_resumes(tmp_path):
+    """SBX's SAC (JAX) goes through the same run folder, checkpoints, resume and export as
+    SB3's; its numpy actor gives the JAX policy's deterministic actions."""
+    pytest.importorskip("sbx")
+    run_dir = tmp_path / "sbx"
+    preset = _tiny_preset(algorithm="sbx_sac", eval_levels=(1,))
+    first = train(preset, run_dir, seed=1, verbose=0)
+    assert first.num_timesteps == 400
+    second = resume(run_dir, total_timesteps=600, verbose=0)
+    assert second.num_timesteps == 600
+    from myoexo.training.export import _checkpoint_parts, load_checkpoint_actor
+
+    checkpoint = ck.list_checkpoints(run_dir)[-1]
+    actor = load_checkpoint_actor(checkpoint)  # stores and checks reference pairs vs JAX
+    model, vn, _ = _checkpoint_parts(checkpoint)
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((16, actor.obs_dim)).astype(np.float32)
+    jax_action, _ = model.predict(vn.normalize_obs(obs), deterministic=True)
+    np.testing.assert_allclose(actor(obs), jax_action, atol=1e-5)
+    assert actor.metadata["algorithm"] == "sbx_sac"
+
+
+def test_the_jax_extra_is_named_when_missing(monkeypatch):
+    import builtins
+
+    from myoexo.policies.algorithms import ALGORITHMS
+
+    real_import = builtins.__import__
+
+    def no_sbx(name, *args, **kwargs):
+        if name == "sbx" or name.startswith("sbx."):
+            raise ImportError("No module named 'sbx'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_sbx)
+    monkeypatch.delitem(__import__("sys").modules, "sbx", raising=False)
+    with pytest.raises(ValueError, match=r"myoexo\[jax\]"):
+        ALGORITHMS["sbx_sac"].load_class()
+
+
 def test_obs_preset_and_algorithm_fields_are_validated():
     preset = get_preset("cpu", obs_preset="exo", algorithm="tqc")
     assert preset_from_dict(preset.to_dict()) == preset

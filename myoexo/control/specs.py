@@ -21,7 +21,8 @@ spec                               controller
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
                                    ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:``, ``tqc:``,
-                                   ``crossq:`` for other algorithms
+                                   ``crossq:``, ``sbx_sac:``, ... (any alias of
+                                   :data:`~myoexo.policies.algorithms.ALGORITHMS`)
 =================================  ==========================================================
 
 Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
@@ -59,7 +60,7 @@ class ControllerSpec:
         label: Name in tables and figures.
         text: The spec as given.
         path: Model file (``sb3``) or shipped policy name (``shipped``).
-        algorithm: SB3 class name (``sb3`` only).
+        algorithm: Alias of :data:`~myoexo.policies.algorithms.ALGORITHMS` (``sb3`` only).
         options: PID options (``pid``), as :class:`PIDConfig` keyword arguments, or
             :class:`~myoexo.control.oracle.OracleConfig` fields (``oracle``).
     """
@@ -98,10 +99,10 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         return ControllerSpec(
             kind="oracle", label=text, text=text, options=parse_oracle_options(tail)
         )
-    algorithm = ALGORITHMS["sac"].class_name
+    algorithm = "sac"
     path_text = text
-    if head.lower() in ALGORITHMS and tail:  # "td3:model.zip"
-        algorithm, path_text = ALGORITHMS[head.lower()].class_name, tail
+    if head.lower() in ALGORITHMS and tail:  # "td3:model.zip", "sbx_sac:model.zip"
+        algorithm, path_text = head.lower(), tail
     path = Path(path_text).expanduser()
     if path.suffix != ".zip":
         raise ValueError(
@@ -201,7 +202,7 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
         return OracleMPC.from_env(env, **spec.options)
     if spec.kind == "sb3" and spec.path is not None:
         return SB3Controller(
-            load_sb3_model(spec.path, spec.algorithm or "SAC"),
+            load_sb3_model(spec.path, spec.algorithm or "sac"),
             name=spec.label,
             obs_normalizer=load_obs_normalizer(spec.path),
         )

@@ -3,14 +3,26 @@ installs them and which ones a training preset can run.
 
 A name is accepted in any case (``"sac"``, ``"SAC"``); a controller spec ``"td3:model.zip"``
 and a preset's ``algorithm = "tqc"`` both read this table.
+
+The ``sbx_*`` learners are SBX's (stable-baselines3 in JAX, the ``jax`` extra): the same API,
+checkpoints and exports, with jitted updates. JAX on a small machine starts more threads than
+it has cores unless told otherwise, so :meth:`Algorithm.load_class` sets
+:data:`JAX_CPU_FLAGS` (one intra-op thread per learner, no Eigen thread pool) before JAX is
+first imported, unless ``XLA_FLAGS`` is already set: two learners on two cores then do not
+oversubscribe them.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
+
+#: ``XLA_FLAGS`` for a JAX learner on a CPU core of its own.
+JAX_CPU_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 
 
 @dataclass(frozen=True)
@@ -23,6 +35,7 @@ class Algorithm:
         package: Module that defines the class.
         extra: The myoexo extra that installs ``package`` (``None``: a core dependency).
         trainable: A preset can train it (the off-policy learners with SAC's interface).
+        framework: ``"torch"`` (stable-baselines3, sb3-contrib) or ``"jax"`` (SBX).
     """
 
     name: str
@@ -30,9 +43,12 @@ class Algorithm:
     package: str = "stable_baselines3"
     extra: str | None = None
     trainable: bool = False
+    framework: str = "torch"
 
     def load_class(self) -> Any:
         """The algorithm's class; ``ValueError`` naming the extra to install if absent."""
+        if self.framework == "jax" and "jax" not in sys.modules:
+            os.environ.setdefault("XLA_FLAGS", JAX_CPU_FLAGS)
         try:
             return getattr(importlib.import_module(self.package), self.class_name)
         except ImportError:
@@ -48,6 +64,9 @@ ALGORITHMS: MappingProxyType[str, Algorithm] = MappingProxyType(
             Algorithm("sac", "SAC", trainable=True),
             Algorithm("tqc", "TQC", "sb3_contrib", "contrib", trainable=True),
             Algorithm("crossq", "CrossQ", "sb3_contrib", "contrib", trainable=True),
+            Algorithm("sbx_sac", "SAC", "sbx", "jax", trainable=True, framework="jax"),
+            Algorithm("sbx_tqc", "TQC", "sbx", "jax", trainable=True, framework="jax"),
+            Algorithm("sbx_crossq", "CrossQ", "sbx", "jax", trainable=True, framework="jax"),
             Algorithm("td3", "TD3"),
             Algorithm("ddpg", "DDPG"),
             Algorithm("ppo", "PPO"),

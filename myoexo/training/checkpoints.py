@@ -56,8 +56,10 @@ _TMP_PREFIX = ".tmp_"
 DAMAGED_PREFIX = "damaged-"
 #: Last byte of a complete pickle (its STOP opcode): a truncated pickle usually lacks it.
 _PICKLE_STOP = b"."
-#: Members every SB3 ``model.zip`` holds (its parameters as JSON, the policy's weights).
+#: Members every SB3 ``model.zip`` holds (its parameters as JSON, the policy's weights);
+#: an SBX (JAX) model keeps its weights inside ``data``.
 MODEL_MEMBERS: tuple[str, ...] = ("data", "policy.pth")
+JAX_MODEL_MEMBERS: tuple[str, ...] = ("data",)
 #: Resumable checkpoints kept with their replay buffer unless told otherwise.
 DEFAULT_KEEP_REPLAY = 2
 
@@ -158,6 +160,18 @@ def _pickle_problem(path: Path) -> str | None:
     return None
 
 
+def _model_members(checkpoint: Path) -> tuple[str, ...]:
+    """The members ``model.zip`` of *checkpoint* must hold, by its run's algorithm."""
+    from myoexo.policies.algorithms import ALGORITHMS
+
+    try:
+        algorithm = read_config(checkpoint.parent.parent)["preset"]["algorithm"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return MODEL_MEMBERS
+    known = ALGORITHMS.get(str(algorithm).lower())
+    return JAX_MODEL_MEMBERS if known is not None and known.framework == "jax" else MODEL_MEMBERS
+
+
 def checkpoint_problem(checkpoint: Path, with_replay: bool = True) -> str | None:
     """Why ``checkpoint`` cannot be resumed from, or ``None`` if it looks intact.
 
@@ -176,7 +190,7 @@ def checkpoint_problem(checkpoint: Path, with_replay: bool = True) -> str | None
     try:
         with zipfile.ZipFile(checkpoint / MODEL_FILE) as z:
             bad = z.testzip()
-            missing = sorted(set(MODEL_MEMBERS) - set(z.namelist()))
+            missing = sorted(set(_model_members(checkpoint)) - set(z.namelist()))
         if bad is not None:
             return f"{MODEL_FILE} member {bad} is corrupt"
         if missing:  # e.g. cut inside an embedded torch archive, read as the whole zip

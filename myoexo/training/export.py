@@ -31,28 +31,19 @@ REFERENCE_SEED = 20240601
 def actor_from_sac(
     model: Any, vec_normalize: Any = None, metadata: dict[str, Any] | None = None
 ) -> MLPActor:
-    """The deterministic actor of an SB3 SAC model as an :class:`MLPActor`.
+    """The deterministic actor of a SAC-family model as an :class:`MLPActor`.
 
     Args:
-        model: ``stable_baselines3.SAC`` with an MLP actor on a flat Box observation.
+        model: A SAC / TQC model of stable-baselines3, sb3-contrib or SBX (JAX) with an MLP
+            actor on a flat Box observation.
         vec_normalize: The ``VecNormalize`` the model was trained behind (``None``: the
             model's own, if any); its observation statistics become the actor's.
         metadata: Provenance stored with the actor.
     """
-    from torch import nn
-
-    actor = model.policy.actor
-    linears = [m for m in actor.latent_pi if isinstance(m, nn.Linear)]
-    acts = {type(m).__name__.lower() for m in actor.latent_pi if not isinstance(m, nn.Linear)}
-    if len(acts) > 1:
-        raise ValueError(f"mixed hidden activations {sorted(acts)} are not supported")
-    activation = acts.pop() if acts else "gelu"
-    if getattr(actor, "use_sde", False):
-        raise ValueError("gSDE actors are not supported by the export (use_sde=False)")
-    weights = [
-        (lin.weight.detach().cpu().numpy(), lin.bias.detach().cpu().numpy())
-        for lin in [*linears, actor.mu]
-    ]
+    if hasattr(model.policy, "actor_state"):  # SBX (JAX)
+        weights, activation = _jax_actor_layers(model.policy)
+    else:
+        weights, activation = _torch_actor_layers(model.policy)
     bounds = {"action_low": model.action_space.low, "action_high": model.action_space.high}
     vn = vec_normalize if vec_normalize is not None else model.get_vec_normalize_env()
     if vn is not None and vn.norm_obs:
@@ -68,6 +59,44 @@ def actor_from_sac(
             **bounds,
         )
     return MLPActor(weights, activation, metadata=metadata, **bounds)
+
+
+def _torch_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], str]:
+    """``(weights, activation)`` of an SB3 (torch) squashed-Gaussian actor."""
+    from torch import nn
+
+    actor = policy.actor
+    linears = [m for m in actor.latent_pi if isinstance(m, nn.Linear)]
+    acts = {type(m).__name__.lower() for m in actor.latent_pi if not isinstance(m, nn.Linear)}
+    if len(acts) > 1:
+        raise ValueError(f"mixed hidden activations {sorted(acts)} are not supported")
+    if getattr(actor, "use_sde", False):
+        raise ValueError("gSDE actors are not supported by the export (use_sde=False)")
+    weights = [
+        (lin.weight.detach().cpu().numpy(), lin.bias.detach().cpu().numpy())
+        for lin in [*linears, actor.mu]
+    ]
+    return weights, acts.pop() if acts else "gelu"
+
+
+def _jax_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], str]:
+    """``(weights, activation)`` of an SBX squashed-Gaussian actor: ``Dense_0 ..
+    Dense_{n-1}`` hidden, ``Dense_n`` the mean, ``Dense_{n+1}`` the log-std (flax kernels
+    are (in, out): transposed). Other layers (CrossQ's batch renormalization) or an
+    approximate GELU raise ``ValueError``: such an actor acts through its model."""
+    params = policy.actor_state.params["params"]
+    names = sorted(params, key=lambda k: int(k.rpartition("_")[2]) if k[-1].isdigit() else -1)
+    if not names or any(not n.startswith("Dense_") for n in names):
+        raise ValueError(f"actor layers {sorted(params)} are not a plain MLP")
+    dense = [(np.asarray(params[n]["kernel"]).T, np.asarray(params[n]["bias"])) for n in names]
+    fn = policy.activation_fn
+    base = getattr(fn, "func", fn)
+    activation = getattr(base, "__name__", "")
+    if activation == "gelu" and getattr(fn, "keywords", {}).get("approximate", True):
+        raise ValueError("the actor's GELU is tanh-approximated; the numpy actor's is exact")
+    if activation not in ("gelu", "relu", "tanh", "elu"):
+        raise ValueError(f"activation {activation!r} is not supported by the export")
+    return dense[:-1], activation  # the log-std head is not part of the deterministic actor
 
 
 def reference_pairs(

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.policies.algorithms import algorithm_class
+from myoexo.policies.algorithms import algorithm_class, get_algorithm
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
@@ -167,14 +167,32 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
     return venv
 
 
-def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
-    """An untrained agent of the preset's algorithm (SB3 SAC by default; TQC or CrossQ
-    from sb3-contrib) with the preset's networks and hyper-parameters."""
+def _activation(name: str, framework: str) -> Any:
+    """The hidden activation *name* of a framework (GELU exact in both, as the numpy actor)."""
+    if framework == "jax":
+        import functools
+
+        import flax.linen as fnn
+
+        jax_fns = {
+            "gelu": functools.partial(fnn.gelu, approximate=False),
+            "relu": fnn.relu,
+            "tanh": fnn.tanh,
+            "elu": fnn.elu,
+        }
+        return jax_fns[name]
     from torch import nn
 
-    cls = algorithm_class(preset.algorithm)
-    activation = {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
-    extra: dict[str, Any] = {} if preset.algorithm == "crossq" else {"tau": preset.tau}
+    return {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}[name]
+
+
+def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
+    """An untrained agent of the preset's algorithm (SB3 SAC by default; TQC or CrossQ
+    from sb3-contrib; SBX's SAC, TQC or CrossQ in JAX) with the preset's networks and
+    hyper-parameters."""
+    algorithm = get_algorithm(preset.algorithm, trainable=True)
+    cls = algorithm.load_class()
+    extra: dict[str, Any] = {} if algorithm.class_name == "CrossQ" else {"tau": preset.tau}
     return cls(
         "MlpPolicy",
         venv,
@@ -189,7 +207,7 @@ def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
         ent_coef=preset.ent_coef,
         policy_kwargs={
             "net_arch": {"pi": list(preset.net_arch_pi), "qf": list(preset.net_arch_qf)},
-            "activation_fn": activation[preset.activation],
+            "activation_fn": _activation(preset.activation, algorithm.framework),
         },
         seed=seed,
         device="cpu",

@@ -1,0 +1,361 @@
+"""Several seeds of one training configuration: trained in parallel, aggregated with their
+uncertainty.
+
+    myoexo seeds train runs/sbx5 --seeds 0 1 2 3 4 --set algorithm=sbx_sac --workers 2
+    myoexo seeds train runs/sbx5                   # again: resumes every unfinished seed
+    myoexo seeds aggregate runs/sbx5 --subjects 10
+
+``train`` runs one ``myoexo train`` process per seed (``--workers`` at a time), each in its
+own run folder ``DIR/seed_<N>`` with its own checkpoints, so each seed is resumable on its own
+(running the same command again resumes the unfinished ones); ``DIR/seeds.json`` records the
+configuration. SIGTERM / SIGINT are passed on to the running seeds, which checkpoint and stop.
+
+``aggregate`` selects each seed's checkpoint on the selection subjects (root seed
+:data:`~myoexo.evaluation.config.SELECTION_ROOT_SEED`, as ``myoexo select``), then reports
+per level, over seeds: the mean, the interquartile mean and a bootstrap 95 % confidence
+interval (``scipy.stats.bootstrap``, percentile method, resampling seeds; per level, so the
+levels are the strata) of the final error, the peak and RMS reductions against the PID and the
+settling time, and the fraction of seeds whose level passes the acceptance criteria
+(:func:`myoexo.evaluation.criteria.compare`; a Wilson 95 % interval). It names the seed to
+ship by a rule that does not pick the luckiest one: the seed closest to the aggregate (the
+smallest sum over levels and metrics of its distance to the across-seed mean, each metric
+divided by its across-seed spread). Files: ``aggregate_seeds.csv`` (one row per seed and
+level), ``aggregate.csv`` / ``aggregate.md`` (the summary), ``aggregate.json`` (the chosen
+seed and checkpoints), ``seeds_spread.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.evaluation.config import SELECTION_ROOT_SEED
+from myoexo.runtime.files import write_json_atomic, write_text_atomic
+from myoexo.runtime.lifecycle import FolderLock, StopSignals, signal_exit_status
+from myoexo.training import checkpoints as ck
+
+#: Configuration file of a seeds folder.
+SEEDS_FILE = "seeds.json"
+#: Per-seed metrics aggregated (column of the per-seed table -> what it is).
+AGGREGATED: dict[str, str] = {
+    "abs_final_error_deg": "|final error| (deg)",
+    "peak_reduction_pct": "peak interaction torque reduction vs PID (%)",
+    "rms_reduction_pct": "RMS interaction torque reduction vs PID (%)",
+    "settling_time_s": "settling time (s)",
+}
+#: Resamples of the bootstrap.
+BOOTSTRAP_RESAMPLES = 2_000
+#: Seconds between two looks at the running seeds.
+POLL_S = 1.0
+
+
+def seed_dir(out: Path, seed: int) -> Path:
+    """Run folder of one seed."""
+    return Path(out) / f"seed_{int(seed)}"
+
+
+def train_command(
+    out: Path,
+    seed: int,
+    preset: str,
+    overrides: Sequence[str],
+    total_timesteps: int | None,
+) -> list[str]:
+    """The ``myoexo train`` command of one seed: a new run, or a resume if it has started."""
+    run_dir = seed_dir(out, seed)
+    cmd = [sys.executable, "-m", "myoexo.cli", "train", "--no-progress"]
+    if (run_dir / ck.CONFIG_FILE).is_file():
+        cmd += ["--resume", str(run_dir)]
+    else:
+        cmd += ["--preset", preset, "--seed", str(seed), "--run-dir", str(run_dir)]
+        for item in overrides:
+            cmd += ["--set", item]
+    if total_timesteps is not None:
+        cmd += ["--total-timesteps", str(total_timesteps)]
+    return cmd
+
+
+def _record_config(out: Path, args: argparse.Namespace) -> None:
+    """Write (first run) or check (later runs) the folder's configuration."""
+    path = out / SEEDS_FILE
+    config = {"preset": args.preset, "set": list(args.set), "seeds": sorted(set(args.seeds))}
+    if path.is_file():
+        saved = json.loads(path.read_text())
+        if saved.get("preset") != config["preset"] or saved.get("set") != config["set"]:
+            raise ValueError(
+                f"{str(out)!r} holds seeds of another configuration ({saved}); choose another "
+                "folder or repeat its settings"
+            )
+        config["seeds"] = sorted(set(saved.get("seeds", [])) | set(config["seeds"]))
+    write_json_atomic(path, config)
+
+
+def train_seeds(args: argparse.Namespace) -> int:
+    """``myoexo seeds train``: every seed in its own process, ``--workers`` at a time."""
+    out = Path(args.out)
+    if any(s < 0 for s in args.seeds) or len(set(args.seeds)) != len(args.seeds):
+        raise ValueError(f"--seeds {args.seeds} must be distinct integers >= 0")
+    if args.workers < 1:
+        raise ValueError(f"--workers = {args.workers} must be >= 1")
+    out.mkdir(parents=True, exist_ok=True)
+    with FolderLock(out, "seeds folder"), StopSignals() as stop:
+        _record_config(out, args)
+        queue = list(args.seeds)
+        running: dict[int, subprocess.Popen[bytes]] = {}
+        codes: dict[int, int] = {}
+        t0 = time.monotonic()
+        while queue or running:
+            while queue and len(running) < args.workers and stop.received is None:
+                seed = queue.pop(0)
+                cmd = train_command(out, seed, args.preset, args.set, args.total_timesteps)
+                log = open(out / f"seed_{seed}.log", "ab")
+                running[seed] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+                log.close()
+                print(f"[seeds] seed {seed} started: {' '.join(cmd[2:])}", flush=True)
+            if stop.received is not None:
+                queue.clear()
+                for proc in running.values():
+                    if proc.poll() is None:
+                        proc.send_signal(signal.SIGTERM)  # each checkpoints and stops
+            time.sleep(POLL_S)
+            for seed, proc in list(running.items()):
+                if proc.poll() is not None:
+                    codes[seed] = int(proc.returncode)
+                    del running[seed]
+                    print(
+                        f"[seeds] seed {seed} ended with status {proc.returncode} after "
+                        f"{(time.monotonic() - t0) / 60:.1f} min (log: {out}/seed_{seed}.log)",
+                        flush=True,
+                    )
+    if stop.received is not None:
+        print(f"myoexo seeds: stopped by {stop.name}; resume with the same command", flush=True)
+        return signal_exit_status(signal.Signals[str(stop.name)])
+    failed = {s: c for s, c in codes.items() if c != 0}
+    if failed:
+        raise ValueError(f"seeds {sorted(failed)} failed (exit statuses {failed}); see the logs")
+    return 0
+
+
+# ----------------------------------------------------------------------------- aggregate
+def interquartile_mean(x: Any, axis: int = -1) -> Any:
+    """Mean of the middle 50 % (``scipy.stats.trim_mean(x, 0.25)``), rliable's IQM."""
+    from scipy.stats import trim_mean
+
+    return trim_mean(x, 0.25, axis=axis)
+
+
+def bootstrap_ci(values: Sequence[float], statistic: Any = np.mean, seed: int = 0) -> tuple:
+    """95 % percentile-bootstrap interval of ``statistic`` over *values* (resampling them);
+    ``(nan, nan)`` for fewer than two finite values."""
+    from scipy.stats import bootstrap
+
+    x = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
+    if x.size < 2 or np.all(x == x[0]):
+        v = float(x[0]) if x.size else math.nan
+        return (v, v) if x.size else (math.nan, math.nan)
+    res = bootstrap(
+        (x,),
+        lambda s, axis=-1: statistic(s, axis=axis),
+        n_resamples=BOOTSTRAP_RESAMPLES,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson 95 % interval of a proportion."""
+    if n == 0:
+        return math.nan, math.nan
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return centre - half, centre + half
+
+
+def summarize(per_seed: Any) -> Any:
+    """Per level: mean, IQM and bootstrap CI of every :data:`AGGREGATED` metric over seeds,
+    and the fraction of seeds passing the criteria with its Wilson interval."""
+    import pandas as pd
+
+    rows = []
+    for level, group in per_seed.groupby("level"):
+        row: dict[str, Any] = {"level": int(level), "seeds": len(group)}
+        for metric in AGGREGATED:
+            values = group[metric].to_numpy(dtype=float)
+            finite = values[np.isfinite(values)]
+            lo, hi = bootstrap_ci(finite, seed=int(level))
+            row[f"{metric}_mean"] = float(finite.mean()) if finite.size else math.nan
+            row[f"{metric}_iqm"] = float(interquartile_mean(finite)) if finite.size else math.nan
+            row[f"{metric}_ci_low"], row[f"{metric}_ci_high"] = lo, hi
+        passed = int(group["pass"].sum())
+        row["p_pass"] = passed / len(group)
+        row["p_pass_ci_low"], row["p_pass_ci_high"] = wilson_interval(passed, len(group))
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("level")
+
+
+def closest_seed(per_seed: Any) -> int:
+    """The seed whose per-level metrics lie closest to the across-seed means (each metric
+    over its across-seed standard deviation): a typical seed, not the best one."""
+    distance: dict[int, float] = {}
+    for (level, metric), _ in per_seed.groupby("level")[list(AGGREGATED)].mean().stack().items():
+        group = per_seed[per_seed.level == level]
+        values = group[metric].to_numpy(dtype=float)
+        finite = values[np.isfinite(values)]
+        mean = float(finite.mean()) if finite.size else math.nan
+        std = float(finite.std()) if finite.size else 0.0
+        for seed, v in zip(group.seed, values, strict=True):
+            d = 0.0 if not math.isfinite(v) or std == 0 else abs(v - mean) / std
+            distance[int(seed)] = distance.get(int(seed), 0.0) + d
+    return min(distance, key=lambda s: (distance[s], s))
+
+
+def per_seed_table(
+    out: Path, subjects: int, last: int, top: int, root_seed: int = SELECTION_ROOT_SEED
+) -> tuple[Any, dict[int, str]]:
+    """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`) and
+    its comparison with the PID, one row per seed and level."""
+    import pandas as pd
+
+    from myoexo.training.select import select_checkpoint
+
+    seeds = sorted(
+        int(p.name.partition("_")[2])
+        for p in Path(out).glob("seed_*")
+        if p.is_dir() and (p / ck.CONFIG_FILE).is_file()
+    )
+    if not seeds:
+        raise ValueError(f"{str(out)!r} holds no seed run folder (seed_<N>/config.json)")
+    frames, chosen = [], {}
+    for seed in seeds:
+        run_dir = seed_dir(out, seed)
+        checkpoint, table = select_checkpoint(
+            run_dir, subjects=subjects, last=last, top=top, root_seed=root_seed, verbose=False
+        )
+        chosen[seed] = str(checkpoint)
+        frame = table.reset_index()
+        frame["seed"] = seed
+        frame["checkpoint"] = checkpoint.name
+        frame["abs_final_error_deg"] = frame["sac_abs_final_error_deg"]
+        frame["settling_time_s"] = frame["sac_settling_time_s"]
+        frames.append(frame)
+        print(f"[seeds] seed {seed}: {checkpoint.name}", flush=True)
+    return pd.concat(frames, ignore_index=True), chosen
+
+
+def markdown_summary(summary: Any) -> str:
+    """The summary as a Markdown table: mean [95 % CI] (IQM) per metric and level."""
+    lines = [
+        "| level | seeds | " + " | ".join(AGGREGATED.values()) + " | P(pass criteria) |",
+        "|---|---|" + "---|" * (len(AGGREGATED) + 1),
+    ]
+    for level, row in summary.iterrows():
+        cells = [
+            f"{row[f'{m}_mean']:.2f} [{row[f'{m}_ci_low']:.2f}, {row[f'{m}_ci_high']:.2f}] "
+            f"(IQM {row[f'{m}_iqm']:.2f})"
+            for m in AGGREGATED
+        ]
+        cells.append(
+            f"{row['p_pass']:.2f} [{row['p_pass_ci_low']:.2f}, {row['p_pass_ci_high']:.2f}]"
+        )
+        lines.append(f"| {level} | {int(row['seeds'])} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_spread(per_seed: Any, summary: Any) -> Any:
+    """Per-seed values (dots) with the mean and its 95 % CI (bar), per level and metric."""
+    from matplotlib.figure import Figure
+
+    from myoexo.viz.colors import LEVEL_COLORS
+
+    fig = Figure(figsize=(3.2 * len(AGGREGATED), 3.2), layout="constrained")
+    axes = fig.subplots(1, len(AGGREGATED))
+    for ax, (metric, title) in zip(axes, AGGREGATED.items(), strict=True):
+        for level, group in per_seed.groupby("level"):
+            x = np.full(len(group), float(level)) + np.linspace(-0.12, 0.12, len(group))
+            ax.scatter(x, group[metric], s=14, color=LEVEL_COLORS.get(int(level), "grey"))
+            row = summary.loc[level]
+            lo, hi = row[f"{metric}_ci_low"], row[f"{metric}_ci_high"]
+            ax.errorbar(
+                float(level) + 0.3,
+                row[f"{metric}_mean"],
+                yerr=[[row[f"{metric}_mean"] - lo], [hi - row[f"{metric}_mean"]]],
+                fmt="s",
+                color="black",
+                capsize=3,
+                ms=4,
+            )
+        ax.set_xticks(sorted(per_seed.level.unique()))
+        ax.set_xlabel("spasticity level")
+        ax.set_title(title, fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle("Per-seed spread (dots) and mean with its 95 % bootstrap CI", fontsize=9)
+    return fig
+
+
+def aggregate_seeds(args: argparse.Namespace) -> int:
+    """``myoexo seeds aggregate``."""
+    out = Path(args.out)
+    per_seed, chosen = per_seed_table(out, args.subjects, args.last, args.top)
+    summary = summarize(per_seed)
+    ship = closest_seed(per_seed)
+    per_seed.to_csv(out / "aggregate_seeds.csv", index=False)
+    summary.to_csv(out / "aggregate.csv")
+    text = markdown_summary(summary)
+    write_text_atomic(out / "aggregate.md", text)
+    write_json_atomic(
+        out / "aggregate.json",
+        {
+            "training_seeds": sorted(chosen),
+            "selected_checkpoints": {str(k): v for k, v in chosen.items()},
+            "selection_root_seed": SELECTION_ROOT_SEED,
+            "selection_subjects_per_level": args.subjects,
+            "ship_rule": "the seed closest to the across-seed means (closest_seed)",
+            "ship_seed": ship,
+            "ship_checkpoint": chosen[ship],
+        },
+    )
+    plot_spread(per_seed, summary).savefig(out / "seeds_spread.png", dpi=130)
+    print(text)
+    print(f"ship by the closest-to-aggregate rule: seed {ship} ({chosen[ship]})")
+    print(f"wrote {out}/aggregate.csv, aggregate.md, aggregate_seeds.csv, seeds_spread.png")
+    return 0
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo seeds``."""
+    sub = parser.add_subparsers(dest="action", required=True)
+    tr = sub.add_parser("train", help="train (or resume) several seeds of one configuration")
+    tr.add_argument("out", help="folder of the seeds (one run folder seed_<N> each)")
+    tr.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    tr.add_argument("--preset", default="cpu", help="training preset (default: cpu)")
+    tr.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", help="preset override"
+    )
+    tr.add_argument("--total-timesteps", type=int, help="step budget of every seed")
+    tr.add_argument("--workers", type=int, default=2, help="seeds trained at once (default 2)")
+    ag = sub.add_parser("aggregate", help="select each seed's checkpoint and aggregate them")
+    ag.add_argument("out", help="folder written by `myoexo seeds train`")
+    ag.add_argument("--subjects", type=int, default=10, help="selection subjects per level")
+    ag.add_argument("--last", type=int, default=2, help="newest checkpoints per seed")
+    ag.add_argument("--top", type=int, default=4, help="best checkpoints by eval.csv per seed")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo seeds train|aggregate``."""
+    if args.action == "train":
+        return train_seeds(args)
+    return aggregate_seeds(args)
