@@ -71,11 +71,14 @@ def train_command(
     overrides: Sequence[str],
     total_timesteps: int | None,
 ) -> list[str]:
-    """The ``myoexo train`` command of one seed: a new run, or a resume if it has started."""
+    """The ``myoexo train`` command of one seed: a new run, a resume if it has a resumable
+    checkpoint, or a restart if it started but stopped before its first one."""
     run_dir = seed_dir(out, seed)
     cmd = [sys.executable, "-m", "myoexo.cli", "train", "--no-progress"]
-    if (run_dir / ck.CONFIG_FILE).is_file():
+    if (run_dir / ck.CONFIG_FILE).is_file() and ck.resumable_checkpoints(run_dir):
         cmd += ["--resume", str(run_dir)]
+    elif (run_dir / ck.CONFIG_FILE).is_file():
+        return [*cmd, "--restart", str(run_dir)]  # --restart keeps the saved step budget
     else:
         cmd += ["--preset", preset, "--seed", str(seed), "--run-dir", str(run_dir)]
         for item in overrides:
