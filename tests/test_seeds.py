@@ -1,0 +1,98 @@
+"""Seeds of one configuration: the aggregation over seeds (mean, IQM, bootstrap CI, pass
+fraction, the ship rule) and the per-seed train commands."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from myoexo.training import seeds as S
+
+
+def _per_seed(values_by_seed: dict[int, float], passed: set[int]) -> pd.DataFrame:
+    rows = []
+    for seed, v in values_by_seed.items():
+        for level in (0, 1):
+            rows.append(
+                {
+                    "seed": seed,
+                    "level": level,
+                    "abs_final_error_deg": v + level,
+                    "peak_reduction_pct": 10.0 * v,
+                    "rms_reduction_pct": -v,
+                    "settling_time_s": math.nan if seed == 0 else 0.5 + v,
+                    "pass": seed in passed,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def test_summary_has_mean_iqm_and_a_ci_that_contains_the_mean():
+    per_seed = _per_seed({0: 0.1, 1: 0.2, 2: 0.3, 3: 0.4, 4: 5.0}, passed={1, 2, 3})
+    summary = S.summarize(per_seed)
+    row = summary.loc[0]
+    assert row["abs_final_error_deg_mean"] == pytest.approx(np.mean([0.1, 0.2, 0.3, 0.4, 5.0]))
+    # the IQM drops the outlier seed 4 (and the best one): the middle three
+    assert row["abs_final_error_deg_iqm"] == pytest.approx(0.3)
+    assert row["abs_final_error_deg_ci_low"] <= row["abs_final_error_deg_mean"]
+    assert row["abs_final_error_deg_mean"] <= row["abs_final_error_deg_ci_high"]
+    assert summary.loc[1, "abs_final_error_deg_mean"] == pytest.approx(
+        row["abs_final_error_deg_mean"] + 1
+    )
+    # a never-settled seed (NaN) is left out of the settling time, not counted as 0
+    assert row["settling_time_s_mean"] == pytest.approx(np.mean([0.7, 0.8, 0.9, 5.5]))
+    assert row["p_pass"] == pytest.approx(0.6)
+    assert 0.0 <= row["p_pass_ci_low"] < 0.6 < row["p_pass_ci_high"] <= 1.0
+    assert "P(pass criteria)" in S.markdown_summary(summary)
+
+
+def test_bootstrap_is_reproducible_and_degenerate_inputs_are_handled():
+    a = S.bootstrap_ci([1.0, 2.0, 3.0, 4.0])
+    assert a == S.bootstrap_ci([1.0, 2.0, 3.0, 4.0]) and a[0] < 2.5 < a[1]
+    assert S.bootstrap_ci([2.0, 2.0]) == (2.0, 2.0)
+    low, high = S.bootstrap_ci([1.0])
+    assert low == high == 1.0
+    assert all(math.isnan(v) for v in S.bootstrap_ci([]))
+
+
+def test_wilson_interval():
+    low, high = S.wilson_interval(0, 5)
+    assert low == pytest.approx(0.0, abs=1e-12) and 0.4 < high < 0.5
+    low, high = S.wilson_interval(5, 5)
+    assert 0.5 < low < 0.6 and high == pytest.approx(1.0)
+
+
+def test_the_ship_rule_picks_the_typical_seed_not_the_best():
+    per_seed = _per_seed({0: 0.0, 1: 1.0, 2: 2.0, 3: 3.0, 4: 4.0}, passed=set())
+    assert S.closest_seed(per_seed) == 2  # the middle one, not seed 0 (the best)
+
+
+def test_train_command_starts_resumes_or_restarts(tmp_path):
+    from myoexo.training import checkpoints as ck
+
+    new = S.train_command(tmp_path, 3, "cpu", ["algorithm=sbx_sac"], 1000)
+    assert "--seed" in new and "3" in new and "algorithm=sbx_sac" in new
+    run_dir = S.seed_dir(tmp_path, 3)
+    run_dir.mkdir()
+    (run_dir / ck.CONFIG_FILE).write_text("{}")
+    assert "--restart" in S.train_command(tmp_path, 3, "cpu", [], None)  # no checkpoint yet
+    step = run_dir / ck.CHECKPOINTS_DIR / ck.checkpoint_name(100)
+    step.mkdir(parents=True)
+    (step / ck.REPLAY_FILE).write_bytes(b".")
+    assert ck.resumable_checkpoints(run_dir) == [step]
+    assert "--resume" in S.train_command(tmp_path, 3, "cpu", [], None)
+
+
+def test_a_seeds_folder_refuses_another_configuration(tmp_path):
+    import argparse
+
+    args = argparse.Namespace(preset="cpu", set=["algorithm=sbx_sac"], seeds=[0, 1])
+    S._record_config(tmp_path, args)
+    S._record_config(
+        tmp_path, argparse.Namespace(preset="cpu", set=["algorithm=sbx_sac"], seeds=[2])
+    )
+    with pytest.raises(ValueError, match="another configuration"):
+        S._record_config(tmp_path, argparse.Namespace(preset="cpu", set=[], seeds=[0]))
