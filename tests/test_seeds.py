@@ -82,6 +82,7 @@ def test_train_command_starts_resumes_or_restarts(tmp_path):
     step = run_dir / ck.CHECKPOINTS_DIR / ck.checkpoint_name(100)
     step.mkdir(parents=True)
     (step / ck.REPLAY_FILE).write_bytes(b".")
+    (step / ck.STATE_FILE).write_text("{}")
     assert ck.resumable_checkpoints(run_dir) == [step]
     assert "--resume" in S.train_command(tmp_path, 3, "cpu", [], None)
 
