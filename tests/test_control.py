@@ -203,7 +203,7 @@ def test_controller_specs(tmp_path):
     model.write_bytes(b"")
     spec = parse_controller_spec(str(model))
     assert spec.kind == "sb3" and spec.label == "my_policy" and spec.algorithm == "sac"
-    assert parse_controller_spec(f"td3:{model}").algorithm == "TD3"
+    assert parse_controller_spec(f"td3:{model}").algorithm == "td3"
     for bad, match in [
         ("pid:gain=3", "unknown PID option"),
         ("pid:kp=abc", "not a number"),
@@ -257,3 +257,31 @@ def test_sb3_models_see_the_observation_normalization_they_were_trained_with(tmp
     ctrl = SB3Controller(EchoModel(), obs_normalizer=normalizer)
     action = ctrl.act(np.array([3.0, 3.0, 3.0], np.float32), {})
     assert action[0] == pytest.approx(0.1, rel=1e-3)  # (3 - 1) / sqrt(4) / 10
+
+
+def test_ramped_setpoint_and_clipped_command():
+    """``ramp_s`` moves the setpoint linearly from the first measured angle to the target on
+    the controller's own clock; ``limit`` clips the command; both parse from a spec."""
+    import math
+
+    from myoexo.control.pid import PID, PIDConfig
+    from myoexo.control.specs import parse_controller_spec, pid_config
+
+    pid = PID(PIDConfig(ramp_s=0.5), dt_s=0.1)
+    start, target = math.radians(90.0), math.radians(7.0)
+    points = [pid.setpoint_rad(target, start) for _ in range(8)]
+    assert points[0] == pytest.approx(start)
+    assert points[5] == pytest.approx(target) and points[7] == pytest.approx(target)
+    assert points[2] == pytest.approx(start + 0.4 * (target - start))
+    pid.reset()
+    assert pid.setpoint_rad(target, math.radians(60.0)) == pytest.approx(math.radians(60.0))
+    assert PID(PIDConfig(), dt_s=0.1).setpoint_rad(target, start) == target  # the paper's step
+    clipped = PID(PIDConfig(output_limit=0.6), dt_s=0.01)
+    assert clipped.update(target, start) == pytest.approx(-0.6)
+    spec = parse_controller_spec("pid:ramp_s=0.6,limit=0.6")
+    config = pid_config(spec.options)
+    assert config.ramp_s == 0.6 and config.output_limit == 0.6
+    with pytest.raises(ValueError, match="ramp_s"):
+        PIDConfig(ramp_s=-1.0)
+    with pytest.raises(ValueError, match="output_limit"):
+        PIDConfig(output_limit=1.5)

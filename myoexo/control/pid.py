@@ -25,6 +25,12 @@ parallel PID ``u = Kp e + Ki int(e) dt + Kd de/dt``
   by ``(u_sat - u) / Tt`` with tracking time ``Tt``; default ``Tt = sqrt(Ti Td)``, Astrom &
   Hagglund's rule, with ``Ti = Kp / Ki`` and ``Td = Kd / Kp``).
 
+Two ways to start gently, for the torque-versus-settling trade-off (the cheap baselines of a
+learned controller): a **ramped setpoint** (``ramp_s``: the setpoint moves linearly from the
+angle measured at the first step to the target over ``ramp_s`` seconds of the controller's own
+clock, the time since the command began; no episode clock) and a **clipped command**
+(``output_limit`` < 1: at most that fraction of the 100 Nm).
+
 Discretization at the env's control period ``dt``: backward-Euler integral and backward
 difference derivative, no derivative filter (Kd is small); the derivative is zero on the
 first step of an episode (no previous sample).
@@ -83,6 +89,8 @@ class PIDConfig:
         feedback: ``"knee"`` (human knee angle, what the simulation knows; the paper's
             reading) or ``"exo"`` (the exo joint encoder, what a real device measures; it
             differs from the human knee by the strap misalignment).
+        ramp_s: Duration (s) of the setpoint's linear ramp from the first measured angle to
+            the target (0: the paper's step).
     """
 
     gains: PIDGains = field(default_factory=PIDGains)
@@ -91,8 +99,11 @@ class PIDConfig:
     tracking_time_s: float | None = None
     output_limit: float = 1.0
     feedback: str = "knee"
+    ramp_s: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.ramp_s) and 0.0 <= self.ramp_s <= 60.0):
+            raise ValueError(f"PIDConfig.ramp_s = {self.ramp_s!r} is outside [0, 60] s")
         if self.anti_windup not in ANTI_WINDUP_SCHEMES:
             raise ValueError(
                 f"PIDConfig.anti_windup = {self.anti_windup!r}; accepted: {ANTI_WINDUP_SCHEMES}"
@@ -101,8 +112,10 @@ class PIDConfig:
             raise ValueError(
                 f"PIDConfig.feedback = {self.feedback!r}; accepted: {tuple(FEEDBACK_KEYS)}"
             )
-        if not (math.isfinite(self.output_limit) and self.output_limit > 0.0):
-            raise ValueError(f"PIDConfig.output_limit = {self.output_limit!r} must be > 0")
+        if not (math.isfinite(self.output_limit) and 0.0 < self.output_limit <= 1.0):
+            raise ValueError(
+                f"PIDConfig.output_limit = {self.output_limit!r} is outside (0, 1] (x 100 Nm)"
+            )
         if self.tracking_time_s is not None and not (
             math.isfinite(self.tracking_time_s) and self.tracking_time_s > 0.0
         ):
@@ -171,6 +184,8 @@ class PID:
         self._integral = 0.0  # integral term, already multiplied by Ki (command units)
         self._prev_error_rad: float | None = None
         self._prev_measurement_rad: float | None = None
+        self._ramp_start_rad: float | None = None  # first measured angle (ramped setpoint)
+        self._steps = 0
         #: The last output's terms (command units): ``p``, ``i``, ``d``, ``unsaturated``.
         self.last_terms: dict[str, float] = {}
 
@@ -215,13 +230,27 @@ class PID:
                 f"PID.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict); got keys "
                 f"{sorted(info)}"
             ) from None
-        u = self.update(math.radians(target_deg), math.radians(measured_deg))
+        setpoint_rad = self.setpoint_rad(math.radians(target_deg), math.radians(measured_deg))
+        u = self.update(setpoint_rad, math.radians(measured_deg))
         return np.array([u], dtype=np.float32)
+
+    def setpoint_rad(self, target_rad: float, measured_rad: float) -> float:
+        """The setpoint of this step: the target, or with ``ramp_s`` > 0 the point of the
+        ramp from the first measured angle (the step counter advances by one)."""
+        ramp = self.config.ramp_s
+        self._steps += 1
+        if ramp <= 0.0:
+            return target_rad
+        if self._ramp_start_rad is None:
+            self._ramp_start_rad = measured_rad
+        frac = min(1.0, (self._steps - 1) * self.dt_s / ramp)
+        return self._ramp_start_rad + frac * (target_rad - self._ramp_start_rad)
 
     def __repr__(self) -> str:
         g = self.config.gains
         return (
             f"PID(kp={g.kp}, ki={g.ki}, kd={g.kd}, dt_s={self.dt_s}, "
             f"feedback={self.config.feedback!r}, anti_windup={self.config.anti_windup!r}, "
-            f"derivative_on_measurement={self.config.derivative_on_measurement})"
+            f"derivative_on_measurement={self.config.derivative_on_measurement}, "
+            f"output_limit={self.config.output_limit}, ramp_s={self.config.ramp_s})"
         )

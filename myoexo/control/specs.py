@@ -12,6 +12,8 @@ spec                               controller
 ``pid:anti_windup=none``           ``clamping`` (default), ``back_calculation`` or ``none``
 ``pid:derivative=error``           derivative on the error instead of the measurement
 ``pid:textbook``                   plain parallel PID (derivative on error, no anti-windup)
+``pid:ramp_s=0.6``                 setpoint ramped to the target over 0.6 s (a gentle start)
+``pid:limit=0.6``                  command clipped at 0.6 (60 Nm)
 ``sac``                            the full-state policy shipped with the package
                                    (:func:`myoexo.load_policy`)
 ``sac_exo``                        the shipped policy on the exo's own sensors
@@ -43,7 +45,17 @@ from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
 
-_PID_KEYS = ("kp", "ki", "kd", "feedback", "anti_windup", "derivative", "textbook")
+_PID_KEYS = (
+    "kp",
+    "ki",
+    "kd",
+    "feedback",
+    "anti_windup",
+    "derivative",
+    "textbook",
+    "ramp_s",
+    "limit",
+)
 
 
 class PolicyUnavailableError(RuntimeError):
@@ -127,9 +139,9 @@ def _pid_options(tail: str) -> dict[str, Any]:
         if key == "textbook":
             options["derivative_on_measurement"] = False
             options.setdefault("anti_windup", "none")
-        elif key in ("kp", "ki", "kd"):
+        elif key in ("kp", "ki", "kd", "ramp_s", "limit"):
             try:
-                options[key] = float(value)
+                options["output_limit" if key == "limit" else key] = float(value)
             except ValueError:
                 raise ValueError(f"PID option {key}={value!r} is not a number") from None
         elif key == "derivative":
