@@ -40,8 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SPEC",
         help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,"
         "limit=..]' (ramp_s: a ramped setpoint; limit: a clipped command), 'sac' / 'sac_exo' "
-        "(the shipped full-state / exo-sensor policies; skipped with a message if absent), 'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the "
-        "achievable bound, slow) or paths of SB3 .zip models (default: pid sac)",
+        "(the shipped full-state / exo-sensor policies; skipped with a message if absent), "
+        "'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the achievable bound, "
+        "slow) or paths of SB3 .zip models (default: pid sac)",
     )
     parser.add_argument(
         "--levels",
