@@ -125,8 +125,20 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     if not path.is_file():
         raise ValueError(f"controller {text!r}: policy file {str(path)!r} does not exist")
     return ControllerSpec(
-        kind="sb3", label=path.stem, text=text, path=str(path.resolve()), algorithm=algorithm
+        kind="sb3",
+        label=_model_label(path),
+        text=text,
+        path=str(path.resolve()),
+        algorithm=algorithm,
     )
+
+
+def _model_label(path: Path) -> str:
+    """A model file's label: its stem, or ``<run>-<checkpoint>`` for the ``model.zip`` of a
+    ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``)."""
+    if path.name == "model.zip" and path.parent.parent.name == "checkpoints":
+        return f"{path.parent.parent.parent.name}-{path.parent.name}"
+    return path.stem
 
 
 def _pid_options(tail: str) -> dict[str, Any]:

@@ -1,0 +1,279 @@
+"""What the twin allows: the trade-off between interaction torque and settling, per level.
+
+    myoexo frontier --out results/frontier --subjects 10
+    myoexo frontier --out results/frontier --subjects 10 --controllers sac --seeds-dir runs/s5
+
+Every controller runs on the same subjects (evaluation root seed 0) through the evaluation
+protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in ``OUT/evaluation``): the
+paper's PID, the device PID on the exo encoder (``pid:feedback=exo``), the *shaped* PIDs a
+reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, a command clipped at
+``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), and whatever ``--controllers``
+adds (the shipped policies, model files, the oracle). Per level and controller: the mean
+settling time, peak interaction torque, RMS interaction torque up to settling and absolute
+final error. A controller is **accurate** at a level when its mean absolute final error is
+within ``--accuracy-deg`` (1 deg) of the best any of them reaches there (at levels 0-1 that is
+the target itself; at levels 2-3 the stall that the motor limit sets). The **frontier** of a
+level is the set of accurate controllers that no other accurate one beats on both settling
+time and peak torque: the achievable trade-off among the controllers tried, an upper bound
+of the twin's true one (a torque-aware planner could only push it further down).
+
+The study's SAC is placed at its reported reductions from *our* paper's-PID values (peak and
+RMS reduced by the study's percentages, its settling times), so that it can be read against
+the frontier on this twin. With ``--seeds-dir``, each seed's selected policy
+(``aggregate.json`` of ``myoexo seeds aggregate``) is a point of its own (the spread over
+seeds). Files: ``frontier.csv`` (every point, with ``accurate`` and ``on_frontier``),
+``frontier.md``, ``frontier_level<L>.png`` and ``frontier.png`` (all levels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from myoexo.evaluation.paper import PAPER_RESULTS
+from myoexo.spasticity.levels import VALID_LEVELS
+
+#: Ramp durations (s) of the ramped-setpoint PIDs.
+RAMPS_S: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5, 3.0)
+#: Command limits (x 100 Nm) of the clipped PIDs.
+LIMITS: tuple[float, ...] = (0.5, 0.6, 0.8)
+#: Accuracy band of the frontier (deg above the best mean |final error| of the level).
+ACCURACY_DEG = 1.0
+#: Columns of a frontier point (per level and controller, means over subjects).
+POINT_METRICS: tuple[str, ...] = (
+    "abs_final_error_deg",
+    "settling_time_s",
+    "peak_interaction_torque_nm",
+    "rms_interaction_torque_nm",
+)
+
+
+def shaped_pid_specs(
+    ramps_s: Sequence[float] = RAMPS_S, limits: Sequence[float] = LIMITS
+) -> list[str]:
+    """The baseline controller specs: the paper's PID, the device PID, ramped and clipped."""
+    specs = ["pid", "pid:feedback=exo"]
+    specs += [f"pid:ramp_s={r:g}" for r in ramps_s]
+    specs += [f"pid:limit={lim:g}" for lim in limits]
+    return specs
+
+
+def points(table: Any) -> Any:
+    """Per (controller, level): the means of :data:`POINT_METRICS` (settling time over the
+    settled episodes), the share of settled episodes and the episode count."""
+    grouped = table.groupby(["controller", "level"])
+    out = grouped[list(POINT_METRICS)].mean()
+    out["settled_share"] = grouped["settling_time_s"].apply(lambda s: float(s.notna().mean()))
+    out["episodes"] = grouped.size()
+    return out.reset_index()
+
+
+def mark_frontier(pts: Any, accuracy_deg: float = ACCURACY_DEG) -> Any:
+    """Add ``accurate`` and ``on_frontier`` (see the module docstring) to *pts*."""
+    pts = pts.copy()
+    pts["accurate"] = False
+    pts["on_frontier"] = False
+    for level, group in pts.groupby("level"):
+        measured = group[~group.controller.str.startswith("paper")]
+        best = float(measured.abs_final_error_deg.min())
+        accurate = group.index[
+            (group.abs_final_error_deg <= best + accuracy_deg)
+            & group.settling_time_s.notna()
+            & ~group.controller.str.startswith("paper")
+        ]
+        pts.loc[accurate, "accurate"] = True
+        for i in accurate:
+            ts, peak = pts.at[i, "settling_time_s"], pts.at[i, "peak_interaction_torque_nm"]
+            dominated = any(
+                pts.at[j, "settling_time_s"] <= ts
+                and pts.at[j, "peak_interaction_torque_nm"] <= peak
+                and (
+                    pts.at[j, "settling_time_s"] < ts
+                    or pts.at[j, "peak_interaction_torque_nm"] < peak
+                )
+                for j in accurate
+                if j != i
+            )
+            pts.at[i, "on_frontier"] = not dominated
+        del level
+    return pts
+
+
+def paper_points(pts: Any, pid_label: str = "pid") -> Any:
+    """The study's SAC per level at its reported reductions from our PID's values."""
+    import pandas as pd
+
+    rows = []
+    for level, res in PAPER_RESULTS.items():
+        pid = pts[(pts.controller == pid_label) & (pts.level == level)]
+        if pid.empty:
+            continue
+        p = pid.iloc[0]
+        rms_red = res.rms_reduction_pct if res.rms_reduction_pct is not None else math.nan
+        rows.append(
+            {
+                "controller": "paper SAC (at its reductions from our PID)",
+                "level": level,
+                "abs_final_error_deg": res.sac_final_error_bound_deg,
+                "settling_time_s": res.sac_settling_time_s,
+                "peak_interaction_torque_nm": p.peak_interaction_torque_nm
+                * (1 - res.peak_reduction_pct / 100),
+                "rms_interaction_torque_nm": p.rms_interaction_torque_nm * (1 - rms_red / 100),
+                "settled_share": math.nan,
+                "episodes": 0,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def seed_controllers(seeds_dir: Path) -> list[str]:
+    """The checkpoints ``myoexo seeds aggregate`` selected, as controller specs (their
+    ``model.zip``; each seed a point of its own)."""
+    from myoexo.training import checkpoints as ck
+
+    path = Path(seeds_dir) / "aggregate.json"
+    if not path.is_file():
+        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
+    chosen = json.loads(path.read_text())["selected_checkpoints"]
+    specs = []
+    for seed in sorted(chosen, key=int):
+        run_config = ck.read_config(Path(chosen[seed]).parent.parent)
+        algorithm = run_config["preset"].get("algorithm", "sac")
+        specs.append(f"{algorithm}:{Path(chosen[seed]) / ck.MODEL_FILE}")
+    return specs
+
+
+def plot_frontier(pts: Any, level: int | None = None) -> Any:
+    """Peak interaction torque vs settling time, one panel per level (or one level)."""
+    from matplotlib.figure import Figure
+
+    levels = [level] if level is not None else sorted(pts.level.unique())
+    fig = Figure(figsize=(4.2 * len(levels), 3.8), layout="constrained")
+    axes = fig.subplots(1, len(levels), squeeze=False)[0]
+    styles = {
+        "pid": ("black", "^", "paper's PID"),
+        "pid:feedback=exo": ("grey", "v", "device PID (exo encoder)"),
+    }
+    for ax, lv in zip(axes, levels, strict=True):
+        group = pts[pts.level == lv]
+        front = group[group.on_frontier].sort_values("settling_time_s")
+        ax.step(
+            front.settling_time_s,
+            front.peak_interaction_torque_nm,
+            where="post",
+            color="tab:green",
+            lw=1.5,
+            label="frontier (accurate, non-dominated)",
+        )
+        for _, p in group.iterrows():
+            label = str(p.controller)
+            ts = p.settling_time_s if math.isfinite(p.settling_time_s) else 8.0
+            if label in styles:
+                color, marker, name = styles[label]
+            elif label.startswith("pid:ramp"):
+                color, marker, name = "tab:blue", "o", "ramped PID"
+            elif label.startswith("pid:limit"):
+                color, marker, name = "tab:cyan", "s", "clipped PID"
+            elif label.startswith("paper"):
+                color, marker, name = "tab:red", "*", "paper SAC (its reductions)"
+            else:
+                color, marker, name = "tab:orange", "D", label
+            ax.scatter(
+                ts,
+                p.peak_interaction_torque_nm,
+                color=color,
+                marker=marker,
+                s=60 if marker == "*" else 28,
+                facecolors=color if p.accurate or label.startswith("paper") else "none",
+                label=name,
+            )
+        ax.set_title(f"level {lv}")
+        ax.set_xlabel("settling time (s; 8 = never)")
+        ax.set_ylabel("peak interaction torque (Nm)")
+        ax.grid(alpha=0.3)
+        handles, labels = ax.get_legend_handles_labels()
+        unique = dict(zip(labels, handles, strict=True))
+        ax.legend(unique.values(), unique.keys(), fontsize=6, loc="best")
+    fig.suptitle("Torque vs settling on the twin (filled: accurate; hollow: not)", fontsize=9)
+    return fig
+
+
+def markdown(pts: Any) -> str:
+    """The frontier table as Markdown."""
+    cols = ["level", "controller", *POINT_METRICS, "settled_share", "accurate", "on_frontier"]
+    return str(pts[cols].sort_values(["level", "settling_time_s"]).to_markdown(index=False))
+
+
+def build_frontier(
+    out: Path,
+    subjects: int,
+    controllers: Sequence[str] = (),
+    seeds_dir: Path | None = None,
+    workers: int | None = None,
+    accuracy_deg: float = ACCURACY_DEG,
+    levels: Sequence[int] = VALID_LEVELS,
+    progress: bool = True,
+) -> Any:
+    """Evaluate the controllers on the same subjects and write the frontier files."""
+    import pandas as pd
+
+    from myoexo.evaluation.config import EvaluationConfig
+    from myoexo.evaluation.runner import evaluate
+
+    specs = [*shaped_pid_specs(), *controllers]
+    if seeds_dir is not None:
+        specs += seed_controllers(seeds_dir)
+    config = EvaluationConfig(controllers=tuple(specs), levels=tuple(levels), subjects=subjects)
+    run = evaluate(config, Path(out) / "evaluation", workers=workers, progress=progress)
+    if run.table is None:
+        raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
+    pts = points(run.table)
+    pts = pd.concat([pts, paper_points(pts)], ignore_index=True)
+    pts = mark_frontier(pts, accuracy_deg)
+    out = Path(out)
+    pts.to_csv(out / "frontier.csv", index=False)
+    (out / "frontier.md").write_text(markdown(pts) + "\n")
+    for lv in levels:
+        plot_frontier(pts, lv).savefig(out / f"frontier_level{lv}.png", dpi=130)
+    plot_frontier(pts).savefig(out / "frontier.png", dpi=130)
+    return pts
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo frontier``."""
+    parser.add_argument("--out", type=Path, default=Path("results/frontier"))
+    parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
+    parser.add_argument(
+        "--controllers", nargs="*", default=[], help="more controller specs (e.g. sac oracle)"
+    )
+    parser.add_argument("--seeds-dir", type=Path, help="a `myoexo seeds` folder (aggregated)")
+    parser.add_argument("--workers", type=int, help="worker processes (default: all cores)")
+    parser.add_argument(
+        "--accuracy-deg",
+        type=float,
+        default=ACCURACY_DEG,
+        help="accuracy band above the level's best mean |final error| (deg)",
+    )
+    parser.add_argument("--no-progress", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo frontier``."""
+    if args.subjects < 1:
+        raise ValueError(f"--subjects = {args.subjects} must be >= 1")
+    pts = build_frontier(
+        args.out,
+        args.subjects,
+        args.controllers,
+        args.seeds_dir,
+        args.workers,
+        args.accuracy_deg,
+        progress=not args.no_progress,
+    )
+    print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
+    print(f"wrote {args.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")
+    return 0
