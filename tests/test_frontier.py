@@ -1,0 +1,72 @@
+"""The torque-versus-settling frontier: which points are accurate and non-dominated, the
+study's point placed from our PID, the shaped-PID specs."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+import pytest
+
+from myoexo.evaluation import frontier as F
+
+
+def _pts(rows):
+    return pd.DataFrame(
+        rows,
+        columns=[
+            "controller",
+            "level",
+            "abs_final_error_deg",
+            "settling_time_s",
+            "peak_interaction_torque_nm",
+            "rms_interaction_torque_nm",
+        ],
+    )
+
+
+def test_frontier_keeps_accurate_non_dominated_points():
+    pts = _pts(
+        [
+            ("pid", 0, 0.0, 1.0, 140.0, 100.0),
+            ("fast_hard", 0, 0.2, 0.5, 150.0, 110.0),  # faster, harder: on the frontier
+            ("slow_soft", 0, 0.3, 2.0, 100.0, 60.0),  # slower, softer: on the frontier
+            ("dominated", 0, 0.1, 1.5, 145.0, 90.0),  # slower and harder than the PID
+            ("inaccurate", 0, 5.0, 0.4, 50.0, 40.0),  # best torque but misses the target
+            ("never", 0, 0.0, math.nan, 80.0, 70.0),  # never settled
+        ]
+    )
+    marked = F.mark_frontier(pts, accuracy_deg=1.0).set_index("controller")
+    assert marked.loc[["pid", "fast_hard", "slow_soft"], "on_frontier"].all()
+    assert not marked.loc["dominated", "on_frontier"] and marked.loc["dominated", "accurate"]
+    assert not marked.loc["inaccurate", "accurate"] and not marked.loc["never", "accurate"]
+
+
+def test_accuracy_is_relative_to_the_best_of_the_level():
+    """At a level where the motor limit stalls everyone ~6 deg short, 6-7 deg is accurate."""
+    pts = _pts([("pid", 2, 6.2, 1.5, 210.0, 170.0), ("other", 2, 7.5, 1.0, 200.0, 160.0)])
+    marked = F.mark_frontier(pts, accuracy_deg=1.0).set_index("controller")
+    assert marked.loc["pid", "accurate"] and not marked.loc["other", "accurate"]
+
+
+def test_paper_point_uses_our_pid_and_the_reported_reductions():
+    from myoexo.evaluation.paper import PAPER_RESULTS
+
+    pts = _pts([("pid", lv, 0.0, 1.0, 200.0, 100.0) for lv in (0, 1, 2, 3)])
+    paper = F.paper_points(pts).set_index("level")
+    res = PAPER_RESULTS[0]
+    assert paper.loc[0, "peak_interaction_torque_nm"] == pytest.approx(
+        200.0 * (1 - res.peak_reduction_pct / 100)
+    )
+    assert paper.loc[0, "settling_time_s"] == res.sac_settling_time_s
+    assert math.isnan(paper.loc[3, "rms_interaction_torque_nm"])  # the paper gives none there
+
+
+def test_shaped_pid_specs_parse():
+    from myoexo.control.specs import parse_controller_spec, pid_config
+
+    specs = F.shaped_pid_specs()
+    assert specs[:2] == ["pid", "pid:feedback=exo"]
+    configs = [pid_config(parse_controller_spec(s).options) for s in specs]
+    assert {c.ramp_s for c in configs} >= set(F.RAMPS_S)
+    assert {c.output_limit for c in configs} >= set(F.LIMITS)
