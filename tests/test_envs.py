@@ -55,10 +55,19 @@ def test_ids_reachable_through_myosuite_and_module_prefix():
     env = gym.make("myoexo:MyoExoKnee-v3")
     env.reset(seed=0)
     assert env.unwrapped.level == 3
-    # the env truncates itself (800 steps = 8 s): no TimeLimit, so another TaskParams needs
-    # no matching max_episode_steps
-    assert env.spec.max_episode_steps is None and env.unwrapped.episode_steps == 800
+    # the env truncates itself (800 steps = 8 s) and its spec says so; no TimeLimit, so
+    # another TaskParams needs no matching max_episode_steps
+    assert env.spec.max_episode_steps == env.unwrapped.episode_steps == 800
+    assert not _has_time_limit(env)
     env.close()
+
+
+def _has_time_limit(env: gym.Env) -> bool:
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, gym.wrappers.TimeLimit):
+            return True
+        env = env.env
+    return False
 
 
 def test_spaces_dt_and_info_keys(env1):
@@ -192,7 +201,9 @@ def test_custom_episode_duration_truncates_in_the_env_itself():
     env = gym.make("MyoExoKnee-v0", task=myoexo.envs.TaskParams(episode_duration_s=0.2))
     _, _, infos = _rollout(env, 0, 1000, action=0.0)
     assert len(infos) == 21 and infos[-1]["time_s"] == pytest.approx(0.2)
-    assert env.spec.max_episode_steps is None
+    # the spec reports this env's own length (20 steps), and no TimeLimit is added
+    assert env.spec.max_episode_steps == env.unwrapped.spec.max_episode_steps == 20
+    assert not _has_time_limit(env)
 
 
 def test_vector_envs():

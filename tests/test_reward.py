@@ -232,3 +232,109 @@ def test_weighted_reward_keys_override_the_weights(default_run, weights):
             assert info["rwd_dict"][key] == info_default["rwd_dict"][key]
     rewards = [r for r, _ in steps]
     assert rewards != [r for r, _ in default_steps]
+
+
+# -- the pure function, without an env ---------------------------------------------------
+
+
+def _pure(**overrides):
+    from myoexo.envs.config import RewardParams
+    from myoexo.envs.reward import reward_dict
+
+    state = {
+        "error_rad": 0.2,
+        "knee_vel_rad_s": -0.5,
+        "interaction_torque_nm": 40.0,
+        "command": -0.4,
+        "prev_command": -0.1,
+        "prev_knee_vel_rad_s": -0.2,
+        "prev_interaction_torque_nm": 30.0,
+        "params": RewardParams(),
+        "weights": DEFAULT_REWARD_WEIGHTS,
+    }
+    state.update(overrides)
+    return reward_dict(**state), state
+
+
+def test_pure_reward_function_terms_from_their_definitions():
+    """``myoexo.envs.reward.reward_dict`` from plain floats: no model, no env."""
+    rwd, s = _pure()
+    e = s["error_rad"]
+    assert rwd["pose"] == approx(math.exp(-(e**2) / (2 * SIGMA_RAD**2)) - abs(e))
+    assert rwd["bonus"] == 0.0  # 0.2 rad from the target
+    assert rwd["inter"] == approx(((40.0 - 30.0) / TORQUE_SCALE_NM) ** 2)  # below 75 Nm
+    assert rwd["vel"] == approx(abs(-0.5 - -0.2))
+    assert rwd["act"] == approx((-0.4 - -0.1) ** 2)
+    assert rwd["sparse"] == -abs(e) and rwd["solved"] is False and rwd["done"] is False
+    dense = sum(w * rwd[k] for k, w in DEFAULT_REWARD_WEIGHTS.items())
+    assert rwd["dense"] == approx(dense)
+    assert set(rwd) == {*TERMS, "sparse", "solved", "done", "dense"}
+
+
+@pytest.mark.parametrize(
+    ("tau", "prev_tau", "expected"),
+    [
+        (74.0, 70.0, (4.0 / TORQUE_SCALE_NM) ** 2),  # the rate term only
+        (80.0, 70.0, (10.0 / TORQUE_SCALE_NM) ** 2 + (80.0 / TORQUE_SCALE_NM) ** 2),
+        (75.0, 75.0, 0.0),  # the threshold itself is not above it
+    ],
+)
+def test_pure_reward_torque_penalty_threshold(tau, prev_tau, expected):
+    rwd, _ = _pure(interaction_torque_nm=tau, prev_interaction_torque_nm=prev_tau)
+    assert rwd["inter"] == approx(expected)
+
+
+@pytest.mark.parametrize(
+    ("error_rad", "vel", "bonus", "solved"),
+    [
+        (0.049, 0.049, BONUS, True),
+        (-0.049, -0.049, BONUS, True),
+        (0.051, 0.0, 0.0, False),
+        (0.0, 0.051, 0.0, True),  # solved on the error alone; the bonus also needs stillness
+    ],
+)
+def test_pure_reward_bonus_and_solved_bounds(error_rad, vel, bonus, solved):
+    rwd, _ = _pure(error_rad=error_rad, knee_vel_rad_s=vel)
+    assert rwd["bonus"] == bonus and rwd["solved"] is solved
+
+
+def test_pure_reward_weights_and_params_are_arguments():
+    from myoexo.envs.config import RewardParams
+
+    weights = {"act": -10.0, "pose": 2.0}
+    params = RewardParams(sigma_rad=0.3, bonus=0.5, torque_threshold_nm=10.0)
+    rwd, _ = _pure(weights=weights, params=params, error_rad=0.01, knee_vel_rad_s=0.0)
+    assert rwd["pose"] == approx(math.exp(-(0.01**2) / (2 * 0.3**2)) - 0.01)
+    assert rwd["bonus"] == 0.5
+    assert rwd["inter"] == approx((10.0 / 100.0) ** 2 + (40.0 / 100.0) ** 2)
+    assert rwd["dense"] == approx(-10.0 * rwd["act"] + 2.0 * rwd["pose"])
+
+
+def test_env_reward_is_the_pure_function_of_consecutive_steps(default_run):
+    """The env's reward of each step equals ``reward_dict`` of the step's observations and
+    the previous step's (the reset's for the first), bit for bit."""
+    from myoexo.envs.config import RewardParams
+    from myoexo.envs.reward import reward_dict
+
+    reset_info, steps = default_run
+    prev_u, prev_vel, prev_tau = (
+        0.0,
+        reset_info["knee_vel_rad_s"],
+        reset_info["interaction_torque_nm"],
+    )
+    for reward, info in steps:
+        od = info["obs_dict"]
+        vel, tau = float(od["knee_vel_rad_s"][0]), float(od["interaction_torque_nm"][0])
+        rwd = reward_dict(
+            float(od["error_rad"][0]),
+            vel,
+            tau,
+            info["command"],
+            prev_u,
+            prev_vel,
+            prev_tau,
+            RewardParams(),
+            DEFAULT_REWARD_WEIGHTS,
+        )
+        assert rwd == info["rwd_dict"] and rwd["dense"] == reward
+        prev_u, prev_vel, prev_tau = info["command"], vel, tau

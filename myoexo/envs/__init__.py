@@ -1,6 +1,9 @@
 """Gymnasium environments of myoexo (registered on ``import myoexo``).
 
-``make_env(level, ...)`` builds one (:func:`~myoexo.envs.registration.make_env`).
+``make_env(level, ...)`` builds one (:func:`~myoexo.envs.registration.make_env`). The env
+(:mod:`~myoexo.envs.knee_exo`) keeps its observation keys and layout in
+:mod:`~myoexo.envs.observation`, its reward in :mod:`~myoexo.envs.reward` and the perturbed
+twin in :mod:`~myoexo.envs.robustness`.
 """
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, RewardParams, TaskParams
@@ -19,9 +22,13 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    # The env class imports MuJoCo models and MyoSuite: load it only when asked for.
-    if name in ("MyoExoKneeEnv", "DEFAULT_OBS_KEYS"):
-        from myoexo.envs import knee_exo
+    # The env class imports MyoSuite's env base: load it only when asked for.
+    if name == "MyoExoKneeEnv":
+        from myoexo.envs.knee_exo import MyoExoKneeEnv
 
-        return getattr(knee_exo, name)
+        return MyoExoKneeEnv
+    if name in ("DEFAULT_OBS_KEYS", "OBS_PRESETS"):
+        from myoexo.envs import observation
+
+        return getattr(observation, name)
     raise AttributeError(name)

@@ -8,7 +8,11 @@ The ids are registered with gymnasium and MyoSuite's registry on ``import myoexo
 The env truncates its episodes itself (at ``TaskParams.episode_steps``, 800 control steps
 by default) and reports instability as a truncation, so neither gymnasium's ``TimeLimit``
 nor MyoSuite's instability wrapper is added: an env built with another ``TaskParams`` needs
-nothing more. :func:`make_env` is the shortcut every part of myoexo uses::
+nothing more. Its ``spec.max_episode_steps`` still reports the episode length of the env's
+own task (``gymnasium.make(id).spec.max_episode_steps == 800``; 400 for a 4 s task), which
+the tools that read it use as their horizon (MyoSuite's ``examine_env``, rl_zoo3,
+gymnasium's wrappers). An explicit ``gymnasium.make(..., max_episode_steps=n)`` still adds
+gymnasium's ``TimeLimit(n)``. :func:`make_env` is the shortcut every part of myoexo uses::
 
     env = make_env(2, episode_duration_s=4.0, reward_weights={"inter": -0.5})
 """
@@ -33,7 +37,9 @@ ENV_LEVELS: dict[str, int | str] = {
     RANDOM_ENV_ID: RANDOM_LEVEL,
 }
 
-#: Default episode length in control steps (8 s at 100 Hz), recorded in the registry.
+#: Default episode length in control steps (8 s at 100 Hz), recorded in MyoSuite's registry
+#: (gymnasium's entry has none, so that ``gymnasium.make`` adds no ``TimeLimit``; the env's
+#: ``spec`` reports its own length).
 MAX_EPISODE_STEPS = TaskParams().episode_steps
 
 
@@ -72,7 +78,7 @@ def env_id(level: int | str) -> str:
 def make_env(
     env: int | str = 0,
     *,
-    task: TaskParams | None = None,
+    task: TaskParams | Mapping[str, Any] | None = None,
     episode_duration_s: float | None = None,
     reward_weights: Mapping[str, float] | None = None,
     subject_noise: bool = True,
@@ -83,7 +89,8 @@ def make_env(
     Args:
         env: A spasticity level (0..3 or ``"random"``) or an env id (``"MyoExoKnee-v2"``,
             ``"module:EnvId"`` for an env registered by another module).
-        task: Task parameters (default: the env's, i.e. :class:`TaskParams`' defaults).
+        task: Task parameters, or a mapping of their fields (default: the env's, i.e.
+            :class:`TaskParams`' defaults).
         episode_duration_s: Shortcut replacing ``task.episode_duration_s`` (``None``: keep).
         reward_weights: Reward-weight overrides on top of the defaults
             (:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`); an unknown key raises.
@@ -97,6 +104,8 @@ def make_env(
     register_envs()  # a no-op after ``import myoexo``; here for ``myoexo.envs`` alone
 
     env_name = env if isinstance(env, str) and env != RANDOM_LEVEL else env_id(env)
+    if isinstance(task, Mapping):
+        task = TaskParams(**task)
     if episode_duration_s is not None:
         task = dataclasses.replace(task or TaskParams(), episode_duration_s=episode_duration_s)
     if task is not None:

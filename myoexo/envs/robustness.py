@@ -41,6 +41,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from myoexo.model import COUPLING_JOINTS, EXO_ACTUATOR, STRAP_EQUALITY
+
 #: Default sensor noise: observation key -> standard deviation in the key's physical unit.
 #: Encoders 0.1 deg / 0.01 rad/s (a 14-bit encoder and a filtered derivative), motor torque
 #: 1 Nm (current-based estimate), cuff sensors 1 N / 0.1 Nm, muscle states 1 % of their
@@ -113,6 +115,41 @@ class RobustnessParams:
     def nominal(cls) -> RobustnessParams:
         """No perturbation at all (every range collapsed; for tests)."""
         return cls((1.0, 1.0), (1.0, 1.0), 0.0, 0.0, 0.0, 0.0, ())
+
+
+def robustness_params(robustness: RobustnessParams | bool | None) -> RobustnessParams | None:
+    """The env's ``robustness=`` argument as parameters: ``True`` -> the default ranges,
+    ``False``/``None`` -> ``None`` (the nominal twin, exact sensors).
+
+    Raises:
+        ValueError: If it is anything else.
+    """
+    if robustness is True:
+        return RobustnessParams()
+    if robustness is False or robustness is None:
+        return None
+    if not isinstance(robustness, RobustnessParams):
+        raise ValueError(
+            f"robustness = {robustness!r}: expected a RobustnessParams, True, False or None"
+        )
+    return robustness
+
+
+def twin_perturbation(
+    model: mujoco.MjModel, params: RobustnessParams, coupling_joints: tuple[str, ...]
+) -> TwinPerturbation:
+    """The :class:`TwinPerturbation` of the MyoExoKnee twin: its coupling joints, the thigh
+    slider (the first coupling joint), the shank strap weld if the model has one, the exo
+    motor."""
+    has_weld = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, STRAP_EQUALITY) >= 0
+    return TwinPerturbation(
+        model,
+        params,
+        coupling_joints,
+        COUPLING_JOINTS[0],
+        STRAP_EQUALITY if has_weld else None,
+        EXO_ACTUATOR,
+    )
 
 
 class TwinPerturbation:
@@ -211,6 +248,23 @@ class SensorModel:
         std_raw: Noise standard deviation of each raw entry (0: exact).
         delay_steps: Latency in control steps.
     """
+
+    @classmethod
+    def with_latency(
+        cls, std_raw: np.ndarray, latency_s: float, control_period_s: float
+    ) -> SensorModel:
+        """A sensor model whose latency is *latency_s* (a whole number of control periods).
+
+        Raises:
+            ValueError: If the latency is not a whole number of control periods.
+        """
+        steps = latency_s / control_period_s
+        if abs(steps - round(steps)) > 1e-6:
+            raise ValueError(
+                f"robustness.latency_s = {latency_s} s must be a whole number of "
+                f"control periods ({control_period_s} s)"
+            )
+        return cls(std_raw, round(steps))
 
     def __init__(self, std_raw: np.ndarray, delay_steps: int) -> None:
         self.std_raw = np.asarray(std_raw, dtype=np.float64)

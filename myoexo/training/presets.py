@@ -46,6 +46,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from myoexo.envs.observation import OBS_PRESETS
 from myoexo.policies.algorithms import get_algorithm
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -53,8 +54,6 @@ from myoexo.spasticity.levels import VALID_LEVELS
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
 _VEC_ENVS = ("dummy", "subproc")
-#: Names of the env's observation presets (``myoexo.envs.knee_exo.OBS_PRESETS``).
-OBS_PRESET_NAMES = ("full", "exo")
 _ACTIVATIONS = ("gelu", "relu", "tanh", "elu")
 
 
@@ -200,8 +199,8 @@ class SACPreset:
             raise ValueError(
                 f"batch_size = {self.batch_size} exceeds buffer_size = {self.buffer_size}"
             )
-        if self.obs_preset not in OBS_PRESET_NAMES:
-            raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {OBS_PRESET_NAMES}")
+        if self.obs_preset not in OBS_PRESETS:
+            raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {sorted(OBS_PRESETS)}")
         get_algorithm(self.algorithm, trainable=True)  # ValueError naming the accepted ones
         if self.vec_env not in _VEC_ENVS:
             raise ValueError(f"vec_env = {self.vec_env!r}; accepted: {_VEC_ENVS}")
