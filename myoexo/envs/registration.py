@@ -22,7 +22,10 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
 from myoexo.spasticity.levels import RANDOM_LEVEL, VALID_LEVELS
@@ -83,7 +86,7 @@ def make_env(
     reward_weights: Mapping[str, float] | None = None,
     subject_noise: bool = True,
     **kwargs: Any,
-) -> Any:
+) -> gym.Env[Any, Any]:
     """Build a MyoExoKnee env through ``gymnasium.make``.
 
     Args:

@@ -144,7 +144,7 @@ def env_fingerprint(env_id: str) -> str:
 
     from myoexo.envs import make_env
 
-    env = make_env(env_id).unwrapped
+    env: Any = make_env(env_id).unwrapped  # a MyoExoKneeEnv
     try:
         model = env.model
         mjb = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)

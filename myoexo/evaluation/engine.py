@@ -237,7 +237,8 @@ def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chu
         row["controller_spec"] = chunk.spec.text
         rows.append(row)
         traces.append(downsample_trace(result, config.trace_stride, n_samples))
-    dt = float(env.unwrapped.dt)
+    base: Any = env.unwrapped  # a MyoExoKneeEnv
+    dt = float(base.dt)
     time_s = (np.arange(n_samples) * config.trace_stride * dt).astype(np.float32)
     save_chunk(chunk.path(Path(out_dir)), rows, np.stack(traces), time_s)
     return chunk, len(rows)

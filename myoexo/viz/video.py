@@ -316,7 +316,7 @@ def write_episode_video(
     spec = parse_controller_spec(controller)
     env = make_env(cfg.level, twin=TwinParams(scene=cfg.scene), **spec_env_kwargs(spec))
     try:
-        base = env.unwrapped
+        base: Any = env.unwrapped  # a MyoExoKneeEnv
         model = base.model
         camera = camera_name(model, cfg.camera)
         # The offscreen buffer bounds the frame size: grow it on this env's own model.
