@@ -38,6 +38,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
     "pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),
     "mas-exam": ("myoexo.clinical.mas", "Modified Ashworth examination: resistance profile"),
+    "stretch-hold": (
+        "myoexo.clinical.hold",
+        "stretch and hold: does the resistance last after a fast stretch?",
+    ),
     "calibrate": (
         "myoexo.spasticity.calibrate",
         "fit the stretch reflex so that the paper's PID behaves as in the study",

@@ -8,7 +8,10 @@ function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
 * ``myoexo pendulum``: :func:`~myoexo.clinical.pendulum.run_pendulum`, Wartenberg's
   pendulum test, relaxation index (:mod:`myoexo.clinical.pendulum`);
 * ``myoexo mas-exam``: :func:`~myoexo.clinical.mas.run_mas_exam`, the Modified Ashworth
-  examination's resistance profile (:mod:`myoexo.clinical.mas`).
+  examination's resistance profile (:mod:`myoexo.clinical.mas`);
+* :func:`~myoexo.clinical.hold.run_stretch_hold` (``myoexo stretch-hold``): a
+  fast and a slow stretch, each then held: does the resistance outlast the stretch
+  (:mod:`myoexo.clinical.hold`)?
 
 Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
 :class:`~myoexo.spasticity.ReflexConfig`) so the reflex models can be compared side by side,
@@ -30,6 +33,8 @@ __all__ = [
     "MASExamResult",
     "PendulumParams",
     "PendulumResult",
+    "StretchHoldParams",
+    "StretchHoldResult",
     "TardieuParams",
     "TardieuResult",
     "plot_mas_exam",
@@ -37,6 +42,7 @@ __all__ = [
     "plot_tardieu",
     "run_mas_exam",
     "run_pendulum",
+    "run_stretch_hold",
     "run_tardieu",
 ]
 
@@ -53,6 +59,9 @@ _HOMES = {
     "MASExamResult": "mas",
     "plot_mas_exam": "mas",
     "run_mas_exam": "mas",
+    "StretchHoldParams": "hold",
+    "StretchHoldResult": "hold",
+    "run_stretch_hold": "hold",
 }
 
 

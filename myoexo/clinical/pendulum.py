@@ -49,8 +49,9 @@ lengthens.
 
 CLI::
 
-    myoexo pendulum [--levels 0 1 2 3] [--reflex stretch|uniform] [--posture seated|reclined]
-                    [--start-deg D] [--swing-s 10] [--subject-seed N] [--out DIR]
+    myoexo pendulum [--levels 0 1 2 3] [--reflex stretch|uniform|persistent]
+                    [--posture seated|reclined] [--start-deg D] [--swing-s 10]
+                    [--subject-seed N] [--out DIR]
 """
 
 from __future__ import annotations

@@ -2,13 +2,14 @@
 
 :class:`OracleMPC` is receding-horizon *predictive sampling* (the planner of MuJoCo MPC,
 Howell et al. 2022): every ``replan`` control steps it copies the env's physics state and
-the reflex's delay line into a private ``MjData`` (the same ``MjModel``, so a perturbed
-twin is planned on as it is), rolls out ``samples`` torque plans over ``horizon_s`` (the
-best plan so far, shifted, plus Gaussian perturbations of it and the two saturated
-constants), and keeps the cheapest. A plan is piecewise linear between ``knots`` values;
-the cost per control step is ``(e / 1 rad)^2 + torque_weight * u^2`` with ``e`` the human
-knee error, the last step of the horizon counts ``terminal_weight`` times and adds
-``velocity_weight * (knee velocity)^2`` (end at rest).
+the reflex's memory (its delay line and, for ``reflex="persistent"``, the after-discharge)
+into a private ``MjData`` (the same ``MjModel``, so a perturbed twin is planned on as it
+is), rolls out ``samples`` torque plans over ``horizon_s`` (the best plan so far, shifted,
+plus Gaussian perturbations of it and the two saturated constants), and keeps the cheapest.
+A plan is piecewise linear between ``knots`` values; the cost per control step is
+``(e / 1 rad)^2 + torque_weight * u^2`` with ``e`` the human knee error, the last step of
+the horizon counts ``terminal_weight`` times and adds ``velocity_weight * (knee
+velocity)^2`` (end at rest).
 
 It knows the subject (its reflex parameters are in the copied stage) and the exact dynamics,
 which no real controller does; what it reaches is what the 100 Nm motor can reach on this
@@ -166,7 +167,7 @@ class OracleMPC:
     def _rollout_cost(self, plan: np.ndarray, stage: SpasticityStage, delay: tuple) -> float:
         m, d = self._model, self._data
         mujoco.mj_setState(m, d, self._state, self._state_spec)
-        stage.delay_line.set_state(delay)
+        stage.set_history_state(delay)
         ctrl, host = self._ctrl, self._host
         cost = 0.0
         tw = self.config.torque_weight
@@ -185,7 +186,7 @@ class OracleMPC:
         e, cfg = self.env, self.config
         mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
         stage = e.spasticity.planning_copy(e.model, e.dt)
-        delay = e.spasticity.delay_line.state()
+        delay = e.spasticity.history_state()  # delay line + after-discharge
         # the best plan so far, shifted by the steps it has run
         shift = self._step_in_plan / max(self._steps - 1, 1) * (cfg.knots - 1)
         grid = np.arange(cfg.knots) + shift

@@ -110,6 +110,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "slide friction +-50 %%, motor constant +-5 %%, sensor noise, 10 ms latency; "
         "myoexo.envs.robustness), drawn from the subject's seed",
     )
+    parser.add_argument(
+        "--reflex",
+        default=d.reflex,
+        help="reflex model of the twin: stretch (default), uniform or persistent "
+        "(docs/reference.md sections 2 and 11)",
+    )
     parser.add_argument("--report", action="store_true", help="write the report when done")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -130,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
             chunk_size=args.chunk_size,
             env_id=args.env_id,
             perturbed=args.perturbed,
+            reflex=args.reflex,
         )
         result = evaluate(
             config,

@@ -68,6 +68,8 @@ class EvaluationConfig:
             parts and sensor noise/latency (``make_env(..., robustness=True)``,
             :mod:`myoexo.envs.robustness`) from its subject seed, the same for every
             controller.
+        reflex: Reflex model of the twin, a preset of
+            :data:`~myoexo.spasticity.REFLEX_PRESETS` (default ``"stretch"``).
     """
 
     controllers: tuple[str, ...] = ("pid",)
@@ -79,8 +81,13 @@ class EvaluationConfig:
     chunk_size: int = 10
     env_id: str = "MyoExoKnee-v{level}"
     perturbed: bool = False
+    reflex: str = "stretch"
 
     def __post_init__(self) -> None:
+        from myoexo.spasticity.reflex import REFLEX_PRESETS
+
+        if self.reflex not in REFLEX_PRESETS:
+            raise ValueError(f"reflex = {self.reflex!r}; accepted: {sorted(REFLEX_PRESETS)}")
         object.__setattr__(self, "controllers", tuple(self.controllers))
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
         if not self.controllers:
@@ -107,7 +114,10 @@ class EvaluationConfig:
     @property
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of every env of the run (on top of a controller's own)."""
-        return {"robustness": True} if self.perturbed else {}
+        kwargs: dict[str, Any] = {"robustness": True} if self.perturbed else {}
+        if self.reflex != "stretch":
+            kwargs["reflex"] = self.reflex
+        return kwargs
 
     def level_env_id(self, level: int) -> str:
         """The env id of one level."""
@@ -132,6 +142,7 @@ class EvaluationConfig:
             "env_id": self.env_id,
             "env_fingerprint": env_fingerprint(self.level_env_id(self.levels[0])),
             **({"perturbed": True} if self.perturbed else {}),
+            **({"reflex": self.reflex} if self.reflex != "stretch" else {}),
         }
 
 

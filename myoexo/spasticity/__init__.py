@@ -28,16 +28,18 @@ The package, one module per part (each name is re-exported here):
 * :mod:`~myoexo.spasticity.coefficients`: :func:`phi`, :func:`sc_angle`,
   :func:`sc_velocity`, :func:`sc_total` (numpy, vectorized) and their torch twins (autograd
   through the inputs and every parameter);
-* :mod:`~myoexo.spasticity.reflex`: the reflex models (``"stretch"``, ``"uniform"``), their
-  calibration data (:data:`CALIBRATION`) and the torch twin of the stretch model;
+* :mod:`~myoexo.spasticity.reflex`: the reflex models (``"stretch"``, ``"uniform"``,
+  ``"persistent"``), their calibration data (:data:`CALIBRATION`, :data:`PERSISTENT`) and
+  their torch twins;
   :mod:`~myoexo.spasticity.delay`: the transmission delay line;
 * :mod:`~myoexo.spasticity.stage`: :class:`SpasticityStage`, the reflex as a stage of
   MyoSuite's muscle-command pipeline (:mod:`myosuite.envs.muscle_stages`), and
   :class:`StageHost`, the smallest host it runs on;
 * :mod:`~myoexo.spasticity.wrapper`: :class:`SpasticityWrapper`, a gymnasium wrapper that
   installs the stage on any MyoSuite env whose model has the 11 muscles and ``knee_angle_r``;
-* :mod:`~myoexo.spasticity.calibrate` (``myoexo calibrate``, fits the stretch reflex to the
-  paper's PID) and :mod:`~myoexo.spasticity.plots` (Fig. 2b).
+* :mod:`~myoexo.spasticity.calibrate` (``myoexo calibrate``, fits the stretch reflex, or with
+  ``--reflex persistent`` the after-discharge, to the paper's PID) and
+  :mod:`~myoexo.spasticity.plots` (Fig. 2b).
 
 Example::
 
@@ -76,15 +78,19 @@ from myoexo.spasticity.levels import (
 )
 from myoexo.spasticity.reflex import (
     CALIBRATION,
+    PERSISTENT,
     REFLEX_MODELS,
     REFLEX_PRESETS,
     STRETCH_DELAY_S,
     UNCALIBRATED,
     LevelCalibration,
+    PersistentParams,
     ReflexConfig,
     StretchCalibration,
     group_excitations,
     group_excitations_torch,
+    persistent_step,
+    persistent_step_torch,
     reflex_config,
 )
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
@@ -94,6 +100,7 @@ __all__ = [
     "CALIBRATION",
     "KNEE_JOINT",
     "LEVELS",
+    "PERSISTENT",
     "RANDOM_LEVEL",
     "REFLEX_MODELS",
     "REFLEX_PRESETS",
@@ -107,6 +114,7 @@ __all__ = [
     "VALID_LEVELS",
     "DelayLine",
     "LevelCalibration",
+    "PersistentParams",
     "ReflexConfig",
     "SpasticityParams",
     "SpasticityStage",
@@ -117,6 +125,8 @@ __all__ = [
     "below",
     "group_excitations",
     "group_excitations_torch",
+    "persistent_step",
+    "persistent_step_torch",
     "phi",
     "phi_torch",
     "reflex_config",

@@ -19,6 +19,16 @@ are not fitted; they are checked (overshoot, final error < 1 deg). Gains stay 1 
 prints the fitted :class:`~myoexo.spasticity.reflex.StretchCalibration` (to paste into
 :data:`myoexo.spasticity.reflex.CALIBRATION`) and the verification table: PID final error and
 overshoot per level next to the paper's, on ``--verify-subjects`` subjects per level.
+
+``--reflex persistent`` fits the ``"persistent"`` model instead
+(:func:`calibrate_persistent`): the after-discharge gains ``G`` of levels 2 and 3 by the
+same bisection on the PID's mean final error (a larger gain stalls it further), level 1's
+gain ``--level1-fraction`` x level 2's, then verifies every level and runs the PID on a
+target ramped over ``--ramp-s`` s (``PIDConfig(ramp_s=...)``, the gentle approach) at levels 2-3::
+
+    myoexo calibrate --reflex persistent --subjects 30 --verify-subjects 200
+
+prints :data:`myoexo.spasticity.reflex.PERSISTENT`'s gains and the table.
 """
 
 from __future__ import annotations
@@ -37,8 +47,11 @@ import numpy as np
 
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.spasticity.reflex import (
+    PERSISTENT,
+    REFLEX_PRESETS,
     STRETCH_DELAY_S,
     LevelCalibration,
+    PersistentParams,
     ReflexConfig,
     StretchCalibration,
 )
@@ -75,6 +88,8 @@ class PIDOutcome:
         final_error_std_deg: Its standard deviation over the subjects.
         overshoot_deg: Mean overshoot past the target (deg).
         settled_fraction: Fraction of subjects whose knee settled (2 % band).
+        peak_exo_torque_nm: Mean over the subjects of the peak exo torque, Nm.
+        settling_time_s: Median settling time of the settled subjects, s (NaN if none).
     """
 
     level: int
@@ -83,6 +98,8 @@ class PIDOutcome:
     final_error_std_deg: float
     overshoot_deg: float
     settled_fraction: float
+    peak_exo_torque_nm: float = math.nan
+    settling_time_s: float = math.nan
 
 
 def pid_outcome(
@@ -90,15 +107,18 @@ def pid_outcome(
     reflex: ReflexConfig,
     subjects: int,
     root_seed: int = 0,
+    ramp_s: float | None = None,
 ) -> PIDOutcome:
-    """The paper's PID on ``subjects`` subjects of ``level`` with the reflex ``reflex``."""
-    from myoexo.control import PID
+    """The paper's PID on ``subjects`` subjects of ``level`` with the reflex ``reflex``
+    (following a target ramped over ``ramp_s`` s, :attr:`PIDConfig.ramp_s
+    <myoexo.control.pid.PIDConfig.ramp_s>`, if given)."""
+    from myoexo.control import PID, PIDConfig
     from myoexo.envs import TaskParams, make_env
     from myoexo.evaluation.config import subject_seed
     from myoexo.evaluation.engine import run_episode
 
     env = make_env(level, reflex=reflex)
-    pid = PID(dt_s=TaskParams().control_period_s)
+    pid = PID(PIDConfig(ramp_s=ramp_s or 0.0), dt_s=TaskParams().control_period_s)
     try:
         rows = [
             run_episode(env, pid, subject_seed(level, i, root_seed)).metrics
@@ -108,7 +128,8 @@ def pid_outcome(
         env.close()
     final = np.array([m.final_error_deg for m in rows])
     overshoot = np.array([m.target_overshoot_deg for m in rows])
-    settled = np.array([math.isfinite(m.settling_time_s) for m in rows])
+    settling = np.array([m.settling_time_s for m in rows])
+    settled = np.isfinite(settling)
     return PIDOutcome(
         level=level,
         subjects=subjects,
@@ -116,6 +137,8 @@ def pid_outcome(
         final_error_std_deg=float(final.std(ddof=1)) if subjects > 1 else 0.0,
         overshoot_deg=float(overshoot.mean()),
         settled_fraction=float(settled.mean()),
+        peak_exo_torque_nm=float(np.mean([m.peak_exo_torque_nm for m in rows])),
+        settling_time_s=float(np.median(settling[settled])) if settled.any() else math.nan,
     )
 
 
@@ -310,6 +333,205 @@ def calibrate(
     )
 
 
+# ------------------------------------------------------------------ the persistent reflex
+def _with_gains(reflex: ReflexConfig, gains: Mapping[int, float], note: str = "") -> ReflexConfig:
+    params = dataclasses.replace(
+        reflex.persistent, gains=MappingProxyType(dict(gains)), note=note or reflex.persistent.note
+    )
+    return dataclasses.replace(reflex, persistent=params)
+
+
+def fit_persistent_gain(
+    level: int,
+    target_final_error_deg: float,
+    base: ReflexConfig,
+    subjects: int,
+    root_seed: int = 0,
+    bracket: tuple[float, float] = (0.1, 0.5),
+    tol: float = 0.004,
+    log: Callable[[str], None] | None = None,
+) -> tuple[float, PIDOutcome]:
+    """Bisection on the after-discharge gain ``G`` of ``level`` (the ``"persistent"`` model)
+    until the paper's PID's mean final error meets ``target_final_error_deg`` (a larger gain
+    holds the knee further from the target).
+
+    Returns:
+        ``(gain, outcome at that gain)``.
+
+    Raises:
+        ValueError: The target is not bracketed by ``bracket``.
+    """
+
+    def outcome(gain: float) -> PIDOutcome:
+        gains = dict(base.persistent.gains)
+        gains[level] = gain
+        out = pid_outcome(level, _with_gains(base, gains), subjects, root_seed)
+        if log:
+            log(
+                f"  L{level} gain {gain:6.4f}: final error {out.final_error_deg:6.2f} "
+                f"+- {out.final_error_std_deg:5.2f} deg, overshoot {out.overshoot_deg:5.2f} deg"
+            )
+        return out
+
+    lo, hi = bracket
+    out_lo, out_hi = outcome(lo), outcome(hi)
+    if not out_lo.final_error_deg <= target_final_error_deg <= out_hi.final_error_deg:
+        raise ValueError(
+            f"level {level}: the target final error {target_final_error_deg} deg is not "
+            f"between {out_lo.final_error_deg:.2f} (gain {lo}) and "
+            f"{out_hi.final_error_deg:.2f} deg (gain {hi})"
+        )
+    best = min(
+        ((lo, out_lo), (hi, out_hi)),
+        key=lambda b: abs(b[1].final_error_deg - target_final_error_deg),
+    )
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        out_mid = outcome(mid)
+        if abs(out_mid.final_error_deg - target_final_error_deg) < abs(
+            best[1].final_error_deg - target_final_error_deg
+        ):
+            best = (mid, out_mid)
+        if out_mid.final_error_deg < target_final_error_deg:
+            lo = mid
+        else:
+            hi = mid
+    return best
+
+
+@dataclass(frozen=True)
+class PersistentCalibrationResult:
+    """What :func:`calibrate_persistent` found.
+
+    Attributes:
+        params: The fitted after-discharge (:class:`~myoexo.spasticity.reflex.PersistentParams`,
+            its ``note`` the provenance).
+        reflex: The reflex config with it.
+        outcomes: Level -> the paper's PID on the verification subjects.
+        ramped: Level -> the same PID following a target ramped over ``ramp_s``.
+        ramp_s: Duration of the ramp, s.
+        targets: The targets.
+        wall_time_s: Time the fit and the verification took.
+    """
+
+    params: PersistentParams
+    reflex: ReflexConfig
+    outcomes: Mapping[int, PIDOutcome]
+    ramped: Mapping[int, PIDOutcome]
+    ramp_s: float
+    targets: CalibrationTargets
+    wall_time_s: float
+
+    def table(self) -> Any:
+        """Per level: the PID (and the ramped PID) next to the paper's PID (pandas)."""
+        import pandas as pd
+
+        from myoexo.evaluation.paper import PAPER_RESULTS
+
+        rows = []
+        for level, out in self.outcomes.items():
+            ramp = self.ramped.get(level)
+            rows.append(
+                {
+                    "level": level,
+                    "gain": f"{self.params.gain(level):.4f}",
+                    "subjects": out.subjects,
+                    "PID final error (deg)": f"{out.final_error_deg:.2f} ± "
+                    f"{out.final_error_std_deg:.2f}",
+                    "paper": PAPER_RESULTS[level].pid_final_error_text,
+                    "PID overshoot (deg)": f"{out.overshoot_deg:.2f}",
+                    "PID peak exo (Nm)": f"{out.peak_exo_torque_nm:.0f}",
+                    f"ramped {self.ramp_s:g} s final error (deg)": "-"
+                    if ramp is None
+                    else f"{ramp.final_error_deg:.2f} ± {ramp.final_error_std_deg:.2f}",
+                    "ramped peak exo (Nm)": "-"
+                    if ramp is None
+                    else f"{ramp.peak_exo_torque_nm:.0f}",
+                    "ramped settling (s)": "-" if ramp is None else f"{ramp.settling_time_s:.2f}",
+                }
+            )
+        return pd.DataFrame(rows)
+
+    def snippet(self) -> str:
+        """The fitted gains as Python, for :data:`myoexo.spasticity.reflex.PERSISTENT`."""
+        items = ", ".join(f"{lv}: {g:.4f}" for lv, g in sorted(self.params.gains.items()))
+        return f"gains=MappingProxyType({{{items}}})"
+
+
+def calibrate_persistent(
+    subjects: int = 30,
+    verify_subjects: int = 200,
+    level1_fraction: float = 0.5,
+    ramp_s: float = 3.0,
+    targets: CalibrationTargets | None = None,
+    root_seed: int = 0,
+    levels: Sequence[int] = VALID_LEVELS,
+    base: PersistentParams = PERSISTENT,
+    log: Callable[[str], None] = print,
+) -> PersistentCalibrationResult:
+    """Fit the after-discharge gains of the target levels (2, 3) of the ``"persistent"``
+    model, set level 1's to ``level1_fraction`` x level 2's (chosen, not fitted; checked:
+    the PID must still reach the target), then verify every level and run the ramped PID at
+    the fitted levels.
+
+    Args:
+        subjects: Subjects per level during the fit.
+        verify_subjects: Subjects per level of the verification.
+        level1_fraction: Level 1's gain as a fraction of level 2's.
+        ramp_s: Ramp duration of the gentle controller, s.
+        targets: What to fit (default :class:`CalibrationTargets`).
+        root_seed: Root seed of the subjects.
+        levels: Levels to verify.
+        base: The after-discharge's other parameters (threshold, time constants).
+        log: Progress lines.
+    """
+    t0 = time.perf_counter()
+    tg = targets or CalibrationTargets()
+    gains = {lv: 0.0 for lv in VALID_LEVELS}
+    reflex = dataclasses.replace(REFLEX_PRESETS["persistent"], persistent=base)
+    reflex = _with_gains(reflex, gains)
+    for level, target in sorted(tg.pid_final_error_deg.items()):
+        log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
+        gain, _ = fit_persistent_gain(level, target, reflex, subjects, root_seed, log=log)
+        gains[level] = round(gain, 4)
+        reflex = _with_gains(reflex, gains)
+    if 2 in gains and 1 in gains:
+        gains[1] = round(level1_fraction * gains[2], 4)
+        reflex = _with_gains(reflex, gains)
+    log(f"verifying on {verify_subjects} subjects per level")
+    outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, root_seed) for lv in levels}
+    log(f"ramped PID ({ramp_s:g} s) on {verify_subjects} subjects per fitted level")
+    ramped = {
+        lv: pid_outcome(lv, reflex, verify_subjects, root_seed, ramp_s=ramp_s)
+        for lv in sorted(tg.pid_final_error_deg)
+        if lv in levels
+    }
+    elapsed = time.perf_counter() - t0
+    note = (
+        f"myoexo calibrate --reflex persistent --subjects {subjects} --verify-subjects "
+        f"{verify_subjects} --level1-fraction {level1_fraction}: PID final error "
+        + ", ".join(
+            f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
+            for lv, o in outcomes.items()
+        )
+        + f"; PID ramped over {ramp_s:g} s: "
+        + ", ".join(
+            f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
+            for lv, o in ramped.items()
+        )
+    )
+    params = dataclasses.replace(reflex.persistent, note=note)
+    return PersistentCalibrationResult(
+        params=params,
+        reflex=dataclasses.replace(reflex, persistent=params),
+        outcomes=outcomes,
+        ramped=ramped,
+        ramp_s=ramp_s,
+        targets=tg,
+        wall_time_s=elapsed,
+    )
+
+
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``myoexo calibrate``."""
@@ -326,6 +548,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1.0,
         help="gain of the extensors' reflex at levels 1-3, fixed (default: 1)",
     )
+    parser.add_argument(
+        "--reflex",
+        choices=("stretch", "persistent"),
+        default="stretch",
+        help="model to fit: the stretch reflex's thresholds (default) or the persistent "
+        "reflex's after-discharge gains",
+    )
+    parser.add_argument(
+        "--level1-fraction",
+        type=float,
+        default=0.5,
+        help="persistent: level 1's gain as a fraction of level 2's (default: 0.5)",
+    )
+    parser.add_argument(
+        "--ramp-s",
+        type=float,
+        default=3.0,
+        help="persistent: ramp of the gentle PID checked after the fit, s (default: 3)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="root seed of the subjects")
     parser.add_argument(
         "--out", type=Path, default=None, help="folder for calibration.md and .csv (optional)"
@@ -337,6 +578,8 @@ def run(args: argparse.Namespace) -> int:
     for name in ("subjects", "verify_subjects"):
         if getattr(args, name) < 2:
             raise ValueError(f"--{name.replace('_', '-')} = {getattr(args, name)} must be >= 2")
+    if getattr(args, "reflex", "stretch") == "persistent":
+        return _run_persistent(args)
     result = calibrate(
         args.subjects,
         args.verify_subjects,
@@ -348,6 +591,33 @@ def run(args: argparse.Namespace) -> int:
     text = (
         f"# Calibration of the stretch reflex\n\n{result.calibration.note}\n\n"
         f"Fitted levels (paste into myoexo.spasticity.reflex.CALIBRATION):\n\n```python\n"
+        f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
+        f"Wall time {result.wall_time_s:.0f} s.\n"
+    )
+    print(text)
+    if args.out is not None:
+        from myoexo.runtime.files import atomic_path, write_text_atomic
+
+        write_text_atomic(args.out / "calibration.md", text)
+        with atomic_path(args.out / "calibration.csv") as path:
+            table.to_csv(path, index=False)
+    return 0
+
+
+def _run_persistent(args: argparse.Namespace) -> int:
+    if not (math.isfinite(args.level1_fraction) and 0.0 <= args.level1_fraction <= 1.0):
+        raise ValueError(f"--level1-fraction = {args.level1_fraction!r} is outside [0, 1]")
+    result = calibrate_persistent(
+        args.subjects,
+        args.verify_subjects,
+        level1_fraction=args.level1_fraction,
+        ramp_s=args.ramp_s,
+        root_seed=args.seed,
+    )
+    table = result.table()
+    text = (
+        f"# Calibration of the persistent reflex\n\n{result.params.note}\n\n"
+        f"Fitted gains (paste into myoexo.spasticity.reflex.PERSISTENT):\n\n```python\n"
         f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
         f"Wall time {result.wall_time_s:.0f} s.\n"
     )

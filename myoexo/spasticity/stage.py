@@ -30,6 +30,10 @@ from myoexo.spasticity.levels import (
 )
 from myoexo.spasticity.reflex import LevelCalibration, ReflexConfig, reflex_config
 
+#: What :meth:`SpasticityStage.history_state` returns: the delay line's state and the
+#: after-discharge ``r`` of the ``"persistent"`` model (0.0 for the others).
+HistoryState = tuple[tuple[tuple[float, ...], tuple[float, ...], int], float]
+
 #: Name of the stage in MyoSuite's muscle-command pipeline.
 STAGE_NAME = "spasticity"
 
@@ -67,11 +71,17 @@ class SpasticityStage:
     reflex's transmission delay (:class:`~myoexo.spasticity.delay.DelayLine`, whole control
     periods of the host's ``env.dt``), computes the current subject's reflex excitation with
     the chosen model (:mod:`myoexo.spasticity.reflex`: ``"stretch"``, each muscle group
-    answering its own stretch, or ``"uniform"``, the paper's ``SC_total`` on all 11
-    muscles) and adds it to the spastic muscles' entries of ``ctrl``, clipped to ``[0, 1]``;
+    answering its own stretch, ``"uniform"``, the paper's ``SC_total`` on all 11
+    muscles, or ``"persistent"``, ``"uniform"`` plus the flexors' after-discharge ``G r``
+    whose state ``r`` remembers fast extensions for seconds) and adds it to the spastic
+    muscles' entries of ``ctrl``, clipped to ``[0, 1]``;
     every other entry is left as it is. MyoSuite's (MuJoCo's) activation dynamics then act on
     the excitation. :meth:`reset` draws the next subject (and, with ``level="random"``, the next
-    level, uniformly) from ``env.np_random`` and clears the delay line.
+    level, uniformly) from ``env.np_random`` and clears the delay line and the after-discharge
+    (``"persistent"`` also draws the subject's gain ``G (1 + rel_std z)``, ``z`` from a child
+    of ``env.np_random`` that leaves its stream where the other models leave it).
+    :meth:`history_state` / :meth:`set_history_state` save and restore the reflex's memory
+    (a planner's copy, :meth:`planning_copy`).
 
     The joint and actuator addresses are resolved once per model, so a step costs a few
     scalar operations and one fancy-indexed update of 11 entries.
@@ -82,7 +92,7 @@ class SpasticityStage:
             reset; ``False`` keeps the level's nominal Table I parameters.
         rel_std: Relative standard deviation of the subject parameters.
         reflex: Reflex model: a preset name of :data:`~myoexo.spasticity.reflex.REFLEX_PRESETS`
-            (``"stretch"``, the calibrated default, or ``"uniform"``) or a
+            (``"stretch"``, the calibrated default, ``"uniform"`` or ``"persistent"``) or a
             :class:`~myoexo.spasticity.reflex.ReflexConfig`.
         flexors: Actuators stretched by knee extension (default: the paper's 6).
         extensors: Actuators stretched by knee flexion (default: the paper's 5).
@@ -97,8 +107,10 @@ class SpasticityStage:
         reflex: The :class:`~myoexo.spasticity.reflex.ReflexConfig` in use.
         last_flexor_excitation: Reflex excitation added to the flexors at the last step.
         last_extensor_excitation: Reflex excitation added to the extensors at the last step.
-        last_sc_total: Their sum (for ``"uniform"``: ``SC_total``, which both groups get);
-            0 before any step.
+        last_sc_total: Their sum (for ``"uniform"``: ``SC_total``, which both groups get;
+            for ``"persistent"``: the flexors' ``SC_total + G r``); 0 before any step.
+        last_after_discharge: The after-discharge ``r`` after the last step
+            (``"persistent"``; 0 otherwise).
 
     Raises:
         ValueError: If *level* or *reflex* is unknown, *rel_std* invalid or a group empty.
@@ -126,7 +138,17 @@ class SpasticityStage:
         self.subject_noise = bool(subject_noise)
         self.rel_std = float(rel_std)
         self.reflex = reflex_config(reflex)
-        self._uniform = self.reflex.model == "uniform"
+        # "persistent" is the uniform reading plus the flexors' after-discharge
+        self._persistent = self.reflex.model == "persistent"
+        self._uniform = self.reflex.model == "uniform" or self._persistent
+        self._pic = self.reflex.persistent
+        self._pic_r = 0.0  # the after-discharge state r (persistent model)
+        self._pic_z = 0.0  # the subject's standard normal draw of its gain
+        self._pic_gain = 0.0  # this subject's gain G (fraction of the excitation range)
+        self._pic_rates = self._pic.rates(0.01)  # re-sized to the host's period in bind
+        self._pic_half_slope = 0.5 * self._pic.ignition_slope_per_rad_s
+        self._pic_v_ig = self._pic.ignition_velocity_rad_s
+        self.last_after_discharge = 0.0
         self.flexors = tuple(flexors)
         self.extensors = tuple(extensors)
         self.muscles = self.flexors + self.extensors
@@ -159,6 +181,9 @@ class SpasticityStage:
             ext_s_theta=cal.extensor_gain * p.s_theta,
             ext_s_v=cal.extensor_gain * p.s_v,
         )
+        if self._persistent:
+            noise = 1.0 + self.rel_std * self._pic_z if self.subject_noise else 1.0
+            self._pic_gain = self._pic.gain(level) * max(0.0, noise)
 
     def set_subject(self, subject: SpasticityParams, level: int | None = None) -> None:
         """Use *subject* from now until the next :meth:`reset` (e.g. a stretch test).
@@ -185,12 +210,28 @@ class SpasticityStage:
         else:
             level = int(self.level_setting)
         subject = sample_subject(level, rng, self.rel_std) if self.subject_noise else LEVELS[level]
+        if self._persistent and self.subject_noise:
+            self._pic_z = self._gain_draw(rng)
         self._set_subject(level, subject)
         self.clear_history()
 
+    @staticmethod
+    def _gain_draw(rng: np.random.Generator) -> float:
+        """The subject's standard normal for the after-discharge gain, from a child of *rng*
+        (``Generator.spawn``: *rng*'s own stream is not advanced, so the rest of the episode,
+        e.g. the env's start angle, draws what it draws under the other models)."""
+        try:
+            child = rng.spawn(1)[0]
+        except (AttributeError, TypeError, ValueError):  # a generator without a seed sequence
+            return float(rng.standard_normal())
+        return float(child.standard_normal())
+
     def clear_history(self) -> None:
-        """Forget the delayed knee states and the last excitations (a new motion starts)."""
+        """Forget the delayed knee states, the after-discharge and the last excitations (a
+        new motion starts)."""
         self._delay.clear()
+        self._pic_r = 0.0
+        self.last_after_discharge = 0.0
         self.last_sc_total = 0.0
         self.last_flexor_excitation = 0.0
         self.last_extensor_excitation = 0.0
@@ -228,14 +269,15 @@ class SpasticityStage:
         self._nu = int(model.nu)
         period = float(control_period_s or model.opt.timestep)
         self._delay = DelayLine(round(self.reflex.delay_s / period))
+        self._pic_rates = self._pic.rates(period)
         self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
         self._model = model
 
     def planning_copy(self, model: Any, control_period_s: float) -> SpasticityStage:
         """A copy of this stage (bound to *model* first if it is not yet) with the same
         subject and a delay line of its own: it can be run ahead on another ``MjData`` of
-        the model and reset to this stage's history (:attr:`delay_line` ``.state()``)
-        without touching this stage."""
+        the model and reset to this stage's history (:meth:`history_state`, which holds the
+        delay line and the after-discharge) without touching this stage."""
         import copy
 
         if self._model is not model:
@@ -244,6 +286,27 @@ class SpasticityStage:
         twin._delay = copy.deepcopy(self._delay)
         twin._data_views = None
         return twin
+
+    def history_state(self) -> HistoryState:
+        """The reflex's memory: the delay line's state and the after-discharge ``r``, for
+        :meth:`set_history_state` (a planner replays from here)."""
+        return self._delay.state(), self._pic_r
+
+    def set_history_state(self, state: HistoryState) -> None:
+        """Restore a memory taken by :meth:`history_state` (of a stage of the same delay)."""
+        delay, r = state
+        self._delay.set_state(delay)
+        self._pic_r = float(r)
+
+    @property
+    def after_discharge(self) -> float:
+        """The after-discharge state ``r`` in [0, 1] (``"persistent"``; 0 for the others)."""
+        return self._pic_r
+
+    @property
+    def after_discharge_gain(self) -> float:
+        """This subject's gain ``G`` of the flexors' extra excitation ``G r``."""
+        return self._pic_gain
 
     @property
     def delay_line(self) -> DelayLine:
@@ -274,7 +337,8 @@ class SpasticityStage:
 
     def excitations_now(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
         """``(flexor, extensor)`` reflex excitation of the current subject at one (already
-        delayed) knee state, with the stage's model.
+        delayed) knee state, with the stage's model (for ``"persistent"``: without the
+        after-discharge, which depends on the history, not on one state).
 
         Raises:
             ValueError: If the angle or the velocity is NaN or infinite.
@@ -339,6 +403,15 @@ class SpasticityStage:
             views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
         )
         flex, ext = self._excitations(theta_deg, vel_rad_s, self._uniform)
+        if self._persistent:  # the flexors' after-discharge: a few scalar operations
+            r = self._pic_r
+            a_rise, a_decay = self._pic_rates
+            # ignition gate sigmoid(slope (-v - v_ig)) = (1 + tanh(slope / 2 (...))) / 2
+            gate = 0.5 * (1.0 + math.tanh(self._pic_half_slope * (-vel_rad_s - self._pic_v_ig)))
+            r += gate * a_rise * (1.0 - r) - (1.0 - gate) * a_decay * r
+            self._pic_r = r
+            self.last_after_discharge = r
+            flex += self._pic_gain * r
         ids = self._act_ids
         u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
         nf = self._n_flex

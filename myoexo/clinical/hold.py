@@ -1,0 +1,219 @@
+"""Stretch-and-hold test of the knee flexors: does the resistance outlast the stretch?
+
+The exo extends the relaxed knee from ``start_deg`` to ``end_deg`` (stretching the hamstrings
+and gastrocnemii) once slowly and once fast, with the stiff PD of
+:mod:`myoexo.clinical.stretch`, then *holds* it there for ``hold_s``. A reflex without memory
+(``"uniform"``, ``"stretch"``) answers the present (delayed) angle and speed only: once the
+knee is held, the fast and the slow stretch leave the same resistance. A reflex with an
+after-discharge (``"persistent"``: motoneurons firing on for seconds after a fast stretch,
+Gorassini et al. 2004, Mottram et al. 2009) keeps resisting after the fast stretch only.
+
+Per level the test reports the muscles' resisting torque (against the extension, Nm) in two
+windows of the hold, ``early`` (0.5-1 s after the stop) and ``late`` (the last 0.5 s), after
+each stretch, and the excess of the fast over the slow stretch in each window::
+
+    hold_excess_early_nm = fast_early_nm - slow_early_nm
+    hold_excess_late_nm  = fast_late_nm  - slow_late_nm
+
+(0 for a reflex without memory; > 0 while an after-discharge lasts), plus the flexors' reflex
+excitation at the end of each hold (``*_end_sc``; for ``"persistent"`` ``SC_total + G r``).
+
+API (``myoexo stretch-hold --reflex persistent`` on the command line)::
+
+    from myoexo.clinical.hold import run_stretch_hold
+    run_stretch_hold(reflex="persistent").table()
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+from myoexo.clinical.common import (
+    check_levels,
+    check_positive,
+    print_table,
+    reflex_name,
+    resolve_twin,
+)
+from myoexo.clinical.stretch import StretchTestParams, simulate_stretch
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.reflex import REFLEX_PRESETS, ReflexConfig
+
+if TYPE_CHECKING:
+    import mujoco
+    import pandas as pd
+
+    from myoexo.clinical.common import PoseFn
+
+__all__ = ["StretchHoldParams", "StretchHoldResult", "run_stretch_hold"]
+
+
+@dataclasses.dataclass(frozen=True)
+class StretchHoldParams:
+    """Parameters of the stretch-and-hold test.
+
+    Attributes:
+        start_deg: Knee flexion at the start, deg (90: the seated rest).
+        end_deg: Knee flexion held after the stretch, deg (30: inside the range, short of the
+            seated hamstrings' passive end range near 20 deg).
+        slow_rad_s: The slow stretch's speed, rad/s (Tardieu V1).
+        fast_rad_s: The fast stretch's speed, rad/s (Tardieu V3).
+        hold_s: Time held at ``end_deg`` after the stretch, s (>= 1.5).
+        levels: Spasticity levels to test.
+    """
+
+    start_deg: float = 90.0
+    end_deg: float = 30.0
+    slow_rad_s: float = 0.2
+    fast_rad_s: float = 3.0
+    hold_s: float = 3.0
+    levels: tuple[int, ...] = VALID_LEVELS
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", check_levels(self.levels))
+        for name in ("slow_rad_s", "fast_rad_s"):
+            check_positive(f"StretchHoldParams.{name}", getattr(self, name), "rad/s")
+        if not self.fast_rad_s > self.slow_rad_s:
+            raise ValueError(
+                f"StretchHoldParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
+                f"{self.slow_rad_s!r}: accepted range ({self.slow_rad_s!r}, inf) rad/s."
+            )
+        if not (math.isfinite(self.hold_s) and 1.5 <= self.hold_s <= 60.0):
+            raise ValueError(f"StretchHoldParams.hold_s = {self.hold_s!r} is outside [1.5, 60] s.")
+        for name in ("start_deg", "end_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 120.0):
+                raise ValueError(
+                    f"StretchHoldParams.{name} = {value!r} is outside the knee's range "
+                    f"[0, 120] deg."
+                )
+        if not self.end_deg < self.start_deg:
+            raise ValueError(
+                f"StretchHoldParams.end_deg = {self.end_deg!r} must be below start_deg = "
+                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)."
+            )
+
+    def stretch(self, vel_rad_s: float) -> StretchTestParams:
+        """The stretch-test parameters of one stretch and its hold."""
+        return StretchTestParams(
+            start_deg=self.start_deg,
+            end_deg=self.end_deg,
+            velocities_rad_s=(vel_rad_s,),
+            levels=self.levels,
+            end_hold_s=self.hold_s,
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class StretchHoldResult:
+    """Outcome of :func:`run_stretch_hold`.
+
+    Attributes:
+        summary: One row per level (see :meth:`table`).
+        traces: One row per control step of every run: ``level, speed, vel_rad_s`` and the
+            stretch-test columns plus ``muscle_resisting_nm`` and ``hold_time_s`` (time since
+            the hold began, NaN before).
+        params: The test parameters.
+        reflex: Name of the reflex model.
+    """
+
+    summary: pd.DataFrame
+    traces: pd.DataFrame
+    params: StretchHoldParams
+    reflex: str
+
+    def table(self) -> pd.DataFrame:
+        """Per level: ``slow_early_nm, fast_early_nm, slow_late_nm, fast_late_nm``
+        (mean muscle resisting torque in the hold's windows), ``hold_excess_early_nm``,
+        ``hold_excess_late_nm`` (fast minus slow), ``slow_end_sc, fast_end_sc`` (the flexors'
+        reflex excitation at the end of the hold), ``fast_peak_nm`` (the fast stretch's
+        peak resisting torque during the motion) and ``reflex``."""
+        return self.summary.copy()
+
+
+def run_stretch_hold(
+    params: StretchHoldParams = StretchHoldParams(),
+    *,
+    reflex: str | ReflexConfig = "stretch",
+    subjects: Mapping[int, SpasticityParams] | None = None,
+    model: mujoco.MjModel | None = None,
+    pose: PoseFn | None = None,
+) -> StretchHoldResult:
+    """Run the stretch-and-hold test (slow and fast, each then held) at every level.
+
+    Args:
+        params: Test parameters.
+        reflex: Reflex model, a preset name or a :class:`~myoexo.spasticity.ReflexConfig`.
+        subjects: Individual reflex parameters per level (default: nominal Table I).
+        model: The twin (default: the seated twin).
+        pose: Its posing function.
+
+    Raises:
+        ValueError: If the reflex is unknown.
+    """
+    import numpy as np
+    import pandas as pd
+
+    label = reflex_name(reflex)
+    model, pose = resolve_twin(model, pose)
+    rows, traces = [], []
+    for level in params.levels:
+        subject = None if subjects is None else subjects.get(level)
+        row: dict[str, float | int] = {"level": level}
+        for speed, vel in (("slow", params.slow_rad_s), ("fast", params.fast_rad_s)):
+            stretch = params.stretch(vel)
+            trace = simulate_stretch(
+                model, level, vel, stretch, pose=pose, subject=subject, reflex=reflex
+            )
+            trace["muscle_resisting_nm"] = -stretch.direction * trace["muscle_torque_nm"]
+            hold = (trace["phase"] == "end_hold").to_numpy()
+            t0 = float(trace["time_s"][hold].iloc[0])
+            trace["hold_time_s"] = np.where(hold, trace["time_s"] - t0, np.nan)
+            ht = trace["hold_time_s"]
+            early = (ht >= 0.5) & (ht < 1.0)
+            late = ht >= params.hold_s - 0.5
+            res = trace["muscle_resisting_nm"]
+            moving = trace["phase"].isin(["accelerate", "constant", "decelerate"])
+            row[f"{speed}_early_nm"] = float(res[early].mean())
+            row[f"{speed}_late_nm"] = float(res[late].mean())
+            row[f"{speed}_end_sc"] = float(trace["sc_total"][hold].iloc[-1])
+            row[f"{speed}_peak_nm"] = float(res[moving].max())
+            traces.append(trace.assign(level=level, speed=speed, vel_rad_s=vel))
+        row["hold_excess_early_nm"] = float(row["fast_early_nm"]) - float(row["slow_early_nm"])
+        row["hold_excess_late_nm"] = float(row["fast_late_nm"]) - float(row["slow_late_nm"])
+        rows.append(row)
+    order = [
+        "level",
+        "slow_early_nm",
+        "fast_early_nm",
+        "hold_excess_early_nm",
+        "slow_late_nm",
+        "fast_late_nm",
+        "hold_excess_late_nm",
+        "slow_end_sc",
+        "fast_end_sc",
+        "fast_peak_nm",
+    ]
+    summary = pd.DataFrame(rows)[order].assign(reflex=label)
+    traces_df = pd.concat(traces, ignore_index=True)
+    return StretchHoldResult(summary, traces_df, params, label)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo stretch-hold``."""
+    d = StretchHoldParams()
+    parser.add_argument("--levels", type=int, nargs="+", default=list(d.levels))
+    parser.add_argument("--reflex", choices=sorted(REFLEX_PRESETS), default="stretch")
+    parser.add_argument("--hold-s", type=float, default=d.hold_s, help="hold after the stretch")
+    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="held angle, deg")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``myoexo stretch-hold [--reflex NAME] [--levels ...] [--hold-s 3]``: the table."""
+    params = StretchHoldParams(levels=tuple(args.levels), hold_s=args.hold_s, end_deg=args.end_deg)
+    print_table(run_stretch_hold(params, reflex=args.reflex).table())
+    return 0
