@@ -21,6 +21,8 @@ spec                               controller
 ``oracle``                         sampling-based MPC on a copy of the twin (true state):
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
+``path/to/actor.npz``              an exported numpy actor (``myoexo export-policy``), with
+                                   its ``.json`` beside it
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
                                    ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:``, ``tqc:``,
                                    ``crossq:``, ``sbx_sac:``, ... (any alias of
@@ -67,8 +69,8 @@ class ControllerSpec:
     """A parsed controller spec.
 
     Attributes:
-        kind: ``"pid"``, ``"shipped"`` (``sac``, ``sac_exo``), ``"oracle"`` or ``"sb3"``
-            (a model file).
+        kind: ``"pid"``, ``"shipped"`` (``sac``, ``sac_exo``), ``"oracle"``, ``"sb3"`` (a
+            model file) or ``"actor"`` (an exported numpy actor, ``.npz`` + ``.json``).
         label: Name in tables and figures.
         text: The spec as given.
         path: Model file (``sb3``) or shipped policy name (``shipped``).
@@ -116,11 +118,13 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     if head.lower() in ALGORITHMS and tail:  # "td3:model.zip", "sbx_sac:model.zip"
         algorithm, path_text = head.lower(), tail
     path = Path(path_text).expanduser()
+    if path.suffix == ".npz" and path.with_suffix(".json").is_file():  # an exported actor
+        return ControllerSpec(kind="actor", label=path.stem, text=text, path=str(path.resolve()))
     if path.suffix != ".zip":
         raise ValueError(
             f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'sac_exo', "
-            "'oracle[:options]', or the path of a "
-            "stable-baselines3 model file (.zip)"
+            "'oracle[:options]', the path of a stable-baselines3 model file (.zip) or of an "
+            "exported actor (.npz beside its .json)"
         )
     if not path.is_file():
         raise ValueError(f"controller {text!r}: policy file {str(path)!r} does not exist")
@@ -214,6 +218,19 @@ def load_obs_normalizer(model_path: str) -> Any:
     return normalizer
 
 
+def load_actor_file(path: str) -> Any:
+    """An exported numpy actor (``.npz`` + ``.json``, :func:`myoexo.policies.save_actor`),
+    checked against its reference pairs; ``ValueError`` if it cannot be read."""
+    from myoexo.policies import load_actor
+
+    try:
+        actor = load_actor(Path(path).with_suffix(""))
+    except (OSError, KeyError) as exc:
+        raise ValueError(f"cannot read the actor {path!r} ({type(exc).__name__}: {exc})") from exc
+    actor.check_reference()
+    return actor
+
+
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
     if spec.kind == "pid":
@@ -224,6 +241,8 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
         from myoexo.control.oracle import OracleMPC
 
         return OracleMPC.from_env(env, **spec.options)
+    if spec.kind == "actor" and spec.path is not None:
+        return load_actor_file(spec.path)
     if spec.kind == "sb3" and spec.path is not None:
         return SB3Controller(
             load_sb3_model(spec.path, spec.algorithm or "sac"),
@@ -250,6 +269,8 @@ def policy_metadata(spec: ControllerSpec) -> dict[str, Any]:
     preset for a model file (``{}`` for the PID and the oracle)."""
     if spec.kind == "shipped":
         return dict(load_shipped_policy(spec.path or "sac").metadata)
+    if spec.kind == "actor" and spec.path is not None:
+        return dict(load_actor_file(spec.path).metadata)
     if spec.kind == "sb3" and spec.path is not None:
         config = _run_config_of_model(spec.path)
         return {"obs_preset": config.get("preset", {}).get("obs_preset", "full")}

@@ -208,7 +208,7 @@ def write_config(
     controllers = dict(previous.get("controllers", {}))
     for spec in specs:
         entry = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
-        if spec.kind == "sb3" and spec.path:
+        if spec.kind in ("sb3", "actor") and spec.path:
             entry["sha256"] = _file_sha256(spec.path)
         elif spec.kind == "shipped":  # a re-exported policy is another controller
             from myoexo.policies import shipped_path

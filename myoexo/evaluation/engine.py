@@ -26,6 +26,7 @@ from myoexo.control.specs import (
     PolicyUnavailableError,
     build_controller,
     check_no_selection_leak,
+    load_actor_file,
     load_shipped_policy,
     parse_controller_spec,
     spec_env_kwargs,
@@ -264,6 +265,8 @@ def resolve_controllers(
         spec = parse_controller_spec(text)
         if spec.kind == "sb3":
             load_sb3_model(str(spec.path), str(spec.algorithm))  # ValueError if unreadable
+        elif spec.kind == "actor":
+            load_actor_file(str(spec.path))  # ValueError if unreadable or inconsistent
         elif spec.kind == "shipped":
             try:
                 load_shipped_policy(spec.path or "sac")

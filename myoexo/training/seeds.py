@@ -4,6 +4,7 @@ uncertainty.
     myoexo seeds train runs/sbx5 --seeds 0 1 2 3 4 --set algorithm=sbx_sac --workers 2
     myoexo seeds train runs/sbx5                   # again: resumes every unfinished seed
     myoexo seeds aggregate runs/sbx5 --subjects 10
+    myoexo seeds ship runs/sbx5 --name sac         # the chosen seed into the package
 
 ``train`` runs one ``myoexo train`` process per seed (``--workers`` at a time), each in its
 own run folder ``DIR/seed_<N>`` with its own checkpoints, so each seed is resumable on its own
@@ -337,6 +338,31 @@ def aggregate_seeds(args: argparse.Namespace) -> int:
     return 0
 
 
+def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> Any:
+    """Export the seed the aggregate chose (``aggregate.json``) as a numpy actor whose
+    metadata records ``training_seeds``, ``ship_seed``, the ship rule and the selection root,
+    to ``stem`` and/or into the package as ``name`` (:func:`myoexo.load_policy`)."""
+    from myoexo.policies import save_actor, shipped_path
+    from myoexo.training.export import load_checkpoint_actor
+
+    path = Path(out) / "aggregate.json"
+    if not path.is_file():
+        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
+    chosen = json.loads(path.read_text())
+    actor = load_checkpoint_actor(
+        Path(chosen["ship_checkpoint"]), selection_root_seed=chosen["selection_root_seed"]
+    )
+    for key in ("training_seeds", "ship_seed", "ship_rule", "selection_subjects_per_level"):
+        actor.metadata[key] = chosen[key]
+    stems = ([Path(stem)] if stem else []) + ([shipped_path(name)] if name else [])
+    for target in stems:
+        npz, js = save_actor(actor, target)
+        print(
+            f"actor: {npz} + {js.name} (seed {chosen['ship_seed']} of {chosen['training_seeds']})"
+        )
+    return actor
+
+
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``myoexo seeds``."""
@@ -355,10 +381,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ag.add_argument("--subjects", type=int, default=10, help="selection subjects per level")
     ag.add_argument("--last", type=int, default=2, help="newest checkpoints per seed")
     ag.add_argument("--top", type=int, default=4, help="best checkpoints by eval.csv per seed")
+    sh = sub.add_parser("ship", help="export the aggregate's chosen seed as a numpy actor")
+    sh.add_argument("out", help="an aggregated `myoexo seeds` folder")
+    sh.add_argument("--to", type=Path, help="write STEM.npz + STEM.json")
+    sh.add_argument("--name", help="write it into the package as NAME (e.g. sac)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo seeds train|aggregate``."""
     if args.action == "train":
         return train_seeds(args)
+    if args.action == "ship":
+        if not (args.to or args.name):
+            raise ValueError("myoexo seeds ship: give --to STEM and/or --name NAME")
+        ship_seed(Path(args.out), args.to, args.name)
+        return 0
     return aggregate_seeds(args)
