@@ -11,13 +11,12 @@ gives the same perturbed twin and the subject/start angle are those of the nomin
 part                           default range                   applied to
 =============================  ==============================  ===============================
 strap stiffness                x0.5-2 (log-uniform)            the five coupling joints'
-                                                               springs; the shank weld's
-                                                               time constant (x 1/sqrt(scale),
-                                                               floored at 2 timesteps by
-                                                               MuJoCo, so its stiffening is
-                                                               capped at x1.56)
-strap damping                  x0.5-2 (log-uniform)            the coupling joints' damping,
-                                                               the weld's damping ratio
+                                                               springs (and, above x1, their
+                                                               armature by scale^2, see
+                                                               below); the shank weld's
+                                                               stiffness
+strap damping                  x0.5-2 (log-uniform)            the coupling joints' damping;
+                                                               the weld's damping
 segment masses and inertias    +-10 % (uniform, per body)      every body with mass
 slide friction                 +-50 % (uniform)                the thigh slider's frictionloss
 motor torque constant          +-5 % (uniform)                 the exo motor's gain and
@@ -26,6 +25,31 @@ sensor noise                   Gaussian, std per observation   the observation v
                                key (:data:`DEFAULT_NOISE_STD`)  ``info["measured_*"]``
 sensor latency                 10 ms                           the same (whole control steps)
 =============================  ==============================  ===============================
+
+Numerical stability of the stiff draws. The twin runs MuJoCo's semi-implicit Euler at 2 ms,
+which integrates joint damping implicitly but joint springs explicitly. Two rules keep every
+draw in these ranges as stable as the nominal twin (``tests/test_stability.py``):
+
+* The weld is scaled in MuJoCo's own terms. A ``solref = (timeconst, dampratio)`` row has the
+  reference stiffness ``1 / (dmax timeconst dampratio)^2`` and damping ``2 / (dmax
+  timeconst)``: stiffness x k and damping x c are ``(timeconst / c, dampratio x c /
+  sqrt(k))``. Where ``timeconst / c`` would fall under MuJoCo's 2-timestep floor (c > 1.25 at
+  the nominal 5 ms and 2 ms) the same stiffness and damping are written in the direct form
+  ``(-stiffness, -damping)``, which MuJoCo does not floor; the damping range is checked
+  against the weld's explicit limit (:data:`MAX_WELD_HB`). (The former ``(timeconst /
+  sqrt(k), dampratio x c / sqrt(k))``, a mass-spring-damper reading of ``solref``, stiffened
+  the weld by ``k^2 / c^2``, x12.5 at k = 2, c = 0.5, and left its damping independent of c;
+  draws just past the ranges, k = 2.5-3 with c = 0.35-0.5, diverged within 10 control steps.)
+* A stiffer strap (k > 1) raises the coupling joints' armature (their numerical rotor
+  inertia) by ``k^2``. The shank cuff pin carries 2000 Nm/rad on 1.5e-3 kg m^2 (the 0.2 kg
+  cuff about the pin, 1e-3 of it armature): ``omega h`` = 2.3, already past the explicit
+  limit 2 on its own, held by its implicit damping and the weld. With a nominal armature its
+  spring at x1.6-2 let an exo-chain mode near 50 Hz grow by ~1 % per physics step (the
+  "unstable" episodes, preceded by seconds of chatter). With ``k^2`` its ``omega h`` falls
+  from 2.3 at x1 to 1.9 at x2 (an armature x k, which keeps ``sqrt(stiffness / armature)``,
+  stopped the divergence but left a bang-bang command at the 50 Hz control rate driving the
+  pins 3-4 times faster than on the nominal twin). The other couplings are slow (``omega h``
+  < 0.5 at x2); at x2 each hinge gains 3e-3 kg m^2 and the slider 3 g.
 
 What is *measured* (the observation the controller reads, ``info["measured_knee_angle_deg"]``
 and ``info["measured_exo_angle_deg"]`` that the PID uses) is noisy and late; what is *scored*
@@ -67,6 +91,11 @@ DEFAULT_NOISE_STD: dict[str, float] = {
     "spastic_length": 0.01,
     "spastic_velocity": 0.01,
 }
+
+
+#: Largest accepted ``timestep x damping`` of the strap weld's reference (explicit limit 2),
+#: see :meth:`TwinPerturbation._check_weld_damping`.
+MAX_WELD_HB = 1.8
 
 
 @dataclass(frozen=True)
@@ -186,6 +215,8 @@ class TwinPerturbation:
         self._motor = int(model.actuator(motor).id)
         self._bodies = np.flatnonzero(model.body_mass > 0.0)
         self._min_tc_s = 2.0 * float(model.opt.timestep)
+        if self._eq is not None:
+            self._check_weld_damping(model, params.strap_damping_scale[1])
         self._nominal = {
             "jnt_stiffness": model.jnt_stiffness[jids].copy(),
             "dof_damping": model.dof_damping[self._dofs].copy(),
@@ -194,6 +225,7 @@ class TwinPerturbation:
             "body_inertia": model.body_inertia.copy(),
             "gain": float(model.actuator_gainprm[self._motor, 0]),
             "forcerange": model.actuator_forcerange[self._motor].copy(),
+            "dof_armature": model.dof_armature[self._dofs].copy(),
             "eq_solref": None if self._eq is None else model.eq_solref[self._eq].copy(),
         }
 
@@ -213,6 +245,8 @@ class TwinPerturbation:
 
         m.jnt_stiffness[self._jids] = nom["jnt_stiffness"] * k
         m.dof_damping[self._dofs] = nom["dof_damping"] * c
+        # a stiffer strap never speeds the shank pin up past the nominal (module docstring)
+        m.dof_armature[self._dofs] = nom["dof_armature"] * max(k, 1.0) ** 2
         m.dof_frictionloss[self._slide_dof] = nom["frictionloss"] * friction
         m.body_mass[:] = nom["body_mass"]
         m.body_inertia[:] = nom["body_inertia"]
@@ -221,13 +255,7 @@ class TwinPerturbation:
         m.actuator_gainprm[self._motor, 0] = nom["gain"] * gain
         m.actuator_forcerange[self._motor] = nom["forcerange"] * gain
         if self._eq is not None:
-            tc, ratio = nom["eq_solref"]
-            # spring ~ 1/tc^2, damper ~ ratio/tc: stiffness x k -> tc / sqrt(k); damping x c
-            # -> ratio x c / sqrt(k) (MuJoCo floors tc at 2 timesteps)
-            m.eq_solref[self._eq] = (
-                max(tc / math.sqrt(k), self._min_tc_s),
-                ratio * c / math.sqrt(k),
-            )
+            m.eq_solref[self._eq] = self.weld_solref(k, c)
         return {
             "strap_stiffness_scale": k,
             "strap_damping_scale": c,
@@ -235,6 +263,40 @@ class TwinPerturbation:
             "slide_friction_scale": friction,
             "motor_gain_scale": gain,
         }
+
+    def _check_weld_damping(self, model: mujoco.MjModel, c_max: float) -> None:
+        """Raise ``ValueError`` if the weld's damping at x ``c_max`` is past its explicit limit.
+
+        MuJoCo evaluates a constraint's reference damping ``B`` at the step's start: the weld
+        diverges as ``h B`` nears 2 (at the nominal 5 ms / 2 ms, ``h B`` = 0.81 x the damping
+        scale; x2.45 diverged at x2 stiffness, x2.3 did not). Accepted: ``h B <= MAX_WELD_HB``.
+        """
+        tc, ratio = (float(v) for v in model.eq_solref[self._eq])
+        dmax = float(model.eq_solimp[self._eq, 1])
+        b_nom = -ratio / dmax if tc <= 0.0 else 2.0 / (dmax * max(tc, self._min_tc_s))
+        hb = float(model.opt.timestep) * b_nom * c_max
+        if hb > MAX_WELD_HB:
+            raise ValueError(
+                f"strap_damping_scale up to x{c_max:g} gives the strap weld h*B = {hb:.2f} > "
+                f"{MAX_WELD_HB} (explicit limit 2): at most "
+                f"x{MAX_WELD_HB / (hb / c_max):.2f} with this timestep and strap solref"
+            )
+
+    def weld_solref(self, k: float, c: float) -> tuple[float, float]:
+        """The strap weld's ``solref`` for stiffness x ``k`` and damping x ``c``.
+
+        MuJoCo's reference stiffness is ``1 / (dmax timeconst dampratio)^2`` and its damping
+        ``2 / (dmax timeconst)`` (``dmax`` of ``solimp``), ``timeconst`` floored at 2
+        timesteps; the direct form ``(-stiffness, -damping)`` is scaled as it is.
+        """
+        tc, ratio = (float(v) for v in self._nominal["eq_solref"])
+        if tc <= 0.0:  # direct (-stiffness, -damping)
+            return tc * k, ratio * c
+        tc_nom = max(tc, self._min_tc_s)  # the time constant MuJoCo uses for the nominal weld
+        if tc_nom / c >= self._min_tc_s:
+            return tc_nom / c, ratio * c / math.sqrt(k)
+        # past the floor: the same stiffness and damping in the direct form (not floored)
+        return -k / (tc_nom * ratio) ** 2, -2.0 * c / tc_nom
 
 
 class SensorModel:
