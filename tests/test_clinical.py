@@ -282,3 +282,20 @@ def test_cli_writes_table_traces_and_figure(argv, stem, levels, tmp_path, capsys
     assert list(table["level"]) == levels
     assert (tmp_path / f"{stem}_traces.csv").stat().st_size > 1_000
     assert (tmp_path / f"{stem}.png").stat().st_size > 10_000
+
+
+def test_pendulum_with_the_exo_range_freed_swings_further_than_worn():
+    """The clinic's test without the device: with the exo's 95 deg stop out of the way (motor
+    off during the swing) the healthy knee's first swing is no longer capped."""
+    import dataclasses
+
+    from myoexo.clinical.pendulum import FREED_EXO_RANGE_DEG, SEATED, run_pendulum
+    from myoexo.model import TwinParams
+
+    params = dataclasses.replace(SEATED, levels=(0,), swing_s=3.0)
+    worn = run_pendulum(params).table().iloc[0]
+    freed = run_pendulum(params, twin=TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG))
+    freed_row = freed.table().iloc[0]
+    assert bool(worn.exo_stop_hit) and not bool(freed_row.exo_stop_hit)
+    assert freed_row.first_peak_deg > worn.first_peak_deg + 10.0
+    assert freed_row.relaxation_index > worn.relaxation_index

@@ -51,7 +51,7 @@ CLI::
 
     myoexo pendulum [--levels 0 1 2 3] [--reflex stretch|uniform|persistent]
                     [--posture seated|reclined] [--start-deg D] [--swing-s 10]
-                    [--subject-seed N] [--out DIR]
+                    [--device worn|freed] [--subject-seed N] [--out DIR]
 """
 
 from __future__ import annotations
@@ -89,7 +89,10 @@ if TYPE_CHECKING:
     from myoexo.model import TwinParams
 
 __all__ = [
+    "DEVICES",
+    "FREED_EXO_RANGE_DEG",
     "HEALTHY_RELAXATION_INDEX",
+    "HEALTHY_RELAXATION_INDEX_WHELAN",
     "PEAK_VELOCITY_CP_DEG_S",
     "PEAK_VELOCITY_TD_DEG_S",
     "POSTURES",
@@ -109,6 +112,9 @@ __all__ = [
 #: Relaxation index ``A1 / A0`` of a healthy, relaxed knee: about 1.6 and above (Bajd and
 #: Vodovnik 1984); below it, spastic.
 HEALTHY_RELAXATION_INDEX = 1.6
+#: Relaxation index of healthy adults in a clinic's pendulum test, mean and SD (Whelan et al.
+#: 2018, n = 50, semi-reclined, no device).
+HEALTHY_RELAXATION_INDEX_WHELAN = (1.68, 0.09)
 #: Peak knee velocity of the first swing in typically developing children, deg/s
 #: (White et al. 2007).
 PEAK_VELOCITY_TD_DEG_S = 293.0
@@ -185,6 +191,12 @@ SEATED = PendulumParams()
 RECLINED = PendulumParams(start_deg=0.0, hip_flexion_deg=40.0)
 #: Named postures of the CLI.
 POSTURES: Mapping[str, PendulumParams] = MappingProxyType({"seated": SEATED, "reclined": RECLINED})
+#: The exo's knee range with its flexion stop out of the way (``--device freed``): the exo's
+#: mass and straps stay, its motor is off during the swing, its 95 deg stop no longer caps it:
+#: as close to the clinic's test without the device as the strapped twin gets.
+FREED_EXO_RANGE_DEG = (-15.0, 130.0)
+#: ``--device`` choices: the exo as worn, or with its range freed.
+DEVICES: tuple[str, ...] = ("worn", "freed")
 
 
 def reclined_gravity(recline_deg: float) -> np.ndarray:
@@ -232,6 +244,12 @@ def published_values() -> pd.DataFrame:
                 "value": HEALTHY_RELAXATION_INDEX,
                 "group": "healthy adults: about this and above; spastic: below",
                 "source": "Bajd and Vodovnik 1984",
+            },
+            {
+                "measure": "relaxation_index",
+                "value": HEALTHY_RELAXATION_INDEX_WHELAN[0],
+                "group": f"healthy adults (n = 50), SD {HEALTHY_RELAXATION_INDEX_WHELAN[1]}",
+                "source": "Whelan et al. 2018",
             },
             {
                 "measure": "peak_velocity_deg_s",
@@ -420,6 +438,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--swing-s", type=float, default=SEATED.swing_s, help="free swing duration in s"
     )
+    parser.add_argument(
+        "--device", choices=DEVICES, default="worn",
+        help="worn: the exo as built (its 95 deg stop caps the first swing); freed: its range "
+        "freed and its motor off, the clinic's test without the device (default: %(default)s)",
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -432,7 +455,12 @@ def run(args: argparse.Namespace) -> int:
         swing_s=args.swing_s,
         levels=tuple(args.levels),
     )
-    result = run_pendulum(params, reflex=args.reflex, subjects=subjects_from_args(args))
+    twin = None
+    if args.device == "freed":
+        from myoexo.model import TwinParams
+
+        twin = TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG)
+    result = run_pendulum(params, reflex=args.reflex, subjects=subjects_from_args(args), twin=twin)
     print_table(result.table())
     print("published:")
     print(published_values().to_string(index=False))
