@@ -267,6 +267,9 @@ class SpasticityStage:
         self._act_ids = np.asarray(ids, dtype=np.intp)
         self._n_flex = len(self.flexors)
         self._nu = int(model.nu)
+        self._exc = np.empty(len(ids))  # the excitation added to each driven muscle
+        self._ones = np.ones(len(ids))
+        self._zeros = np.zeros(len(ids))
         period = float(control_period_s or model.opt.timestep)
         self._delay = DelayLine(round(self.reflex.delay_s / period))
         self._pic_rates = self._pic.rates(period)
@@ -284,6 +287,7 @@ class SpasticityStage:
             self.bind(model, control_period_s)
         twin = copy.copy(self)
         twin._delay = copy.deepcopy(self._delay)
+        twin._exc = self._exc.copy()  # scratch buffer of its own
         twin._data_views = None
         return twin
 
@@ -413,12 +417,14 @@ class SpasticityStage:
             self.last_after_discharge = r
             flex += self._pic_gain * r
         ids = self._act_ids
-        u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
+        exc = self._exc  # preallocated: array-array operations, no scalar broadcasting
         nf = self._n_flex
-        u[:nf] += flex
-        u[nf:] += ext
-        np.minimum(u, 1.0, out=u)
-        np.maximum(u, 0.0, out=u)
+        exc[:nf] = flex
+        exc[nf:] = ext
+        u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
+        u += exc
+        np.minimum(u, self._ones, out=u)
+        np.maximum(u, self._zeros, out=u)
         ctrl[ids] = u
         self.last_flexor_excitation = flex
         self.last_extensor_excitation = ext
@@ -432,7 +438,17 @@ class SpasticityStage:
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state["_model"] = None  # re-bound on the first step after unpickling
-        for key in ("_qpos_adr", "_dof_adr", "_act_ids", "_nu", "_n_flex", "_data_views"):
+        for key in (
+            "_qpos_adr",
+            "_dof_adr",
+            "_exc",
+            "_ones",
+            "_zeros",
+            "_act_ids",
+            "_nu",
+            "_n_flex",
+            "_data_views",
+        ):
             state.pop(key, None)
         return state
 
