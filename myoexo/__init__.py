@@ -24,6 +24,7 @@ from myoexo.envs.registration import ENV_LEVELS, make_env, register_envs
 
 if TYPE_CHECKING:
     from myoexo.policies.actor import MLPActor
+    from myoexo.policies.student import StudentController
 
 __version__ = "0.1.0"
 __all__ = ["ENV_LEVELS", "__version__", "load_policy", "make_env", "register_envs"]
@@ -31,9 +32,10 @@ __all__ = ["ENV_LEVELS", "__version__", "load_policy", "make_env", "register_env
 register_envs()
 
 
-def load_policy(name: str = "sac", check: bool = True) -> MLPActor:
+def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentController:
     """A policy shipped with the package, by name: ``"sac"`` (the twin's full state,
-    default) or ``"sac_exo"`` (the exoskeleton's own sensors).
+    default), ``"student_exo"`` (the exoskeleton's own sensors with memory: deployable) or
+    ``"sac_exo"`` (the exoskeleton's sensors and an episode clock).
 
     Args:
         name: A name of :data:`myoexo.policies.SHIPPED_POLICIES` (or a file stem inside

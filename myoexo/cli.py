@@ -63,6 +63,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Ray Tune over training configurations, ranked on the acceptance criteria",
     ),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "distill": (
+        "myoexo.training.distill",
+        "distil the full-state teacher into an exo-sensor student with memory (DAgger)",
+    ),
     "video": ("myoexo.viz.video", "render an episode of a controller to MP4 or GIF"),
     "select": (
         "myoexo.training.select",

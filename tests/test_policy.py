@@ -37,7 +37,11 @@ def _fixed_obs(policy: MLPActor) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- shipped
-@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
+#: The shipped SAC actors (``student_exo`` wraps an actor in a memory: tests/test_distill.py).
+SAC_POLICIES = sorted(n for n in SHIPPED_POLICIES if n.startswith("sac"))
+
+
+@pytest.mark.parametrize("name", SAC_POLICIES)
 def test_shipped_policy_loads_offline_and_is_small(no_network, name):
     policy = load_policy(name)
     assert isinstance(policy, MLPActor)
@@ -65,7 +69,7 @@ def test_shipped_policy_actions_are_stable(no_network):
     np.testing.assert_array_equal(action, first[0])
 
 
-@pytest.mark.parametrize("name", sorted(SHIPPED_POLICIES))
+@pytest.mark.parametrize("name", SAC_POLICIES)
 def test_shipped_policy_fits_the_env(name):
     import gymnasium as gym
 

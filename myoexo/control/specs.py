@@ -16,8 +16,11 @@ spec                               controller
 ``pid:limit=0.6``                  command clipped at 0.6 (60 Nm)
 ``sac``                            the full-state policy shipped with the package
                                    (:func:`myoexo.load_policy`)
-``sac_exo``                        the shipped policy on the exo's own sensors
-                                   (``load_policy("sac_exo")``, env ``obs_preset="exo"``)
+``student_exo``                    the deployable controller: the exo's own sensors, a
+                                   memory of 10 frames, no clock (``load_policy
+                                   ("student_exo")``, env ``obs_preset="exo"``)
+``sac_exo``                        the shipped policy on the exo's own sensors and an
+                                   episode clock (``load_policy("sac_exo")``)
 ``oracle``                         sampling-based MPC on a copy of the twin (true state):
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
@@ -122,7 +125,8 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         return ControllerSpec(kind="actor", label=path.stem, text=text, path=str(path.resolve()))
     if path.suffix != ".zip":
         raise ValueError(
-            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'sac_exo', "
+            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'student_exo', "
+            "'sac_exo', "
             "'oracle[:options]', the path of a stable-baselines3 model file (.zip) or of an "
             "exported actor (.npz beside its .json)"
         )

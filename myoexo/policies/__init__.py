@@ -1,47 +1,61 @@
-"""The SAC policies shipped with myoexo (a model card each beside this file).
+"""The policies shipped with myoexo (a model card each beside this file).
 
-=============  ========================  ====================================================
-name           files (``<stem>.npz/json``)  observation
-=============  ========================  ====================================================
-``sac``        ``sac_knee_exo``          ``obs_preset="full"``: the twin's whole state, muscle
-                                         activations, forces and lengths included (simulation
-                                         only); ``MODEL_CARD.md``
-``sac_exo``    ``sac_exo_sensors``       ``obs_preset="exo"``: only what the exoskeleton
-                                         measures (encoder, motor torque, cuff force/torque
-                                         sensors, last command, time): deployable;
-                                         ``MODEL_CARD_sac_exo.md``
-=============  ========================  ====================================================
+===============  ===========================  ==================================================
+name             files (``<stem>.npz/json``)  observation
+===============  ===========================  ==================================================
+``sac``          ``sac_knee_exo``             ``obs_preset="full"``: the twin's whole state,
+                                              muscle activations, forces and lengths included
+                                              (simulation only); ``MODEL_CARD.md``
+``student_exo``  ``student_exo``              ``obs_preset="exo"``: only what the exoskeleton
+                                              measures (encoder, motor torque, cuff
+                                              force/torque sensors, last command, target), a
+                                              memory of the last 10 frames, no clock:
+                                              deployable; distilled from ``sac``;
+                                              ``MODEL_CARD_student_exo.md``
+``sac_exo``      ``sac_exo_sensors``          ``obs_preset="exo"``: the same sensors plus an
+                                              episode clock (``time_frac``), which a device
+                                              does not have; ``MODEL_CARD_sac_exo.md``
+===============  ===========================  ==================================================
 
     import gymnasium as gym, myoexo
 
     policy = myoexo.load_policy()              # "sac"; offline: two small files in this folder
-    device_policy = myoexo.load_policy("sac_exo")
+    device_policy = myoexo.load_policy("student_exo")
     env = gym.make("MyoExoKnee-v1", obs_preset=device_policy.obs_preset)
     obs, info = env.reset(seed=0)
     action = policy.act(obs, info)                         # a myoexo Controller
     action, _ = policy.predict(obs, deterministic=True)   # SB3's signature
     action = policy(obs)                                   # or simply call it
 
-The policy is the deterministic actor of a stable-baselines3 SAC run (observation
-normalization included) as a numpy :class:`~myoexo.policies.actor.MLPActor`; ``to_torch()``
-gives it as a torch module. Each was trained on ``MyoExoKneeRandom-v0`` and expects that
-env's observation vector for its preset (``policy.obs_preset``; the keys are recorded as
-``policy.metadata["obs_keys"]``).
+``sac`` and ``sac_exo`` are the deterministic actors of SAC runs (observation normalization
+included) as numpy :class:`~myoexo.policies.actor.MLPActor` (``to_torch()`` gives a torch
+module); ``student_exo`` is a :class:`~myoexo.policies.student.StudentController` (its MLP
+actor on a memory of sensor frames, ``reset()`` clears it). Each expects the env observation
+vector of its preset (``policy.obs_preset``). :mod:`~myoexo.policies.algorithms` is the one
+table of learning algorithms.
 """
 
 from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from myoexo.policies.actor import MLPActor, load_actor, save_actor
+
+if TYPE_CHECKING:
+    from myoexo.policies.student import StudentController
 
 #: File stem of the default shipped actor (``.npz`` weights + ``.json`` normalization and
 #: provenance).
 SHIPPED_POLICY = "sac_knee_exo"
 
 #: Shipped policies: name -> file stem inside this folder.
-SHIPPED_POLICIES: dict[str, str] = {"sac": SHIPPED_POLICY, "sac_exo": "sac_exo_sensors"}
+SHIPPED_POLICIES: dict[str, str] = {
+    "sac": SHIPPED_POLICY,
+    "sac_exo": "sac_exo_sensors",
+    "student_exo": "student_exo",
+}
 
 __all__ = [
     "SHIPPED_POLICIES",
@@ -60,12 +74,15 @@ def shipped_path(name: str = SHIPPED_POLICY) -> Path:
     return Path(str(resources.files(__name__).joinpath(SHIPPED_POLICIES.get(name, name))))
 
 
-def load_policy(name: str = "sac", check: bool = True) -> MLPActor:
+def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentController:
     """Load a policy shipped with the package (no network, no SB3 needed).
 
     Args:
         name: ``"sac"`` (full-state observation), ``"sac_exo"`` (the exoskeleton's own
-            sensors, deployable), or a file stem inside ``myoexo/policies/``.
+            sensors and an episode clock), ``"student_exo"`` (the exoskeleton's own sensors
+            with a memory of 10 frames, no clock: deployable; a
+            :class:`~myoexo.policies.student.StudentController`), or a file stem inside
+            ``myoexo/policies/``.
         check: Replay the reference (observation, action) pairs stored at export time and
             raise ``ValueError`` if the loaded actor disagrees (corrupted or edited files).
 
@@ -76,6 +93,10 @@ def load_policy(name: str = "sac", check: bool = True) -> MLPActor:
     if not path.with_suffix(".npz").is_file():
         raise FileNotFoundError(f"no shipped policy {name!r}; accepted: {sorted(SHIPPED_POLICIES)}")
     actor = load_actor(path)
+    if "student" in actor.metadata:  # a controller with memory around its actor
+        from myoexo.policies.student import load_student
+
+        return load_student(path, check=check)
     if check:
         actor.check_reference()
     return actor

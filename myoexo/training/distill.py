@@ -1,0 +1,724 @@
+"""``myoexo distill``: DAgger distillation of the full-state teacher into an exo-sensor student.
+
+The teacher is the shipped full-state policy (``sac``: it reads the human knee, the muscles
+and the straps, which only the simulation knows). The student is a
+:class:`~myoexo.policies.student.StudentController`: an MLP on its last frames of what the
+exoskeleton measures (encoder, motor torque, cuff force/torque sensors, last command,
+target; no episode clock). Plain behaviour cloning of the teacher's own trajectories fails
+(the student's small errors take it to states the teacher never visits), so the data is
+collected DAgger-style:
+
+* round ``r`` runs ``episodes_per_round`` episodes (levels in turn, subjects of root seed
+  :data:`~myoexo.evaluation.config.SELECTION_ROOT_SEED` from index ``subject_offset`` on,
+  never the evaluation root 0); at each step the executed command is the teacher's with
+  probability ``beta_r = beta_decay ** r`` (round 0: the teacher alone) and the student's
+  otherwise; the teacher *labels every visited step* from the true full state;
+* a ``robust_fraction`` of the episodes runs on perturbed twins (``robustness=True``: strap
+  stiffness/damping, masses, friction, motor gain, sensor noise, 10 ms latency): the student
+  reads the noisy, late sensor values of the env's observation, while the teacher labels
+  from the exact state of the same step (``info["obs_dict"]``, the true buffer, flattened as
+  the teacher's env would);
+* after each round the student is trained (torch, CPU, warm-started) on the aggregated
+  dataset and scored on held-apart selection subjects (root 1, indices ``0..n-1`` per level,
+  nominal and perturbed twins); the best round is the run's student.
+
+Run folder (every file written atomically; ``--resume DIR`` continues after the last
+finished round)::
+
+    config.json                 settings (a resume keeps them)
+    dataset.npz                 frames (N, FRAME_DIM), teacher labels (N,), episode starts
+    student_round_<r>.npz/json  the student after round r
+    student.npz/json            the selected (best) student so far
+    history.json                per round: samples, beta, loss, selection scores, wall time
+
+Examples::
+
+    myoexo distill --run-dir runs/distill --rounds 8 --episodes 96 --robust-fraction 0.5
+    myoexo distill --run-dir runs/distill_fine --fine-gain 20 --fine-width 0.02   # shipped
+    myoexo distill --resume runs/distill
+    myoexo distill --resume runs/distill --rounds 12            # more rounds
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, subject_seed
+from myoexo.policies.actor import MLPActor
+from myoexo.policies.student import (
+    FRAME_DIM,
+    StudentController,
+    frame_indices,
+    load_student,
+    save_student,
+)
+from myoexo.runtime.files import package_versions, savez_atomic, write_json_atomic
+
+CONFIG_FILE = "config.json"
+DATASET_FILE = "dataset.npz"
+HISTORY_FILE = "history.json"
+BEST_STEM = "student"
+
+
+@dataclass(frozen=True)
+class DistillConfig:
+    """Settings of a distillation run (``config.json``).
+
+    Attributes:
+        rounds: DAgger rounds (round 0: the teacher drives; behaviour cloning).
+        episodes_per_round: Episodes collected per round (levels in turn).
+        levels: Spasticity levels of the collected subjects.
+        robust_fraction: Share of episodes on perturbed twins (``robustness=True``).
+        beta_decay: ``beta_r = beta_decay ** r``: probability that the teacher's command is
+            executed at a step of round ``r``.
+        action_noise_std: Gaussian noise added to the executed command (exploration; the
+            label stays the teacher's clean action).
+        n_frames: Frames the student sees; ``stride``: steps between them.
+        hidden: Hidden layer widths; ``activation``: their activation.
+        epochs_first: Training epochs after round 0; ``epochs``: after later rounds.
+        batch_size, lr, weight_decay: Adam settings.
+        teacher: Shipped full-state policy labelling the states.
+        fine_gain: Privileged fine-positioning term added to the teacher's label,
+            ``-fine_gain * e * exp(-(e / fine_width_rad)^2)`` with ``e`` the true knee error
+            (rad): active only within about a degree of the target (the teacher ``sac``
+            settles 0.5-0.7 deg short at levels 0-1), zero far from it (levels 2-3, the
+            transient); 0 labels with the teacher alone.
+        fine_width_rad: Width of that term (rad).
+        root_seed: Root seed of the training and selection subjects (never the evaluation
+            root 0).
+        subject_offset: First subject index of the training episodes (selection uses
+            ``0..selection_subjects-1``).
+        selection_subjects: Selection subjects per level and twin (0: no selection, the
+            last round is the student).
+        episode_duration_s: Episode length (``None``: the env's 8 s).
+        seed: Seed of the mixture draws, noise and torch.
+    """
+
+    rounds: int = 8
+    episodes_per_round: int = 96
+    levels: tuple[int, ...] = (0, 1, 2, 3)
+    robust_fraction: float = 0.5
+    beta_decay: float = 0.5
+    action_noise_std: float = 0.0
+    n_frames: int = 10
+    stride: int = 2
+    hidden: tuple[int, ...] = (256, 256)
+    activation: str = "elu"
+    epochs_first: int = 20
+    epochs: int = 8
+    batch_size: int = 512
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    teacher: str = "sac"
+    fine_gain: float = 0.0
+    fine_width_rad: float = 0.02
+    root_seed: int = SELECTION_ROOT_SEED
+    subject_offset: int = 10_000
+    selection_subjects: int = 8
+    episode_duration_s: float | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
+        object.__setattr__(self, "hidden", tuple(int(v) for v in self.hidden))
+        if self.root_seed == 0:
+            raise ValueError("root_seed = 0 is the evaluation root: train on another (1)")
+        for name in ("rounds", "episodes_per_round", "n_frames", "stride", "batch_size"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} = {getattr(self, name)!r} must be >= 1")
+        if not 0.0 <= self.robust_fraction <= 1.0:
+            raise ValueError(f"robust_fraction = {self.robust_fraction} must be in [0, 1]")
+        if not 0.0 <= self.beta_decay <= 1.0:
+            raise ValueError(f"beta_decay = {self.beta_decay} must be in [0, 1]")
+        if self.subject_offset < self.selection_subjects:
+            raise ValueError("subject_offset must exceed selection_subjects (disjoint subjects)")
+        if not self.levels:
+            raise ValueError("levels is empty")
+
+    def beta(self, round_index: int) -> float:
+        """Probability that the teacher's command is executed in a round."""
+        return 1.0 if round_index == 0 else float(self.beta_decay**round_index)
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, doc: dict[str, Any]) -> DistillConfig:
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in doc.items() if k in names})
+
+
+# ---------------------------------------------------------------------------- teacher
+def true_full_observation(env: Any, info: dict[str, Any] | None) -> np.ndarray:
+    """The ``obs_preset="full"`` vector of the env's *true* state (no sensor noise or
+    latency): from ``info["obs_dict"]`` after a step, from the state itself after a reset."""
+    u = env.unwrapped
+    od = (info or {}).get("obs_dict")
+    if od is None:
+        od = u._get_obs_dict(u._accessor)
+    return np.asarray(u._obs_dict_to_vec(od), dtype=np.float64)
+
+
+class Expert:
+    """The labelling expert: the teacher on the true full state, plus the optional
+    fine-positioning term on the true knee error (:class:`DistillConfig`)."""
+
+    def __init__(self, teacher: MLPActor, fine_gain: float = 0.0, fine_width_rad: float = 0.02):
+        self.teacher = teacher
+        self.fine_gain = float(fine_gain)
+        self.fine_width_rad = float(fine_width_rad)
+        keys = list(teacher.metadata.get("obs_keys") or [])
+        if self.fine_gain and keys[:6] != [
+            "knee_angle_rad", "knee_vel_rad_s", "exo_angle_rad", "exo_vel_rad_s",
+            "target_rad", "error_rad",
+        ]:  # fmt: skip
+            raise ValueError(f"the teacher's observation has no error_rad at index 5: {keys}")
+
+    def __call__(self, x_full: np.ndarray) -> np.ndarray:
+        a = self.teacher(x_full)
+        if self.fine_gain:
+            e = float(x_full[5])  # error_rad (scale 1)
+            a = a - self.fine_gain * e * math.exp(-((e / self.fine_width_rad) ** 2))
+        return np.clip(np.asarray(a, np.float32), -1.0, 1.0)
+
+
+def load_teacher(name: str = "sac") -> MLPActor:
+    """The shipped full-state policy (checked against its reference pairs)."""
+    import myoexo
+
+    teacher = myoexo.load_policy(name)
+    if not isinstance(teacher, MLPActor):
+        raise ValueError(f"teacher {name!r} is not a plain actor ({type(teacher).__name__})")
+    if teacher.obs_preset != "full":
+        raise ValueError(f"teacher {name!r} reads obs_preset {teacher.obs_preset!r}, not 'full'")
+    return teacher
+
+
+# ---------------------------------------------------------------------------- collection
+@dataclass
+class Episodes:
+    """Collected steps: frames (what the student read), teacher labels, episode starts."""
+
+    frames: np.ndarray = field(default_factory=lambda: np.zeros((0, FRAME_DIM), np.float32))
+    labels: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    starts: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    rounds: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+
+    @property
+    def size(self) -> int:
+        return int(self.labels.size)
+
+    def extend(self, other: Episodes) -> Episodes:
+        return Episodes(
+            np.concatenate([self.frames, other.frames]),
+            np.concatenate([self.labels, other.labels]),
+            np.concatenate([self.starts, other.starts + self.size]),
+            np.concatenate([self.rounds, other.rounds]),
+        )
+
+    def save(self, path: Path) -> None:
+        savez_atomic(
+            path, frames=self.frames, labels=self.labels, starts=self.starts, rounds=self.rounds
+        )
+
+    @classmethod
+    def load(cls, path: Path) -> Episodes:
+        with np.load(path) as d:
+            return cls(d["frames"], d["labels"], d["starts"], d["rounds"])
+
+    def stack_index(self, n_frames: int, stride: int) -> np.ndarray:
+        """``(N, n_frames)`` row indices of each sample's frames, newest first, the
+        episode's first frame repeating before its start (as the controller's memory)."""
+        n = self.size
+        ep_start = np.zeros(n, dtype=np.int64)
+        bounds = np.append(self.starts, n)
+        for a, b in itertools.pairwise(bounds):
+            ep_start[a:b] = a
+        t = np.arange(n, dtype=np.int64) - ep_start
+        lag = np.arange(n_frames, dtype=np.int64) * stride
+        return ep_start[:, None] + np.maximum(t[:, None] - lag[None, :], 0)
+
+
+class EnvPool:
+    """One ``obs_preset="full"`` env per (level, perturbed), built on first use."""
+
+    def __init__(self, episode_duration_s: float | None = None) -> None:
+        self.episode_duration_s = episode_duration_s
+        self._envs: dict[tuple[int, bool], Any] = {}
+
+    def get(self, level: int, perturbed: bool) -> Any:
+        from myoexo.envs import make_env
+
+        key = (int(level), bool(perturbed))
+        if key not in self._envs:
+            kwargs: dict[str, Any] = {"robustness": True} if perturbed else {}
+            self._envs[key] = make_env(
+                int(level), episode_duration_s=self.episode_duration_s, **kwargs
+            )
+        return self._envs[key]
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+
+def collect_episode(
+    env: Any,
+    teacher: Callable[[np.ndarray], np.ndarray],
+    student: StudentController | None,
+    seed: int,
+    beta: float,
+    rng: np.random.Generator,
+    action_noise_std: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """One episode: the executed command is the teacher's with probability ``beta`` per
+    step (always without a student), else the student's; every step is labelled by the
+    teacher from the true full state. Returns ``(frames, labels, summary)``."""
+    idx = frame_indices(list(env.unwrapped.obs_keys))
+    obs, info = env.reset(seed=int(seed))
+    if student is not None:
+        student.bind(env).reset(seed)
+    frames, labels = [], []
+    max_steps = int(env.unwrapped.episode_steps)
+    for _ in range(max_steps):
+        x_teacher = true_full_observation(env, info)
+        a_teacher = teacher(x_teacher)
+        frames.append(np.asarray(obs, np.float64)[idx])
+        labels.append(float(a_teacher[0]))
+        if student is not None:
+            a_student = student.act(obs, info)
+            a = a_teacher if rng.random() < beta else a_student
+        else:
+            a = a_teacher
+        if action_noise_std > 0.0:
+            a = a + action_noise_std * rng.standard_normal(1)
+        a = np.clip(np.asarray(a, np.float32).reshape(1), -1.0, 1.0)
+        obs, _, terminated, truncated, info = env.step(a)
+        if terminated or truncated:
+            break
+    summary = {"final_error_deg": float(info["error_deg"]), "level": int(info["level"])}
+    return np.asarray(frames, np.float32), np.asarray(labels, np.float32), summary
+
+
+def collect_round(
+    config: DistillConfig,
+    round_index: int,
+    teacher: Callable[[np.ndarray], np.ndarray],
+    student: StudentController | None,
+    envs: EnvPool,
+) -> tuple[Episodes, dict[str, Any]]:
+    """The episodes of one round (deterministic given the config and the round)."""
+    rng = np.random.default_rng([int(config.seed), int(round_index), 0xDA66E4])
+    beta = config.beta(round_index) if student is not None else 1.0
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    errors: dict[str, list[float]] = {}
+    n_levels = len(config.levels)
+    for j in range(config.episodes_per_round):
+        level = config.levels[j % n_levels]
+        perturbed = bool(rng.random() < config.robust_fraction)
+        index = config.subject_offset + round_index * config.episodes_per_round + j
+        seed = subject_seed(level, index, config.root_seed)
+        frames, labels, summary = collect_episode(
+            envs.get(level, perturbed), teacher, student, seed, beta, rng, config.action_noise_std
+        )
+        parts.append((frames, labels))
+        key = f"L{level}{'p' if perturbed else ''}"
+        errors.setdefault(key, []).append(abs(summary["final_error_deg"]))
+    sizes = [p[1].size for p in parts]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    eps = Episodes(
+        np.concatenate([p[0] for p in parts]),
+        np.concatenate([p[1] for p in parts]),
+        starts,
+        np.full(int(sum(sizes)), round_index, np.int32),
+    )
+    stats = {
+        "beta": beta,
+        "episodes": config.episodes_per_round,
+        "samples": eps.size,
+        "driven_abs_final_error_deg": {k: float(np.mean(v)) for k, v in sorted(errors.items())},
+    }
+    return eps, stats
+
+
+# ---------------------------------------------------------------------------- training
+def _normalization(frames: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-feature mean and variance of the frames, tiled over the stacked frames; a
+    constant feature (the target) gets variance 1 (so it is only centred)."""
+    mean = frames.astype(np.float64).mean(axis=0)
+    var = frames.astype(np.float64).var(axis=0)
+    var = np.where(var < 1e-10, 1.0, var)
+    return np.tile(mean, n_frames), np.tile(var, n_frames)
+
+
+def _build_module(config: DistillConfig, in_dim: int) -> Any:
+    from torch import nn
+
+    acts = {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
+    layers: list[Any] = []
+    width = in_dim
+    for h in config.hidden:
+        layers += [nn.Linear(width, h), acts[config.activation]()]
+        width = h
+    layers.append(nn.Linear(width, 1))
+    return nn.Sequential(*layers)
+
+
+def _module_from_actor(actor: MLPActor, config: DistillConfig) -> Any:
+    import torch
+
+    module = _build_module(config, actor.obs_dim)
+    linears = [m for m in module if isinstance(m, torch.nn.Linear)]
+    with torch.no_grad():
+        for lin, (w, b) in zip(linears, actor.weights, strict=True):
+            lin.weight.copy_(torch.as_tensor(w, dtype=torch.float32))
+            lin.bias.copy_(torch.as_tensor(b, dtype=torch.float32))
+    return module
+
+
+def train_student(
+    config: DistillConfig,
+    data: Episodes,
+    epochs: int,
+    previous: StudentController | None,
+    seed: int,
+    log: Callable[[str], None] = print,
+) -> tuple[StudentController, dict[str, float]]:
+    """Fit the student to the teacher's labels (MSE on the tanh output), warm-started
+    from ``previous`` (its input normalization is recomputed on the aggregated data, and
+    its first layer re-expressed so that the warm start is the same function)."""
+    import torch
+
+    torch.set_num_threads(1)
+    torch.manual_seed(seed)
+    in_dim = config.n_frames * FRAME_DIM
+    mean, var = _normalization(data.frames, config.n_frames)
+    std = np.sqrt(var + 1e-8)
+    if previous is not None:
+        module = _module_from_actor(previous.actor, config)
+        old = previous.actor
+        old_mean = old.obs_mean if old.obs_mean is not None else np.zeros(in_dim)
+        old_std = np.sqrt(old.obs_var + old.epsilon) if old.obs_var is not None else np.ones(in_dim)
+        # z_old = (x - m_old) / s_old = (z_new * s_new + m_new - m_old) / s_old
+        first = module[0]
+        with torch.no_grad():
+            w = first.weight.double().numpy()
+            b = first.bias.double().numpy()
+            scale = std / old_std
+            shift = (mean - old_mean) / old_std
+            first.weight.copy_(torch.as_tensor(w * scale[None, :], dtype=torch.float32))
+            first.bias.copy_(torch.as_tensor(b + w @ shift, dtype=torch.float32))
+    else:
+        module = _build_module(config, in_dim)
+    z = np.clip((data.frames - mean[:FRAME_DIM]) / std[:FRAME_DIM], -10.0, 10.0)  # as MLPActor
+    frames = torch.as_tensor(z, dtype=torch.float32)
+    index = torch.as_tensor(data.stack_index(config.n_frames, config.stride))
+    labels = torch.as_tensor(data.labels, dtype=torch.float32)
+    opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    n = labels.numel()
+    gen = torch.Generator().manual_seed(seed)
+    steps_per_epoch = max(1, math.ceil(n / config.batch_size))
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(
+        opt, T_max=max(1, epochs * steps_per_epoch), eta_min=config.lr * 0.05
+    )
+    loss_value = float("nan")
+    for epoch in range(epochs):
+        perm = torch.randperm(n, generator=gen)
+        total, count = 0.0, 0
+        for k in range(steps_per_epoch):
+            rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
+            x = frames[index[rows]].flatten(1)
+            pred = torch.tanh(module(x)).squeeze(1)
+            loss = torch.mean((pred - labels[rows]) ** 2)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * rows.numel()
+            count += rows.numel()
+        loss_value = total / max(count, 1)
+        log(f"[distill]   epoch {epoch + 1}/{epochs}: mse {loss_value:.3e}")
+    linears = [m for m in module if isinstance(m, torch.nn.Linear)]
+    weights = [
+        (lin.weight.detach().double().numpy(), lin.bias.detach().double().numpy())
+        for lin in linears
+    ]
+    actor = MLPActor(weights, activation=config.activation, obs_mean=mean, obs_var=var)
+    return StudentController(actor, config.n_frames, config.stride), {"train_mse": loss_value}
+
+
+# ---------------------------------------------------------------------------- selection
+def selection_scores(
+    student: StudentController, config: DistillConfig, envs: EnvPool
+) -> dict[str, float]:
+    """Mean |final error| (deg) of the student on the selection subjects (root
+    ``config.root_seed``, indices ``0..selection_subjects-1``), per level and twin, and
+    ``score``: their mean."""
+    from myoexo.control.rollout import rollout
+    from myoexo.evaluation.metrics import episode_metrics
+
+    out: dict[str, float] = {}
+    for perturbed in (False, True):
+        for level in config.levels:
+            env = envs.get(level, perturbed)
+            student.bind(env)
+            errs = []
+            for i in range(config.selection_subjects):
+                ep = rollout(
+                    env,
+                    student,
+                    subject_seed(level, i, config.root_seed),
+                    channels=(
+                        "time_s",
+                        "knee_angle_deg",
+                        "target_angle_deg",
+                        "interaction_torque_nm",
+                        "exo_torque_nm",
+                        "command",
+                    ),
+                )
+                errs.append(episode_metrics(ep.signals).abs_final_error_deg)
+            out[f"L{level}{'p' if perturbed else ''}"] = float(np.mean(errs))
+    out["score"] = float(np.mean(list(out.values()))) if out else float("nan")
+    return out
+
+
+# ---------------------------------------------------------------------------- the run
+def _round_stem(run_dir: Path, r: int) -> Path:
+    return run_dir / f"student_round_{r:02d}"
+
+
+def distill(
+    config: DistillConfig,
+    run_dir: str | Path,
+    resume: bool = False,
+    rounds: int | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Run (or continue) a distillation in ``run_dir``; returns the history document.
+
+    ``resume``: continue after the last finished round with the saved settings (``rounds``
+    may raise their number). A new run refuses a folder that already holds one.
+    """
+    import torch
+
+    torch.set_num_threads(1)
+    run_dir = Path(run_dir)
+    cfg_path, data_path, hist_path = (
+        run_dir / CONFIG_FILE,
+        run_dir / DATASET_FILE,
+        run_dir / HISTORY_FILE,
+    )
+    if resume:
+        if not cfg_path.is_file():
+            raise ValueError(f"{run_dir} has no {CONFIG_FILE}: nothing to resume")
+        doc = json.loads(cfg_path.read_text())
+        config = DistillConfig.from_json(doc["config"])
+        if rounds is not None and rounds != config.rounds:
+            config = dataclasses.replace(config, rounds=int(rounds))
+            doc["config"] = config.to_json()
+            write_json_atomic(cfg_path, doc, indent=2)
+        history = json.loads(hist_path.read_text()) if hist_path.is_file() else {"rounds": []}
+    else:
+        if cfg_path.exists():
+            raise ValueError(f"{run_dir} already holds a distillation run; use --resume")
+        if rounds is not None:
+            config = dataclasses.replace(config, rounds=int(rounds))
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(
+            cfg_path,
+            {"config": config.to_json(), "versions": package_versions(), "kind": "distill"},
+            indent=2,
+        )
+        history = {"rounds": []}
+    done = [
+        h
+        for h in history["rounds"]
+        if _round_stem(run_dir, h["round"]).with_suffix(".npz").is_file()
+    ]
+    history["rounds"] = done
+    start = len(done)
+    data = Episodes.load(data_path) if start and data_path.is_file() else Episodes()
+    if start and data.size and int(data.rounds.max()) >= start:  # a round cut after the data
+        keep = data.rounds < start
+        data = _subset(data, keep)
+    student = load_student(_round_stem(run_dir, start - 1)) if start else None
+    teacher = Expert(load_teacher(config.teacher), config.fine_gain, config.fine_width_rad)
+    envs = EnvPool(config.episode_duration_s)
+    try:
+        for r in range(start, config.rounds):
+            t0 = time.time()
+            log(f"[distill] round {r}: collecting (beta {config.beta(r) if student else 1.0:.3f})")
+            new, stats = collect_round(config, r, teacher, student, envs)
+            data = data.extend(new)
+            data.save(data_path)
+            t1 = time.time()
+            epochs = config.epochs_first if student is None else config.epochs
+            log(f"[distill] round {r}: {new.size} new samples, {data.size} in all; training")
+            student, fit = train_student(config, data, epochs, student, config.seed + r, log)
+            t2 = time.time()
+            scores = selection_scores(student, config, envs) if config.selection_subjects else {}
+            entry = {
+                "round": r,
+                **stats,
+                "dataset_size": data.size,
+                "epochs": epochs,
+                **fit,
+                "selection": scores,
+                "collect_s": round(t1 - t0, 1),
+                "train_s": round(t2 - t1, 1),
+                "select_s": round(time.time() - t2, 1),
+            }
+            student.metadata.update(_provenance(config, r, data.size, scores))
+            save_student(student, _round_stem(run_dir, r))
+            history["rounds"].append(entry)
+            best = _best_round(history["rounds"])
+            history["best_round"] = best
+            write_json_atomic(hist_path, history, indent=1)
+            _copy_student(_round_stem(run_dir, best), run_dir / BEST_STEM)
+            log(
+                f"[distill] round {r} done in {time.time() - t0:.0f} s: mse "
+                f"{fit['train_mse']:.2e}, selection "
+                f"{json.dumps({k: round(v, 2) for k, v in scores.items()})}; best round {best}"
+            )
+    finally:
+        envs.close()
+    return history
+
+
+def _subset(data: Episodes, keep: np.ndarray) -> Episodes:
+    starts = [int(s) for s in data.starts if keep[s]]
+    idx = np.flatnonzero(keep)
+    remap = {int(old): new for new, old in enumerate(idx)}
+    return Episodes(
+        data.frames[idx],
+        data.labels[idx],
+        np.array([remap[s] for s in starts], np.int64),
+        data.rounds[idx],
+    )
+
+
+def _best_round(rounds: Sequence[dict[str, Any]]) -> int:
+    scored = [(h["selection"].get("score", math.inf), h["round"]) for h in rounds]
+    if all(not math.isfinite(s) for s, _ in scored):
+        return int(rounds[-1]["round"])
+    return int(min(scored)[1])
+
+
+def _copy_student(src: Path, dst: Path) -> None:
+    save_student(load_student(src), dst)
+
+
+def _provenance(config: DistillConfig, r: int, n: int, scores: dict[str, float]) -> dict[str, Any]:
+    return {
+        "trained_by": "myoexo distill (DAgger)",
+        "teacher": config.teacher,
+        "fine_gain": config.fine_gain,
+        "fine_width_rad": config.fine_width_rad,
+        "round": r,
+        "dataset_size": int(n),
+        "selection_root_seed": int(config.root_seed),
+        "selection_scores": scores,
+        "distill_config": config.to_json(),
+        "env_id": f"MyoExoKnee-v{{level}} (levels {list(config.levels)})",
+    }
+
+
+# ---------------------------------------------------------------------------- CLI
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo distill``."""
+    d = DistillConfig()
+    parser.add_argument("--run-dir", help="output folder (default: runs/distill_<timestamp>)")
+    parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
+    parser.add_argument("--rounds", type=int, help=f"DAgger rounds (default {d.rounds})")
+    parser.add_argument(
+        "--episodes", type=int, default=d.episodes_per_round, help="episodes per round"
+    )
+    parser.add_argument(
+        "--robust-fraction",
+        type=float,
+        default=d.robust_fraction,
+        help="share of episodes on perturbed twins (sensor noise, latency, twin changes)",
+    )
+    parser.add_argument("--beta-decay", type=float, default=d.beta_decay)
+    parser.add_argument("--action-noise", type=float, default=d.action_noise_std)
+    parser.add_argument("--n-frames", type=int, default=d.n_frames)
+    parser.add_argument("--stride", type=int, default=d.stride)
+    parser.add_argument(
+        "--hidden", default=",".join(map(str, d.hidden)), help="hidden widths, e.g. 256,256"
+    )
+    parser.add_argument("--epochs-first", type=int, default=d.epochs_first)
+    parser.add_argument("--epochs", type=int, default=d.epochs)
+    parser.add_argument(
+        "--fine-gain",
+        type=float,
+        default=d.fine_gain,
+        help="privileged fine-positioning term on the teacher's labels (0: teacher alone)",
+    )
+    parser.add_argument("--fine-width", type=float, default=d.fine_width_rad, help="rad")
+    parser.add_argument("--selection-subjects", type=int, default=d.selection_subjects)
+    parser.add_argument("--episode-duration", type=float, default=None, help="s (default 8)")
+    parser.add_argument("--seed", type=int, default=d.seed)
+    parser.add_argument("--export", metavar="STEM", help="write the selected student to STEM")
+    parser.add_argument("--onnx", metavar="FILE", help="write the selected student as ONNX")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no per-epoch lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo distill``; 0 when every round is done."""
+    from myoexo.policies.student import export_student_onnx
+
+    def log(msg: str) -> None:
+        if not (args.quiet and "epoch" in msg):
+            print(msg, flush=True)
+
+    if args.resume:
+        run_dir = Path(args.resume)
+        distill(DistillConfig(), run_dir, resume=True, rounds=args.rounds, log=log)
+    else:
+        config = DistillConfig(
+            episodes_per_round=args.episodes,
+            robust_fraction=args.robust_fraction,
+            beta_decay=args.beta_decay,
+            action_noise_std=args.action_noise,
+            n_frames=args.n_frames,
+            stride=args.stride,
+            hidden=tuple(int(h) for h in str(args.hidden).split(",") if h),
+            epochs_first=args.epochs_first,
+            epochs=args.epochs,
+            selection_subjects=args.selection_subjects,
+            fine_gain=args.fine_gain,
+            fine_width_rad=args.fine_width,
+            episode_duration_s=args.episode_duration,
+            seed=args.seed,
+        )
+        run_dir = Path(args.run_dir or f"runs/distill_{time.strftime('%Y%m%d-%H%M%S')}")
+        distill(config, run_dir, resume=False, rounds=args.rounds, log=log)
+    best = load_student(run_dir / BEST_STEM)
+    if args.export:
+        print(f"student: {save_student(best, args.export)[0]}")
+    if args.onnx:
+        print(f"onnx: {export_student_onnx(best, args.onnx)}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="myoexo distill", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

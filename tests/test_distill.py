@@ -1,0 +1,324 @@
+"""The deployable student controller (myoexo.policies.student) and its DAgger distillation
+(myoexo.training.distill)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+
+import numpy as np
+import pytest
+
+from myoexo.control.protocol import Controller
+from myoexo.policies.actor import MLPActor
+from myoexo.policies.student import (
+    EXO_PRESET_KEYS,
+    FORBIDDEN_KEYS,
+    FRAME_DIM,
+    FRAME_KEYS,
+    StudentController,
+    export_student_onnx,
+    frame_indices,
+    load_student,
+    save_student,
+    stack_frames,
+)
+
+
+def _random_student(n_frames: int = 4, stride: int = 2, seed: int = 0) -> StudentController:
+    rng = np.random.default_rng(seed)
+    dims = [n_frames * FRAME_DIM, 16, 16, 1]
+    weights = [
+        (rng.normal(0, 1 / math.sqrt(i), (o, i)), rng.normal(0, 0.1, o))
+        for i, o in itertools.pairwise(dims)
+    ]
+    actor = MLPActor(
+        weights,
+        activation="elu",
+        obs_mean=rng.normal(0, 0.1, dims[0]),
+        obs_var=rng.uniform(0.5, 2.0, dims[0]),
+    )
+    return StudentController(actor, n_frames=n_frames, stride=stride)
+
+
+@pytest.fixture(scope="module")
+def env_exo():
+    from myoexo.envs import make_env
+
+    env = make_env(1, obs_preset="exo", episode_duration_s=0.5)
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def env_full():
+    from myoexo.envs import make_env
+
+    env = make_env(1, episode_duration_s=0.5)
+    yield env
+    env.close()
+
+
+def _episode_obs(env, seed: int, steps: int = 30) -> list[np.ndarray]:
+    """Observations of an episode driven by a fixed command sequence."""
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for k in range(steps):
+        obs, *_ = env.step(np.array([-0.5 * math.sin(0.2 * k)], np.float32))
+        out.append(obs)
+    return out
+
+
+def test_student_is_a_controller_and_reads_no_forbidden_key():
+    student = _random_student()
+    assert isinstance(student, Controller)
+    assert student.obs_preset == "exo"
+    assert not set(student.required_obs_keys) & set(FORBIDDEN_KEYS)
+    assert EXO_PRESET_KEYS[:-1] == FRAME_KEYS and EXO_PRESET_KEYS[-1] == "time_frac"
+
+
+def test_frame_layout_matches_the_env(env_exo, env_full):
+    """The exo preset is the frame keys + time_frac; the full preset holds the same values
+    at frame_indices(obs_keys)."""
+    assert tuple(env_exo.unwrapped.obs_keys) == EXO_PRESET_KEYS
+    a = _episode_obs(env_exo, seed=5, steps=5)
+    b = _episode_obs(env_full, seed=5, steps=5)
+    idx = frame_indices(env_full.unwrapped.obs_keys)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x[:FRAME_DIM], y[idx])
+
+
+def test_reset_clears_memory(env_exo):
+    student = _random_student()
+    obs = _episode_obs(env_exo, seed=3, steps=12)
+    assert student.memory is None
+    first = [student.act(o, {}) for o in obs]
+    assert student.memory is not None
+    student.reset(seed=1)
+    assert student.memory is None
+    again = [student.act(o, {}) for o in obs]
+    np.testing.assert_array_equal(np.concatenate(first), np.concatenate(again))
+    # the memory matters: the same last observation after another history acts differently
+    student.reset()
+    student.act(obs[0], {})
+    other = student.act(obs[-1], {})
+    assert not np.array_equal(other, first[-1])
+
+
+def test_never_reads_forbidden_keys(env_exo, env_full):
+    """Human-knee, muscle, strap and clock entries NaN (or info empty): it still acts, and
+    exactly as from the exo sensors alone."""
+    exo_obs = _episode_obs(env_exo, seed=9, steps=15)
+    full_obs = _episode_obs(env_full, seed=9, steps=15)
+    keys = list(env_full.unwrapped.obs_keys)
+    idx = set(frame_indices(keys).tolist())
+    a = _random_student()
+    b = _random_student().bind(env_full)
+    for xe, xf in zip(exo_obs, full_obs, strict=True):
+        xe = xe.copy()
+        xe[-1] = np.nan  # time_frac
+        xf = xf.copy()
+        xf[[i for i in range(xf.size) if i not in idx]] = np.nan  # knee, muscles, clock ...
+        info = {"obs_dict": {"knee_angle_rad": np.array([np.nan])}, "knee_angle_deg": np.nan}
+        ua = a.act(xe, info)
+        ub = b.act(xf, {})
+        assert np.isfinite(ua).all() and ua.shape == (1,) and ua.dtype == np.float32
+        np.testing.assert_array_equal(ua, ub)
+
+
+def test_frame_indices_refuses_unknown_layouts():
+    with pytest.raises(ValueError, match="lacks"):
+        frame_indices(["exo_angle_rad", "time_frac"])
+    with pytest.raises(ValueError, match="unknown size"):
+        frame_indices(["coupling_qpos", *FRAME_KEYS])
+
+
+def test_training_stacks_equal_the_controller_memory():
+    """Episodes.stack_index builds exactly the input the controller's memory gives."""
+    from myoexo.training.distill import Episodes
+
+    rng = np.random.default_rng(0)
+    lengths = [7, 12]
+    frames = rng.normal(size=(sum(lengths), FRAME_DIM)).astype(np.float32)
+    data = Episodes(
+        frames, np.zeros(len(frames), np.float32), np.array([0, 7]), np.zeros(19, np.int32)
+    )
+    student = _random_student(n_frames=3, stride=2)
+    index = data.stack_index(3, 2)
+    row = 0
+    for n in lengths:
+        student.reset()
+        for _ in range(n):
+            x = student.push(frames[row].astype(np.float64))
+            np.testing.assert_array_equal(x, frames[index[row]].reshape(-1).astype(np.float64))
+            row += 1
+    mem = np.arange(5 * 2).reshape(5, 2)
+    np.testing.assert_array_equal(stack_frames(mem, 3, 2), [8, 9, 4, 5, 0, 1])
+
+
+def test_save_load_roundtrip(tmp_path, env_exo):
+    student = _random_student()
+    student.metadata["note"] = "x"
+    save_student(student, tmp_path / "s")
+    loaded = load_student(tmp_path / "s")
+    assert loaded.n_frames == student.n_frames and loaded.stride == student.stride
+    assert loaded.metadata["note"] == "x"
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert doc["student"]["frame_keys"] == list(FRAME_KEYS)
+    assert doc["obs_preset"] == "exo"
+    for o in _episode_obs(env_exo, seed=2, steps=5):
+        np.testing.assert_allclose(loaded.act(o), student.act(o), atol=1e-5)
+
+
+def _onnx_parity(student: StudentController, episodes: list[list[np.ndarray]], path) -> float:
+    ort = pytest.importorskip("onnxruntime")
+    export_student_onnx(student, path)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    worst = 0.0
+    for obs_seq in episodes:
+        student.reset()
+        memory = None
+        for obs in obs_seq:
+            frame = student.frame(obs).astype(np.float32)
+            if memory is None:
+                memory = student.initial_memory(frame)[None]
+            action, memory = sess.run(None, {"frame": frame[None], "memory": memory})
+            expected = student.act(obs)
+            worst = max(worst, float(np.max(np.abs(action[0] - expected))))
+    return worst
+
+
+def test_onnx_parity(tmp_path, env_exo):
+    student = _random_student(n_frames=4, stride=2)
+    episodes = [_episode_obs(env_exo, seed=s, steps=25) for s in (0, 1)]
+    assert _onnx_parity(student, episodes, tmp_path / "s.onnx") <= 1e-5
+
+
+def test_tiny_dagger_run_and_resume(tmp_path):
+    from myoexo.training.distill import DistillConfig, Episodes, distill
+
+    cfg = DistillConfig(
+        rounds=1,
+        episodes_per_round=2,
+        levels=(0, 2),
+        robust_fraction=0.5,
+        n_frames=3,
+        stride=1,
+        hidden=(8,),
+        epochs_first=1,
+        epochs=1,
+        selection_subjects=1,
+        episode_duration_s=0.2,
+    )
+    run = tmp_path / "run"
+    hist = distill(cfg, run, log=lambda m: None)
+    assert [h["round"] for h in hist["rounds"]] == [0]
+    assert hist["rounds"][0]["beta"] == 1.0
+    n0 = Episodes.load(run / "dataset.npz").size
+    assert n0 == 2 * 20
+    with pytest.raises(ValueError, match="resume"):
+        distill(cfg, run, log=lambda m: None)
+    hist = distill(cfg, run, resume=True, rounds=2, log=lambda m: None)
+    assert [h["round"] for h in hist["rounds"]] == [0, 1]
+    assert hist["rounds"][1]["beta"] == 0.5
+    assert Episodes.load(run / "dataset.npz").size == 2 * n0
+    student = load_student(run / "student")
+    assert student.n_frames == 3
+    meta = json.loads((run / "student_round_01.json").read_text())
+    assert meta["selection_root_seed"] == 1 and meta["teacher"] == "sac"
+    # nothing to do: a resume with every round done changes nothing
+    again = distill(cfg, run, resume=True, log=lambda m: None)
+    assert len(again["rounds"]) == 2
+    # a kill after round 1's data was saved but before its student: the resume drops that
+    # round's samples and runs the round again
+    labels = Episodes.load(run / "dataset.npz").labels.copy()
+    for suffix in (".npz", ".json"):
+        (run / f"student_round_01{suffix}").unlink()
+    again = distill(cfg, run, resume=True, log=lambda m: None)
+    assert [h["round"] for h in again["rounds"]] == [0, 1]
+    redone = Episodes.load(run / "dataset.npz")
+    assert redone.size == 2 * n0 and list(redone.starts) == [0, 20, 40, 60]
+    np.testing.assert_array_equal(redone.labels[:n0], labels[:n0])
+
+
+def test_distill_refuses_the_evaluation_root():
+    from myoexo.training.distill import DistillConfig
+
+    with pytest.raises(ValueError, match="evaluation root"):
+        DistillConfig(root_seed=0)
+
+
+def test_teacher_labels_from_the_true_state():
+    """On a perturbed twin the teacher's input is the exact state, not the sensed one."""
+    from myoexo.envs import make_env
+    from myoexo.training.distill import true_full_observation
+
+    env = make_env(0, robustness=True, episode_duration_s=0.2)
+    nominal = make_env(0, episode_duration_s=0.2)
+    try:
+        obs, info = env.reset(seed=4)
+        for _ in range(3):
+            obs, *_, info = env.step(np.array([0.1], np.float32))
+        truth = true_full_observation(env, info)
+        assert not np.allclose(truth, obs)  # the sensed obs is noisy and late
+        obs_n, info_n = nominal.reset(seed=4)
+        np.testing.assert_allclose(true_full_observation(nominal, info_n), obs_n, atol=1e-6)
+        for _ in range(3):
+            obs_n, *_, info_n = nominal.step(np.array([0.1], np.float32))
+        np.testing.assert_allclose(true_full_observation(nominal, info_n), obs_n, atol=1e-6)
+    finally:
+        env.close()
+        nominal.close()
+
+
+def test_shipped_student_loads_and_acts(env_exo, tmp_path):
+    from myoexo.policies.student import load_shipped_student
+
+    try:
+        student = load_shipped_student()
+    except FileNotFoundError:
+        pytest.skip("no shipped student")
+    assert student.obs_preset == "exo"
+    assert student.metadata.get("teacher") == "sac"
+    assert int(student.metadata.get("selection_root_seed")) == 1
+    for o in _episode_obs(env_exo, seed=0, steps=10):
+        a = student.act(o, {})
+        assert a.shape == (1,) and np.isfinite(a).all() and -1 <= a[0] <= 1
+    # the shipped controller exported whole (memory included) matches numpy on an episode
+    episodes = [_episode_obs(env_exo, seed=s, steps=40) for s in (3, 4)]
+    assert _onnx_parity(student, episodes, tmp_path / "student.onnx") <= 1e-5
+
+
+def test_wrong_layout_is_refused(env_full):
+    """An exo-layout student given a full-preset observation says so instead of acting."""
+    obs, _ = env_full.reset(seed=0)
+    with pytest.raises(ValueError, match="obs_preset"):
+        _random_student().act(obs, {})
+
+
+def test_expert_fine_term_acts_only_near_the_target():
+    import myoexo
+    from myoexo.training.distill import Expert
+
+    teacher = myoexo.load_policy("sac")
+    rng = np.random.default_rng(0)
+    x = rng.normal(0, 0.3, (3, teacher.obs_dim))
+    plain, fine = Expert(teacher), Expert(teacher, fine_gain=20.0, fine_width_rad=0.02)
+    for xi in x:
+        np.testing.assert_array_equal(plain(xi), np.clip(teacher(xi), -1, 1))
+        xi[5] = 0.5  # 29 deg from the target: the term vanishes
+        np.testing.assert_allclose(fine(xi), plain(xi), atol=1e-6)
+        xi[5] = 0.01  # knee 0.6 deg too flexed: push towards extension (negative)
+        assert fine(xi)[0] < plain(xi)[0] or plain(xi)[0] == -1.0
+
+
+def test_evaluation_engine_runs_the_student():
+    """evaluate_controller builds the exo-preset env from the controller's obs_preset."""
+    from myoexo.evaluation.engine import evaluate_controller
+
+    table, results = evaluate_controller(
+        _random_student(), level=0, subjects=1, root_seed=1, episode_duration_s=0.3
+    )
+    assert len(table) == 1 and results[0].n_steps == 30
+    assert np.isfinite(table["abs_final_error_deg"]).all()
