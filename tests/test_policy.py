@@ -53,7 +53,9 @@ def test_shipped_policy_loads_offline_and_is_small(no_network, name):
     for key in (*keys, "selection_root_seed", "reward_weights"):
         assert policy.metadata.get(key) is not None, key
     assert policy.obs_preset == {"sac": "full", "sac_exo": "exo"}[name]
-    assert policy.metadata["algorithm"] == name.split("_")[0]  # "sac", "tqc"
+    from myoexo.policies.algorithms import get_algorithm
+
+    assert get_algorithm(policy.metadata["algorithm"]).class_name == "SAC"  # torch or JAX
 
 
 def test_shipped_policy_actions_are_stable(no_network):
@@ -181,3 +183,13 @@ def test_actor_rejects_inconsistent_weights():
         MLPActor([(np.ones((1, 3)), np.ones(1))], activation="swish")
     with pytest.raises(ValueError, match="obs_mean"):
         MLPActor([(np.ones((1, 3)), np.ones(1))], obs_mean=np.zeros(3))
+
+
+def test_the_shipped_sac_records_its_seeds_and_the_ship_rule():
+    """The full-state policy is one of several seeds, shipped by a rule that does not pick
+    the luckiest (``myoexo seeds ship``); its metadata says which and why."""
+    policy = load_policy("sac")
+    seeds = policy.metadata["training_seeds"]
+    assert len(seeds) >= 5 and policy.metadata["ship_seed"] in seeds
+    assert "closest" in policy.metadata["ship_rule"]
+    assert policy.selection_root_seed == 1
