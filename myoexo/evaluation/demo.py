@@ -1,7 +1,9 @@
 """``myoexo demo`` (what ``make demo`` runs): the paper's evaluation protocol, small.
 
-Evaluates the PID baseline and the two shipped SAC policies (``sac``: full state; ``sac_exo``:
-the exoskeleton's own sensors) on 20 subjects per spasticity level (paper: 1000), and the
+Evaluates the paper's PID, the device's own PID (``pid:feedback=exo``, closed on the exo
+encoder, what a real exoskeleton can run), the full-state ``sac`` and the deployable
+``student_exo`` (the exoskeleton's own sensors with memory) on 20 subjects per spasticity
+level (paper: 1000), and the
 achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
 then writes the figures and the Markdown report (with each controller's distance to the
 bound) and prints where they are. About 5 minutes on 2 cores, most of it the oracle.
@@ -18,7 +20,7 @@ from pathlib import Path
 
 #: Defaults of the demo.
 DEMO_SUBJECTS = 20
-DEMO_CONTROLLERS = ("pid", "sac", "sac_exo")
+DEMO_CONTROLLERS = ("pid", "pid:feedback=exo", "sac", "student_exo")
 #: Subjects per level of the oracle (the bound); it costs ~40 s of a core per episode.
 DEMO_BOUND_SUBJECTS = 2
 DEMO_OUT = Path("results") / "demo"
@@ -37,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         default=list(DEMO_CONTROLLERS),
         metavar="SPEC",
-        help="controller specs as for 'myoexo evaluate' (default: pid sac sac_exo)",
+        help="controller specs as for 'myoexo evaluate' (default: %(default)s)",
     )
     parser.add_argument(
         "--bound-subjects",
