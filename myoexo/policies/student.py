@@ -51,59 +51,29 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.envs.observation import (
+    CUFF_OBS_KEYS,
+    DEFAULT_OBS_KEYS,
+    EXO_SENSOR_OBS_KEYS,
+    STATE_OBS_KEYS,
+)
 from myoexo.policies.actor import MLPActor, load_actor, save_actor
 
-#: What one frame of the controller's memory holds (obs-vector keys, in this order).
-FRAME_KEYS: tuple[str, ...] = (
-    "exo_angle_rad",
-    "exo_vel_rad_s",
-    "target_rad",
-    "command",
-    "exo_torque_nm",
-    "thigh_cuff_force_n",
-    "thigh_cuff_torque_nm",
-    "shank_cuff_force_n",
-    "shank_cuff_torque_nm",
-)
-#: Size of each frame key in the observation vector.
+#: What one frame of the controller's memory holds (obs-vector keys, in this order): the
+#: exo-sensor preset's keys without its episode clock.
+FRAME_KEYS: tuple[str, ...] = tuple(k for k in EXO_SENSOR_OBS_KEYS if k != "time_frac")
+#: Size of each scalar-or-cuff key in the observation vector (the cuffs' 3-D force and torque).
 KEY_SIZES: dict[str, int] = {
-    **dict.fromkeys(
-        (
-            "knee_angle_rad",
-            "knee_vel_rad_s",
-            "exo_angle_rad",
-            "exo_vel_rad_s",
-            "target_rad",
-            "error_rad",
-            "command",
-            "exo_torque_nm",
-            "muscle_knee_torque_nm",
-            "time_frac",
-        ),
-        1,
-    ),
-    "thigh_cuff_force_n": 3,
-    "thigh_cuff_torque_nm": 3,
-    "shank_cuff_force_n": 3,
-    "shank_cuff_torque_nm": 3,
+    k: 3 if k in CUFF_OBS_KEYS else 1 for k in (*STATE_OBS_KEYS, *CUFF_OBS_KEYS, "time_frac")
 }
 FRAME_DIM: int = sum(KEY_SIZES[k] for k in FRAME_KEYS)
 #: Observation keys a student must never read (the twin's hidden state and the clock).
 FORBIDDEN_KEYS: tuple[str, ...] = (
-    "knee_angle_rad",
-    "knee_vel_rad_s",
-    "error_rad",
-    "muscle_knee_torque_nm",
-    "coupling_qpos",
-    "coupling_qvel",
-    "spastic_act",
-    "spastic_force",
-    "spastic_length",
-    "spastic_velocity",
+    *(k for k in DEFAULT_OBS_KEYS if k not in FRAME_KEYS and k != "time_frac"),
     "time_frac",
 )
 #: The env's ``obs_preset="exo"`` keys (:data:`FRAME_KEYS` + ``time_frac``, ignored).
-EXO_PRESET_KEYS: tuple[str, ...] = (*FRAME_KEYS, "time_frac")
+EXO_PRESET_KEYS: tuple[str, ...] = EXO_SENSOR_OBS_KEYS
 #: Version of the ``"student"`` block of the file format.
 STUDENT_FORMAT_VERSION = 1
 

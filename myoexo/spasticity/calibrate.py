@@ -587,19 +587,24 @@ def run(args: argparse.Namespace) -> int:
         extensor_gain=args.extensor_gain,
         root_seed=args.seed,
     )
+    return _report("stretch", result.calibration.note, "CALIBRATION", result, args.out)
+
+
+def _report(model: str, note: str, constant: str, result: Any, out: Path | None) -> int:
+    """Print the calibration's text (and write ``calibration.md`` / ``.csv`` to *out*)."""
     table = result.table()
     text = (
-        f"# Calibration of the stretch reflex\n\n{result.calibration.note}\n\n"
-        f"Fitted levels (paste into myoexo.spasticity.reflex.CALIBRATION):\n\n```python\n"
+        f"# Calibration of the {model} reflex\n\n{note}\n\n"
+        f"Fitted values (paste into myoexo.spasticity.reflex.{constant}):\n\n```python\n"
         f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
         f"Wall time {result.wall_time_s:.0f} s.\n"
     )
     print(text)
-    if args.out is not None:
+    if out is not None:
         from myoexo.runtime.files import atomic_path, write_text_atomic
 
-        write_text_atomic(args.out / "calibration.md", text)
-        with atomic_path(args.out / "calibration.csv") as path:
+        write_text_atomic(out / "calibration.md", text)
+        with atomic_path(out / "calibration.csv") as path:
             table.to_csv(path, index=False)
     return 0
 
@@ -614,18 +619,4 @@ def _run_persistent(args: argparse.Namespace) -> int:
         ramp_s=args.ramp_s,
         root_seed=args.seed,
     )
-    table = result.table()
-    text = (
-        f"# Calibration of the persistent reflex\n\n{result.params.note}\n\n"
-        f"Fitted gains (paste into myoexo.spasticity.reflex.PERSISTENT):\n\n```python\n"
-        f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
-        f"Wall time {result.wall_time_s:.0f} s.\n"
-    )
-    print(text)
-    if args.out is not None:
-        from myoexo.runtime.files import atomic_path, write_text_atomic
-
-        write_text_atomic(args.out / "calibration.md", text)
-        with atomic_path(args.out / "calibration.csv") as path:
-            table.to_csv(path, index=False)
-    return 0
+    return _report("persistent", result.params.note, "PERSISTENT", result, args.out)
