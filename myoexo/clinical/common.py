@@ -41,8 +41,10 @@ __all__ = [
     "DriveParams",
     "PoseFn",
     "add_common_arguments",
+    "check_extension_angles",
     "check_levels",
     "check_positive",
+    "check_two_speeds",
     "default_twin",
     "draw_subjects",
     "interp_on_angle",
@@ -114,6 +116,37 @@ def check_positive(name: str, value: Any, unit: str) -> float:
     if not (math.isfinite(number) and number > 0.0):
         raise ValueError(f"{name} = {value!r} is not accepted: it must lie in (0, inf) {unit}.")
     return number
+
+
+def check_two_speeds(owner: str, slow_rad_s: float, fast_rad_s: float) -> None:
+    """A slow and a fast stretch speed (rad/s): both positive, the fast one faster, else a
+    ``ValueError`` naming ``<owner>.<field>`` and the accepted range."""
+    check_positive(f"{owner}.slow_rad_s", slow_rad_s, "rad/s")
+    check_positive(f"{owner}.fast_rad_s", fast_rad_s, "rad/s")
+    if not fast_rad_s > slow_rad_s:
+        raise ValueError(
+            f"{owner}.fast_rad_s = {fast_rad_s!r} must exceed slow_rad_s = "
+            f"{slow_rad_s!r}: accepted range ({slow_rad_s!r}, inf) rad/s."
+        )
+
+
+def check_extension_angles(
+    owner: str,
+    start_deg: float,
+    end_deg: float,
+    why: str = "the test extends the knee (stretches the flexors)",
+) -> None:
+    """Start and end knee angles (deg) of an extension inside the knee's [0, 120] deg range,
+    the end below the start, else a ``ValueError`` naming ``<owner>.<field>``."""
+    for name, value in (("start_deg", start_deg), ("end_deg", end_deg)):
+        if not (math.isfinite(value) and 0.0 <= value <= 120.0):
+            raise ValueError(
+                f"{owner}.{name} = {value!r} is outside the knee's range [0, 120] deg."
+            )
+    if not end_deg < start_deg:
+        raise ValueError(
+            f"{owner}.end_deg = {end_deg!r} must be below start_deg = {start_deg!r}: {why}."
+        )
 
 
 def check_levels(levels: Iterable[Any]) -> tuple[int, ...]:

@@ -33,8 +33,9 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from myoexo.clinical.common import (
+    check_extension_angles,
     check_levels,
-    check_positive,
+    check_two_speeds,
     print_table,
     reflex_name,
     resolve_twin,
@@ -75,27 +76,10 @@ class StretchHoldParams:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", check_levels(self.levels))
-        for name in ("slow_rad_s", "fast_rad_s"):
-            check_positive(f"StretchHoldParams.{name}", getattr(self, name), "rad/s")
-        if not self.fast_rad_s > self.slow_rad_s:
-            raise ValueError(
-                f"StretchHoldParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
-                f"{self.slow_rad_s!r}: accepted range ({self.slow_rad_s!r}, inf) rad/s."
-            )
+        check_two_speeds("StretchHoldParams", self.slow_rad_s, self.fast_rad_s)
         if not (math.isfinite(self.hold_s) and 1.5 <= self.hold_s <= 60.0):
             raise ValueError(f"StretchHoldParams.hold_s = {self.hold_s!r} is outside [1.5, 60] s.")
-        for name in ("start_deg", "end_deg"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 120.0):
-                raise ValueError(
-                    f"StretchHoldParams.{name} = {value!r} is outside the knee's range "
-                    f"[0, 120] deg."
-                )
-        if not self.end_deg < self.start_deg:
-            raise ValueError(
-                f"StretchHoldParams.end_deg = {self.end_deg!r} must be below start_deg = "
-                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)."
-            )
+        check_extension_angles("StretchHoldParams", self.start_deg, self.end_deg)
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one stretch and its hold."""

@@ -51,6 +51,7 @@ import numpy as np
 from myoexo.clinical.common import (
     DriveParams,
     add_common_arguments,
+    check_extension_angles,
     check_levels,
     check_positive,
     control_substeps,
@@ -116,17 +117,12 @@ class MASExamParams:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", check_levels(self.levels))
-        for name in ("start_deg", "end_deg"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 120.0):
-                raise ValueError(
-                    f"MASExamParams.{name} = {value!r} is outside the knee's range [0, 120] deg."
-                )
-        if not self.end_deg < self.start_deg:
-            raise ValueError(
-                f"MASExamParams.end_deg = {self.end_deg!r} must be below start_deg = "
-                f"{self.start_deg!r}: the exam extends the knee (moves the flexors)."
-            )
+        check_extension_angles(
+            "MASExamParams",
+            self.start_deg,
+            self.end_deg,
+            why="the exam extends the knee (moves the flexors)",
+        )
         check_positive("MASExamParams.duration_s", self.duration_s, "s")
         check_positive("MASExamParams.onset_threshold_nm", self.onset_threshold_nm, "Nm")
         for name in ("hold_s", "end_hold_s"):

@@ -59,8 +59,10 @@ import numpy as np
 
 from myoexo.clinical.common import (
     add_common_arguments,
+    check_extension_angles,
     check_levels,
     check_positive,
+    check_two_speeds,
     interp_on_angle,
     print_table,
     reflex_name,
@@ -132,26 +134,10 @@ class TardieuParams:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", check_levels(self.levels))
-        for name in ("slow_rad_s", "fast_rad_s"):
-            check_positive(f"TardieuParams.{name}", getattr(self, name), "rad/s")
-        if not self.fast_rad_s > self.slow_rad_s:
-            raise ValueError(
-                f"TardieuParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
-                f"{self.slow_rad_s!r}: accepted range ({self.slow_rad_s!r}, inf) rad/s."
-            )
+        check_two_speeds("TardieuParams", self.slow_rad_s, self.fast_rad_s)
         for name in ("catch_threshold_nm", "end_feel_torque_nm"):
             check_positive(f"TardieuParams.{name}", getattr(self, name), "Nm")
-        for name in ("start_deg", "end_deg"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 <= value <= 120.0):
-                raise ValueError(
-                    f"TardieuParams.{name} = {value!r} is outside the knee's range [0, 120] deg."
-                )
-        if not self.end_deg < self.start_deg:
-            raise ValueError(
-                f"TardieuParams.end_deg = {self.end_deg!r} must be below start_deg = "
-                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)."
-            )
+        check_extension_angles("TardieuParams", self.start_deg, self.end_deg)
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one of the two stretches."""

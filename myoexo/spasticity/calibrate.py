@@ -185,26 +185,49 @@ def fit_threshold_shift(
             )
         return out
 
-    lo, hi = bracket_deg
+    return bisect_final_error(outcome, bracket_deg, target_final_error_deg, tol_deg, level, "shift")
+
+
+def bisect_final_error(
+    outcome: Callable[[float], PIDOutcome],
+    bracket: tuple[float, float],
+    target_final_error_deg: float,
+    tol: float,
+    level: int,
+    name: str,
+) -> tuple[float, PIDOutcome]:
+    """Bisection on one reflex parameter whose growth moves the PID's mean final error
+    monotonically up: ``(value, outcome)`` of the value whose final error came closest to
+    the target (ties: the lower bracket end).
+
+    Args:
+        outcome: The PID's outcome at a parameter value.
+        bracket: ``(low, high)`` values whose outcomes must enclose the target.
+        target_final_error_deg: The mean final error sought, deg.
+        tol: Stop once the bracket is this narrow.
+        level: The level (for the message).
+        name: The parameter's name (for the message).
+
+    Raises:
+        ValueError: The target is not bracketed.
+    """
+    lo, hi = bracket
     out_lo, out_hi = outcome(lo), outcome(hi)
     if not out_lo.final_error_deg <= target_final_error_deg <= out_hi.final_error_deg:
         raise ValueError(
             f"level {level}: the target final error {target_final_error_deg} deg is not "
-            f"between {out_lo.final_error_deg:.2f} (shift {lo}) and "
-            f"{out_hi.final_error_deg:.2f} deg (shift {hi})"
+            f"between {out_lo.final_error_deg:.2f} ({name} {lo}) and "
+            f"{out_hi.final_error_deg:.2f} deg ({name} {hi})"
         )
-    best = (
-        (lo, out_lo)
-        if abs(out_lo.final_error_deg - target_final_error_deg)
-        < abs(out_hi.final_error_deg - target_final_error_deg)
-        else (hi, out_hi)
-    )
-    while hi - lo > tol_deg:
+
+    def miss(candidate: tuple[float, PIDOutcome]) -> float:
+        return abs(candidate[1].final_error_deg - target_final_error_deg)
+
+    best = min(((lo, out_lo), (hi, out_hi)), key=miss)
+    while hi - lo > tol:
         mid = 0.5 * (lo + hi)
         out_mid = outcome(mid)
-        if abs(out_mid.final_error_deg - target_final_error_deg) < abs(
-            best[1].final_error_deg - target_final_error_deg
-        ):
+        if miss((mid, out_mid)) < miss(best):
             best = (mid, out_mid)
         if out_mid.final_error_deg < target_final_error_deg:
             lo = mid
@@ -373,30 +396,7 @@ def fit_persistent_gain(
             )
         return out
 
-    lo, hi = bracket
-    out_lo, out_hi = outcome(lo), outcome(hi)
-    if not out_lo.final_error_deg <= target_final_error_deg <= out_hi.final_error_deg:
-        raise ValueError(
-            f"level {level}: the target final error {target_final_error_deg} deg is not "
-            f"between {out_lo.final_error_deg:.2f} (gain {lo}) and "
-            f"{out_hi.final_error_deg:.2f} deg (gain {hi})"
-        )
-    best = min(
-        ((lo, out_lo), (hi, out_hi)),
-        key=lambda b: abs(b[1].final_error_deg - target_final_error_deg),
-    )
-    while hi - lo > tol:
-        mid = 0.5 * (lo + hi)
-        out_mid = outcome(mid)
-        if abs(out_mid.final_error_deg - target_final_error_deg) < abs(
-            best[1].final_error_deg - target_final_error_deg
-        ):
-            best = (mid, out_mid)
-        if out_mid.final_error_deg < target_final_error_deg:
-            lo = mid
-        else:
-            hi = mid
-    return best
+    return bisect_final_error(outcome, bracket, target_final_error_deg, tol, level, "gain")
 
 
 @dataclass(frozen=True)
