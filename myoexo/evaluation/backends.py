@@ -73,9 +73,7 @@ def run_chunks(
         return ray_backend.run_chunks(todo, config, out, bar, ray_workers, address, stop)
     if workers == 1 or len(todo) <= 1:
         return run_in_process(todo, config, out, bar, stop)
-    if todo:
-        return run_process_pool(todo, config, out, min(workers, len(todo)), bar, stop)
-    return 0
+    return run_process_pool(todo, config, out, min(workers, len(todo)), bar, stop)
 
 
 def run_in_process(

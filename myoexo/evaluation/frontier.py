@@ -77,7 +77,7 @@ def mark_frontier(pts: Any, accuracy_deg: float = ACCURACY_DEG) -> Any:
     pts = pts.copy()
     pts["accurate"] = False
     pts["on_frontier"] = False
-    for level, group in pts.groupby("level"):
+    for _, group in pts.groupby("level"):
         measured = group[~group.controller.str.startswith("paper")]
         best = float(measured.abs_final_error_deg.min())
         accurate = group.index[
@@ -99,7 +99,6 @@ def mark_frontier(pts: Any, accuracy_deg: float = ACCURACY_DEG) -> Any:
                 if j != i
             )
             pts.at[i, "on_frontier"] = not dominated
-        del level
     return pts
 
 

@@ -141,7 +141,9 @@ def evaluate(
             )
         finally:
             bar.close()
-        stored = _episodes([c for c in chunks if chunk_done(c.path(out))])
+        stored = total  # every backend stores each chunk it finishes, or raises
+        if stop.received is not None:  # a graceful stop may leave chunks undone
+            stored = _episodes([c for c in chunks if chunk_done(c.path(out))])
         table = None
         if stored == total:  # else stopped: the run that completes the chunks writes it
             table = collect_table([c.path(out) for c in chunks], labels)

@@ -124,7 +124,7 @@ def train_seeds(args: argparse.Namespace) -> int:
                 cmd = train_command(out, seed, args.preset, args.set, args.total_timesteps)
                 log = open(out / f"seed_{seed}.log", "ab")
                 running[seed] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
-                log.close()
+                log.close()  # the child has its own copy of the file descriptor
                 print(f"[seeds] seed {seed} started: {' '.join(cmd[2:])}", flush=True)
             if stop.received is not None:
                 queue.clear()
@@ -214,15 +214,16 @@ def closest_seed(per_seed: Any) -> int:
     """The seed whose per-level metrics lie closest to the across-seed means (each metric
     over its across-seed standard deviation): a typical seed, not the best one."""
     distance: dict[int, float] = {}
-    for (level, metric), _ in per_seed.groupby("level")[list(AGGREGATED)].mean().stack().items():
-        group = per_seed[per_seed.level == level]
-        values = group[metric].to_numpy(dtype=float)
-        finite = values[np.isfinite(values)]
-        mean = float(finite.mean()) if finite.size else math.nan
-        std = float(finite.std()) if finite.size else 0.0
-        for seed, v in zip(group.seed, values, strict=True):
-            d = 0.0 if not math.isfinite(v) or std == 0 else abs(v - mean) / std
-            distance[int(seed)] = distance.get(int(seed), 0.0) + d
+    for _, group in per_seed.groupby("level"):
+        for metric in AGGREGATED:
+            values = group[metric].to_numpy(dtype=float)
+            finite = values[np.isfinite(values)]
+            if not finite.size:
+                continue  # no seed has a value here (e.g. none settled): no distance
+            mean, std = float(finite.mean()), float(finite.std())
+            for seed, v in zip(group.seed, values, strict=True):
+                d = 0.0 if not math.isfinite(v) or std == 0 else abs(v - mean) / std
+                distance[int(seed)] = distance.get(int(seed), 0.0) + d
     return min(distance, key=lambda s: (distance[s], s))
 
 
