@@ -273,12 +273,11 @@ def test_teacher_labels_from_the_true_state():
 
 
 def test_shipped_student_loads_and_acts(env_exo, tmp_path):
-    from myoexo.policies.student import load_shipped_student
+    import myoexo
+    from myoexo.policies.student import StudentController
 
-    try:
-        student = load_shipped_student()
-    except FileNotFoundError:
-        pytest.skip("no shipped student")
+    student = myoexo.load_policy("student_exo")
+    assert isinstance(student, StudentController)
     assert student.obs_preset == "exo"
     assert student.metadata.get("teacher") == "sac"
     assert int(student.metadata.get("selection_root_seed")) == 1

@@ -223,16 +223,15 @@ def load_obs_normalizer(model_path: str) -> Any:
 
 
 def load_actor_file(path: str) -> Any:
-    """An exported numpy actor (``.npz`` + ``.json``, :func:`myoexo.policies.save_actor`),
-    checked against its reference pairs; ``ValueError`` if it cannot be read."""
-    from myoexo.policies import load_actor
+    """An exported controller file (``.npz`` + ``.json``: a numpy actor or a student,
+    :func:`myoexo.policies.load_controller`), checked against its reference pairs;
+    ``ValueError`` if it cannot be read."""
+    from myoexo.policies import load_controller
 
     try:
-        actor = load_actor(Path(path).with_suffix(""))
+        return load_controller(Path(path).with_suffix(""))
     except (OSError, KeyError) as exc:
         raise ValueError(f"cannot read the actor {path!r} ({type(exc).__name__}: {exc})") from exc
-    actor.check_reference()
-    return actor
 
 
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:

@@ -62,6 +62,7 @@ __all__ = [
     "SHIPPED_POLICY",
     "MLPActor",
     "load_actor",
+    "load_controller",
     "load_policy",
     "save_actor",
     "shipped_path",
@@ -92,11 +93,22 @@ def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentCont
     path = shipped_path(name)
     if not path.with_suffix(".npz").is_file():
         raise FileNotFoundError(f"no shipped policy {name!r}; accepted: {sorted(SHIPPED_POLICIES)}")
-    actor = load_actor(path)
-    if "student" in actor.metadata:  # a controller with memory around its actor
-        from myoexo.policies.student import load_student
+    return load_controller(path, check=check)
 
-        return load_student(path, check=check)
+
+def load_controller(path_stem: str | Path, check: bool = True) -> MLPActor | StudentController:
+    """A controller from its files (``<stem>.npz`` + ``<stem>.json``): the numpy actor, or,
+    for a student file, the :class:`~myoexo.policies.student.StudentController` around it.
+
+    Args:
+        path_stem: The files' path without suffix (a suffix is ignored).
+        check: Replay the stored reference pairs; ``ValueError`` if the actor disagrees.
+    """
+    actor = load_actor(path_stem)
+    if "student" in actor.metadata:  # a controller with memory around its actor
+        from myoexo.policies.student import student_from_actor
+
+        return student_from_actor(actor, path_stem, check)
     if check:
         actor.check_reference()
     return actor

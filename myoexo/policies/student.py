@@ -364,7 +364,14 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
 def load_student(path_stem: str | Path, check: bool = True) -> StudentController:
     """Read a controller written by :func:`save_student` (``check``: replay its reference
     pairs, ``ValueError`` if the files disagree with them)."""
-    actor = load_actor(path_stem)
+    return student_from_actor(load_actor(path_stem), path_stem, check)
+
+
+def student_from_actor(
+    actor: MLPActor, path_stem: str | Path, check: bool = True
+) -> StudentController:
+    """The controller around an actor read from a student file (*path_stem*, for the
+    messages): :func:`load_student` without reading the files again."""
     block = actor.metadata.get("student")
     if not isinstance(block, dict) or block.get("format_version") != STUDENT_FORMAT_VERSION:
         raise ValueError(f"{path_stem}: not a student controller file (no 'student' block)")
@@ -379,16 +386,6 @@ def load_student(path_stem: str | Path, check: bool = True) -> StudentController
 
 
 _NOT_PROVENANCE = {"student", "reference", "obs_keys"}
-
-
-def load_shipped_student(name: str = "student_exo", check: bool = True) -> StudentController:
-    """The student shipped in ``myoexo/policies/`` (``<name>.npz/json``)."""
-    from importlib import resources
-
-    stem = Path(str(resources.files("myoexo.policies").joinpath(name)))
-    if not stem.with_suffix(".npz").is_file():
-        raise FileNotFoundError(f"no shipped student {name!r} in myoexo/policies/")
-    return load_student(stem, check=check)
 
 
 def describe(student: StudentController) -> str:
