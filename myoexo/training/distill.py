@@ -64,6 +64,7 @@ from myoexo.policies.student import (
     save_student,
 )
 from myoexo.runtime.files import package_versions, savez_atomic, write_json_atomic
+from myoexo.runtime.lifecycle import FolderLock
 
 CONFIG_FILE = "config.json"
 DATASET_FILE = "dataset.npz"
@@ -510,20 +511,35 @@ def distill(
     """Run (or continue) a distillation in ``run_dir``; returns the history document.
 
     ``resume``: continue after the last finished round with the saved settings (``rounds``
-    may raise their number). A new run refuses a folder that already holds one.
+    may raise their number). A new run refuses a folder that already holds one. The folder
+    is locked for the run (:class:`~myoexo.runtime.lifecycle.FolderLock`): a second writer
+    stops with the holder's name.
     """
+    run_dir = Path(run_dir)
+    if resume and not (run_dir / CONFIG_FILE).is_file():
+        raise ValueError(f"{run_dir} has no {CONFIG_FILE}: nothing to resume")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with FolderLock(run_dir, "distillation folder"):
+        return _distill(config, run_dir, resume, rounds, log)
+
+
+def _distill(
+    config: DistillConfig,
+    run_dir: Path,
+    resume: bool,
+    rounds: int | None,
+    log: Callable[[str], None],
+) -> dict[str, Any]:
+    """:func:`distill` in its locked folder."""
     import torch
 
     torch.set_num_threads(1)
-    run_dir = Path(run_dir)
     cfg_path, data_path, hist_path = (
         run_dir / CONFIG_FILE,
         run_dir / DATASET_FILE,
         run_dir / HISTORY_FILE,
     )
     if resume:
-        if not cfg_path.is_file():
-            raise ValueError(f"{run_dir} has no {CONFIG_FILE}: nothing to resume")
         doc = json.loads(cfg_path.read_text())
         config = DistillConfig.from_json(doc["config"])
         if rounds is not None and rounds != config.rounds:
@@ -536,7 +552,6 @@ def distill(
             raise ValueError(f"{run_dir} already holds a distillation run; use --resume")
         if rounds is not None:
             config = dataclasses.replace(config, rounds=int(rounds))
-        run_dir.mkdir(parents=True, exist_ok=True)
         write_json_atomic(
             cfg_path,
             {"config": config.to_json(), "versions": package_versions(), "kind": "distill"},
