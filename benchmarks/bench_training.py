@@ -127,7 +127,7 @@ def measure(
 
     from myoexo.training import get_preset
     from myoexo.training.callbacks import RewardTermsCallback
-    from myoexo.training.train import build_sac, make_vec_env
+    from myoexo.training.train import build_model, make_vec_env
 
     algorithm, _, k = learner.partition(":")
     k_steps = int(k or 1)
@@ -137,7 +137,7 @@ def measure(
     )
     torch.set_num_threads(preset.torch_threads)
     venv = make_vec_env(preset, seed)
-    model = build_sac(preset, venv, seed)
+    model = build_model(preset, venv, seed)
     model.learning_starts = 0
     from stable_baselines3.common.logger import configure
 

@@ -492,16 +492,16 @@ def test_resume_without_checkpoint_is_one_line_and_restart_starts_again(
     # ``train`` attribute is the function
 
     run_dir = tmp_path / "run"
-    real_build = train_module.build_sac
+    real_build = train_module.build_model
 
     def crash(*args, **kwargs):
         raise RuntimeError("crash during the start")
 
-    monkeypatch.setattr(train_module, "build_sac", crash)
+    monkeypatch.setattr(train_module, "build_model", crash)
     preset = _tiny(total_timesteps=150, learning_starts=50, first_checkpoint_steps=0)
     with pytest.raises(RuntimeError, match="crash"):
         train(preset, run_dir, seed=0, verbose=0)
-    monkeypatch.setattr(train_module, "build_sac", real_build)
+    monkeypatch.setattr(train_module, "build_model", real_build)
     assert (run_dir / ck.CONFIG_FILE).is_file() and not ck.list_checkpoints(run_dir)
     (run_dir / "progress_00.csv").write_text("time/total_timesteps\n")  # a failed start's log
 

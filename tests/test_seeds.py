@@ -97,3 +97,43 @@ def test_a_seeds_folder_refuses_another_configuration(tmp_path):
     )
     with pytest.raises(ValueError, match="another configuration"):
         S._record_config(tmp_path, argparse.Namespace(preset="cpu", set=[], seeds=[0]))
+
+
+def _fake_seed_run(out, seed, algorithm, wall_s, steps, updates, preset_extra=None):
+    """A seed run folder with a config and one checkpoint state (no model)."""
+    import json
+
+    from myoexo.training import checkpoints as ck
+
+    run = S.seed_dir(out, seed)
+    step = run / ck.CHECKPOINTS_DIR / ck.checkpoint_name(steps)
+    step.mkdir(parents=True)
+    preset = {"algorithm": algorithm, "name": "x", **(preset_extra or {})}
+    (run / ck.CONFIG_FILE).write_text(json.dumps({"preset": preset, "seed": seed}))
+    state = {"num_timesteps": steps, "n_updates": updates, "wall_time_s": wall_s}
+    (step / ck.STATE_FILE).write_text(json.dumps(state))
+
+
+def test_compare_reads_speed_from_checkpoints_and_criteria_from_the_aggregate(tmp_path):
+    for name, algorithm, extra in (
+        ("sac", "sbx_sac", None),
+        ("ppo", "ppo", {"n_steps": 256, "n_envs": 16, "batch_size": 512}),
+    ):
+        out = tmp_path / name
+        for seed in (0, 1):
+            _fake_seed_run(out, seed, algorithm, 600.0, 60_000 * (seed + 1), 1_000, extra)
+        summary = S.summarize(_per_seed({0: 1.0, 1: 3.0}, passed={1}))
+        summary.to_csv(out / "aggregate.csv")
+    table = S.compare_configurations([tmp_path / "sac", tmp_path / "ppo"])
+    sac, ppo = table.iloc[0], table.iloc[1]
+    assert sac["configuration"] == "sbx_sac (x)" and sac["seeds"] == 2
+    assert sac["wall_time_min"] == pytest.approx(10.0)
+    assert sac["env_steps_per_s"] == pytest.approx(150.0)  # (100 + 200) / 2
+    assert sac["updates_per_s"] == pytest.approx(1_000 / 600)
+    # PPO counts epochs: 8 minibatches of 512 in a 4096-transition rollout
+    assert ppo["updates_per_s"] == pytest.approx(8 * 1_000 / 600)
+    assert sac["L0_p_pass"] == 0.5 and sac["p_pass_mean"] == 0.5
+    text = S.markdown_comparison(table)
+    assert text.count("\n") == 4 and "| sbx_sac (x) | 2 | 10.0 |" in text
+    with pytest.raises(ValueError, match="seeds aggregate"):
+        S.compare_configurations([tmp_path / "nothing"])

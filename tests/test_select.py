@@ -186,13 +186,13 @@ def crafted_run(tmp_path_factory):
     import torch
 
     from myoexo.training import get_preset
-    from myoexo.training.train import build_sac, make_vec_env
+    from myoexo.training.train import build_model, make_vec_env
 
     run_dir = tmp_path_factory.mktemp("select") / "run"
     run_dir.mkdir()
     preset = get_preset("cpu", n_envs=1, buffer_size=1_000, batch_size=16, learning_starts=10)
     venv = make_vec_env(preset, seed=0)
-    model = build_sac(preset, venv, seed=0)
+    model = build_model(preset, venv, seed=0)
     ck.write_json_atomic(run_dir / ck.CONFIG_FILE, {"seed": 0, "env_id": preset.env_id})
     mu = model.policy.actor.mu
     for step, (action, _) in CRAFTED.items():

@@ -40,7 +40,7 @@ def test_cpu_preset_budget():
     assert p.torch_threads == 1
     # the paper's networks and discounting are kept
     assert (p.net_arch_pi, p.activation, p.gamma, p.tau) == ((64, 64), "gelu", 0.99, 0.05)
-    assert set(PRESETS) == {"paper", "cpu"}
+    assert set(PRESETS) == {"paper", "cpu", "ppo"}
 
 
 @pytest.mark.parametrize(
@@ -352,7 +352,7 @@ def test_obs_preset_and_algorithm_fields_are_validated():
     with pytest.raises(ValueError, match="obs_preset"):
         get_preset("cpu", obs_preset="nope")
     with pytest.raises(ValueError, match="algorithm"):
-        get_preset("cpu", algorithm="ppo")
+        get_preset("cpu", algorithm="a2c")
 
 
 def test_exo_preset_and_robustness_reach_the_training_envs():
@@ -368,3 +368,79 @@ def test_exo_preset_and_robustness_reach_the_training_envs():
     plain.close()
     key, value = parse_override("robustness=true")
     assert get_preset("cpu", **{key: value}).robustness is True
+
+
+# ---------------------------------------------------------------------------- on-policy (PPO)
+def test_ppo_preset_fields_are_validated():
+    p = get_preset("ppo")
+    assert p.algorithm == "ppo" and p.n_envs == 16 and p.normalize_reward
+    assert (p.net_arch_pi, p.net_arch_qf, p.activation) == ((64, 64), (64, 64), "gelu")
+    with pytest.raises(ValueError, match="ent_coef"):
+        get_preset("ppo", ent_coef="auto")
+    with pytest.raises(ValueError, match="batch_size = 8192 exceeds a rollout"):
+        get_preset("ppo", batch_size=8192)
+    with pytest.raises(ValueError, match="gae_lambda"):
+        get_preset("ppo", gae_lambda=1.5)
+    with pytest.raises(ValueError, match="max_wall_time_s"):
+        get_preset("cpu", max_wall_time_s=-1.0)
+
+
+def _tiny_ppo(**overrides):
+    base = {
+        "env_id": ENV_ID,
+        "episode_duration_s": 0.5,
+        "total_timesteps": 256,
+        "n_envs": 2,
+        "n_steps": 64,
+        "batch_size": 32,
+        "n_epochs": 2,
+        "checkpoint_every_s": 0.0,
+        "checkpoint_every_steps": 128,
+        "eval_every_steps": 128,
+        "eval_subjects": 1,
+        "eval_levels": (1,),
+    }
+    return get_preset("ppo", **{**base, **overrides})
+
+
+@pytest.mark.slow
+def test_ppo_trains_checkpoints_resumes_and_acts(tmp_path):
+    """SB3's PPO goes through the same run folder, small evaluation, checkpoints and resume
+    as the off-policy learners; its checkpoints are resumable without a replay buffer."""
+    run_dir = tmp_path / "ppo"
+    first = train(_tiny_ppo(), run_dir, seed=2, verbose=0)
+    assert first.num_timesteps == 256
+    last = ck.list_checkpoints(run_dir)[-1]
+    assert (last / ck.ON_POLICY_FILE).is_file() and not (last / ck.REPLAY_FILE).exists()
+    assert ck.resumable_checkpoints(run_dir)[-1] == last
+    assert ck.checkpoint_problem(last) is None
+    # written as the second rollout of 2 x 64 transitions ends: one update phase of 2 epochs
+    assert ck.read_state(last)["n_updates"] == 2
+    from myoexo.training.seeds import gradient_updates
+
+    assert gradient_updates(run_dir, 2) == 2 * (2 * 64 // 32)
+    second = resume(run_dir, total_timesteps=512, verbose=0)
+    assert second.num_timesteps == 512
+    # only the newest keep_resumable_checkpoints stay resumable
+    assert len(ck.resumable_checkpoints(run_dir)) == 2
+    from myoexo.envs import make_env
+    from myoexo.training.export import load_checkpoint_controller
+
+    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
+    env = make_env(1, episode_duration_s=0.5)
+    obs, info = env.reset(seed=0)
+    action = controller.act(obs, info)
+    assert action.shape == (1,) and abs(float(action[0])) <= 1.0
+
+
+@pytest.mark.slow
+def test_the_wall_time_budget_ends_a_run_and_a_resume_keeps_it(tmp_path):
+    run_dir = tmp_path / "budget"
+    preset = _tiny_ppo(total_timesteps=10**7, eval_every_steps=0, max_wall_time_s=2.0)
+    first = train(preset, run_dir, seed=0, verbose=0)
+    assert 0 < first.num_timesteps < 10**7
+    assert 2.0 <= first.wall_time_s < 30.0
+    sessions = [json.loads(x) for x in (run_dir / ck.SESSIONS_FILE).read_text().splitlines()]
+    assert sessions[-1]["ended_by"] == "wall_time_budget" and sessions[-1]["stopped_by"] is None
+    again = resume(run_dir, verbose=0)  # the budget is spent: nothing more is trained
+    assert again.num_timesteps == first.num_timesteps

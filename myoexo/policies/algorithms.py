@@ -34,8 +34,10 @@ class Algorithm:
         class_name: Class name in its package (``"SAC"``).
         package: Module that defines the class.
         extra: The myoexo extra that installs ``package`` (``None``: a core dependency).
-        trainable: A preset can train it (the off-policy learners with SAC's interface).
+        trainable: A preset can train it (the off-policy learners with SAC's interface, and
+            PPO).
         framework: ``"torch"`` (stable-baselines3, sb3-contrib) or ``"jax"`` (SBX).
+        on_policy: Learns from fresh rollouts (no replay buffer; PPO, A2C).
     """
 
     name: str
@@ -44,6 +46,7 @@ class Algorithm:
     extra: str | None = None
     trainable: bool = False
     framework: str = "torch"
+    on_policy: bool = False
 
     def load_class(self) -> Any:
         """The algorithm's class; ``ValueError`` naming the extra to install if absent."""
@@ -69,8 +72,8 @@ ALGORITHMS: MappingProxyType[str, Algorithm] = MappingProxyType(
             Algorithm("sbx_crossq", "CrossQ", "sbx", "jax", trainable=True, framework="jax"),
             Algorithm("td3", "TD3"),
             Algorithm("ddpg", "DDPG"),
-            Algorithm("ppo", "PPO"),
-            Algorithm("a2c", "A2C"),
+            Algorithm("ppo", "PPO", trainable=True, on_policy=True),
+            Algorithm("a2c", "A2C", on_policy=True),
         )
     }
 )

@@ -430,3 +430,26 @@ class StopOnSignalCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         return self.signals.received is None
+
+
+class StopOnWallTimeCallback(BaseCallback):
+    """End training once the run's wall-time budget is spent (runs compared on the same
+    wall-clock budget): ``learn`` then ends as at its normal end, with the final resumable
+    checkpoint.
+
+    Args:
+        budget_s: Wall time (s) this session may still train.
+    """
+
+    def __init__(self, budget_s: float, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.budget_s = float(budget_s)
+        self.fired = False
+        self._t0 = 0.0
+
+    def _on_training_start(self) -> None:
+        self._t0 = time.monotonic()
+
+    def _on_step(self) -> bool:
+        self.fired = time.monotonic() - self._t0 >= self.budget_s
+        return not self.fired

@@ -10,7 +10,9 @@
     <run>/tb/                      the same as tensorboard event files
     <run>/checkpoints/step_<n>/    model.zip, vecnormalize.pkl, state.json and, for the
                                    newest ``keep_replay`` (2) resumable checkpoints,
-                                   replay_buffer.pkl (the others are policy snapshots)
+                                   replay_buffer.pkl (the others are policy snapshots);
+                                   an on-policy learner (PPO) has no replay buffer: its
+                                   resumable checkpoints hold on_policy.json instead
     <run>/checkpoints/damaged-step_<n>-<time>/   a checkpoint found damaged, set aside
     <run>/latest.json              name of the newest resumable checkpoint
     <run>/.myoexo.lock             the lock of the process training in the folder
@@ -47,6 +49,11 @@ TB_DIR = "tb"
 
 MODEL_FILE = "model.zip"
 REPLAY_FILE = "replay_buffer.pkl"
+#: What makes an on-policy learner's checkpoint resumable (it has no replay buffer; a resumed
+#: run starts a new rollout, the one in progress when the checkpoint was written is dropped).
+ON_POLICY_FILE = "on_policy.json"
+#: The files that make a checkpoint resumable, one per kind of learner.
+RESUME_FILES: tuple[str, ...] = (REPLAY_FILE, ON_POLICY_FILE)
 VECNORM_FILE = "vecnormalize.pkl"
 STATE_FILE = "state.json"
 
@@ -107,8 +114,10 @@ def save_checkpoint(
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
             vec_normalize.save(str(tmp / VECNORM_FILE))
-        if with_replay:
+        if with_replay and hasattr(model, "save_replay_buffer"):
             model.save_replay_buffer(tmp / REPLAY_FILE)
+        elif with_replay:  # on-policy: the model and its statistics are the whole state
+            write_json_atomic(tmp / ON_POLICY_FILE, {"rollout": "dropped; resume collects anew"})
         write_json_atomic(tmp / STATE_FILE, state)
     except BaseException:  # e.g. a full disk: no partial checkpoint stays behind
         shutil.rmtree(tmp, ignore_errors=True)
@@ -118,9 +127,9 @@ def save_checkpoint(
     os.replace(tmp, final)
     if with_replay:
         write_json_atomic(run_dir / LATEST_FILE, {"checkpoint": final.name, **state})
-        resumable = [p for p in list_checkpoints(run_dir) if (p / REPLAY_FILE).is_file()]
-        for old in resumable[: -max(keep_replay, 1)]:
-            (old / REPLAY_FILE).unlink(missing_ok=True)
+        for old in resumable_checkpoints(run_dir)[: -max(keep_replay, 1)]:
+            for name in RESUME_FILES:
+                (old / name).unlink(missing_ok=True)
     return final
 
 
@@ -136,15 +145,19 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
 
 def latest_checkpoint(run_dir: Path, with_replay: bool = False) -> Path | None:
     """Newest complete checkpoint (with a replay buffer if ``with_replay``), or ``None``."""
-    ckpts = list_checkpoints(run_dir)
-    if with_replay:
-        ckpts = [p for p in ckpts if (p / REPLAY_FILE).is_file()]
+    ckpts = resumable_checkpoints(run_dir) if with_replay else list_checkpoints(run_dir)
     return ckpts[-1] if ckpts else None
 
 
+def is_resumable(checkpoint: Path) -> bool:
+    """Whether a checkpoint holds what resuming needs (a replay buffer, or an on-policy
+    learner's marker)."""
+    return any((Path(checkpoint) / name).is_file() for name in RESUME_FILES)
+
+
 def resumable_checkpoints(run_dir: Path) -> list[Path]:
-    """Checkpoints of a run that hold a replay buffer, oldest first."""
-    return [p for p in list_checkpoints(run_dir) if (p / REPLAY_FILE).is_file()]
+    """Checkpoints of a run that can be resumed from (:func:`is_resumable`), oldest first."""
+    return [p for p in list_checkpoints(run_dir) if is_resumable(p)]
 
 
 def _pickle_problem(path: Path) -> str | None:
@@ -197,7 +210,7 @@ def checkpoint_problem(checkpoint: Path, with_replay: bool = True) -> str | None
             return f"{MODEL_FILE} lacks {missing}"
     except (OSError, zipfile.BadZipFile, EOFError) as exc:
         return f"{MODEL_FILE} is not a readable zip ({type(exc).__name__}: {exc})"
-    if with_replay:
+    if with_replay and not (checkpoint / ON_POLICY_FILE).is_file():
         problem = _pickle_problem(checkpoint / REPLAY_FILE)
         if problem:
             return problem

@@ -114,7 +114,20 @@ class SACPreset:
         algorithm: ``"sac"`` (stable-baselines3), or from sb3-contrib (the ``contrib``
             extra) ``"tqc"`` (truncated quantile critics, Kuznetsov 2020) or ``"crossq"``
             (batch-renormalized critics without target networks, Bhatt 2024; ``tau`` is not
-            used).
+            used); SBX's ``"sbx_sac"``, ``"sbx_tqc"``, ``"sbx_crossq"`` (the ``jax`` extra);
+            or the on-policy ``"ppo"`` (stable-baselines3; ``buffer_size``, ``tau``,
+            ``train_freq``, ``gradient_steps`` and ``learning_starts`` are not used,
+            ``net_arch_qf`` is its value network, ``batch_size`` its minibatch).
+        n_steps: PPO: vector steps per env in one rollout (a rollout is ``n_steps * n_envs``
+            transitions).
+        n_epochs: PPO: passes over each rollout.
+        gae_lambda: PPO: the GAE(lambda) bias-variance trade-off.
+        clip_range: PPO: the clip of the probability ratio.
+        normalize_reward: Also normalize rewards by a running estimate of the return's
+            spread (``VecNormalize(norm_reward=True)``: usual for PPO, not for SAC).
+        max_wall_time_s: Training wall-time budget (s, all sessions together; 0: none): the
+            run ends at ``total_timesteps`` or at this wall time, whichever comes first, with a
+            resumable checkpoint (runs compared on the same wall-clock budget).
     """
 
     name: str = "custom"
@@ -150,6 +163,12 @@ class SACPreset:
     obs_preset: str = "full"
     robustness: bool = False
     algorithm: str = "sac"
+    n_steps: int = 256
+    n_epochs: int = 10
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    normalize_reward: bool = False
+    max_wall_time_s: float = 0.0
 
     _POSITIVE_INTS: ClassVar[tuple[str, ...]] = (
         "total_timesteps",
@@ -161,6 +180,8 @@ class SACPreset:
         "torch_threads",
         "eval_subjects",
         "keep_resumable_checkpoints",
+        "n_steps",
+        "n_epochs",
     )
 
     def __post_init__(self) -> None:
@@ -193,15 +214,29 @@ class SACPreset:
         _check_float("clip_obs", self.clip_obs, 0.0, 1e6, low_open=True)
         _check_float("checkpoint_every_s", self.checkpoint_every_s, 0.0, 1e7)
         _check_float("first_checkpoint_s", self.first_checkpoint_s, 0.0, 1e7)
+        _check_float("gae_lambda", self.gae_lambda, 0.0, 1.0)
+        _check_float("clip_range", self.clip_range, 0.0, 1.0, low_open=True)
+        _check_float("max_wall_time_s", self.max_wall_time_s, 0.0, 1e7)
         if self.episode_duration_s is not None:
             _check_float("episode_duration_s", self.episode_duration_s, 0.0, 3600.0, True)
-        if self.batch_size > self.buffer_size:
+        algorithm = get_algorithm(self.algorithm, trainable=True)  # names the accepted ones
+        if self.batch_size > self.buffer_size and not algorithm.on_policy:
             raise ValueError(
                 f"batch_size = {self.batch_size} exceeds buffer_size = {self.buffer_size}"
             )
         if self.obs_preset not in OBS_PRESETS:
             raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {sorted(OBS_PRESETS)}")
-        get_algorithm(self.algorithm, trainable=True)  # ValueError naming the accepted ones
+        if algorithm.on_policy:
+            if isinstance(self.ent_coef, str):
+                raise ValueError(
+                    f"ent_coef = {self.ent_coef!r}: {self.algorithm} needs a float >= 0 (no "
+                    "learned entropy coefficient)"
+                )
+            if self.batch_size > self.n_steps * self.n_envs:
+                raise ValueError(
+                    f"batch_size = {self.batch_size} exceeds a rollout of n_steps * n_envs = "
+                    f"{self.n_steps * self.n_envs} transitions"
+                )
         if self.vec_env not in _VEC_ENVS:
             raise ValueError(f"vec_env = {self.vec_env!r}; accepted: {_VEC_ENVS}")
         if self.activation not in _ACTIVATIONS:
@@ -219,7 +254,9 @@ class SACPreset:
             if not self.ent_coef.startswith("auto"):
                 raise ValueError(f"ent_coef = {self.ent_coef!r}: a float > 0 or 'auto[_<init>]'")
         else:
-            _check_float("ent_coef", float(self.ent_coef), 0.0, 1e3, low_open=True)
+            _check_float(
+                "ent_coef", float(self.ent_coef), 0.0, 1e3, low_open=not algorithm.on_policy
+            )
         bad = [v for v in self.eval_levels if v not in VALID_LEVELS]
         if bad:
             raise ValueError(f"eval_levels has unknown level(s) {bad}; accepted: {VALID_LEVELS}")
@@ -306,12 +343,37 @@ class CpuPreset(SACPreset):
     eval_subjects: int = 2
 
 
+@dataclass(frozen=True)
+class PPOPreset(CpuPreset):
+    """SB3's PPO with many envs, the way simulation-bound exoskeleton controllers are trained
+    (MyoAssist; Luo et al. 2024): the same networks as ``cpu`` (actor 64-64 GELU, value
+    network 64-64 GELU), observations normalized as there.
+
+    * ``n_envs`` 16 in one process (``DummyVecEnv``), rollouts of ``n_steps`` = 256 per env:
+      4,096 transitions (5 episodes' worth) per update phase.
+    * ``n_epochs`` 10 over minibatches of ``batch_size`` = 512: 80 gradient updates per
+      rollout, 0.02 per transition (SAC's ``cpu`` preset: 0.25).
+    * SB3's PPO defaults otherwise: lr 3e-4, GAE lambda 0.95, clip 0.2, gamma 0.99 (the
+      SAC presets' 1-s horizon), no entropy bonus (``ent_coef`` 0); rewards normalized
+      (``normalize_reward``) as PPO expects.
+    """
+
+    name: str = "ppo"
+    algorithm: str = "ppo"
+    n_envs: int = 16
+    n_steps: int = 256
+    n_epochs: int = 10
+    batch_size: int = 512
+    ent_coef: str | float = 0.0
+    normalize_reward: bool = True
+
+
 #: Preset name -> class (its defaults are the preset).
-PRESETS: dict[str, type[SACPreset]] = {"paper": PaperPreset, "cpu": CpuPreset}
+PRESETS: dict[str, type[SACPreset]] = {"paper": PaperPreset, "cpu": CpuPreset, "ppo": PPOPreset}
 
 
 def get_preset(name: str, **overrides: Any) -> SACPreset:
-    """The preset ``name`` (``"paper"`` or ``"cpu"``) with some fields replaced.
+    """The preset ``name`` (``"paper"``, ``"cpu"`` or ``"ppo"``) with some fields replaced.
 
     Raises:
         ValueError: Unknown preset or field, or a value out of range.

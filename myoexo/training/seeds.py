@@ -5,6 +5,7 @@ uncertainty.
     myoexo seeds train runs/sbx5                   # again: resumes every unfinished seed
     myoexo seeds aggregate runs/sbx5 --subjects 10
     myoexo seeds ship runs/sbx5 --name sac         # the chosen seed into the package
+    myoexo seeds compare runs/algos/* --out results/algorithms   # several configurations
 
 ``train`` runs one ``myoexo train`` process per seed (``--workers`` at a time), each in its
 own run folder ``DIR/seed_<N>`` with its own checkpoints, so each seed is resumable on its own
@@ -23,6 +24,11 @@ smallest sum over levels and metrics of its distance to the across-seed mean, ea
 divided by its across-seed spread). Files: ``aggregate_seeds.csv`` (one row per seed and
 level), ``aggregate.csv`` / ``aggregate.md`` (the summary), ``aggregate.json`` (the chosen
 seed and checkpoints), ``seeds_spread.png``.
+
+``compare`` puts several aggregated folders side by side (e.g. algorithms trained on the same
+wall-clock budget, ``--set max_wall_time_s=...``): per configuration, the mean over seeds of
+the training wall time, env steps, env steps/s and gradient updates/s, and per level the
+final error and peak reduction (mean [95 % CI]) and the share of seeds passing the criteria.
 """
 
 from __future__ import annotations
@@ -364,6 +370,130 @@ def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> A
     return actor
 
 
+# ----------------------------------------------------------------------------- compare
+def gradient_updates(run_dir: Path, n_updates: int) -> int:
+    """Gradient steps behind a checkpoint's ``n_updates``: SB3's off-policy learners count
+    gradient steps; its PPO counts epochs, each ``ceil(n_steps * n_envs / batch_size)``
+    minibatch updates."""
+    from myoexo.policies.algorithms import get_algorithm
+
+    preset = ck.read_config(run_dir)["preset"]
+    if not get_algorithm(preset["algorithm"]).on_policy:
+        return int(n_updates)
+    rollout = int(preset["n_steps"]) * int(preset["n_envs"])
+    return int(n_updates) * math.ceil(rollout / int(preset["batch_size"]))
+
+
+def training_speed(out: Path) -> Any:
+    """Per seed of a seeds folder: training wall time, env steps and gradient updates of its
+    newest checkpoint, and their rates."""
+    import pandas as pd
+
+    rows = []
+    for run_dir in sorted(Path(out).glob("seed_*")):
+        last = ck.latest_checkpoint(run_dir)
+        if last is None:
+            continue
+        state = ck.read_state(last)
+        wall = float(state["wall_time_s"])
+        steps = int(state["num_timesteps"])
+        updates = gradient_updates(run_dir, int(state.get("n_updates") or 0))
+        rows.append(
+            {
+                "seed": int(run_dir.name.partition("_")[2]),
+                "wall_time_min": wall / 60.0,
+                "env_steps": steps,
+                "gradient_updates": updates,
+                "env_steps_per_s": steps / max(wall, 1e-9),
+                "updates_per_s": updates / max(wall, 1e-9),
+            }
+        )
+    if not rows:
+        raise ValueError(f"{str(out)!r} holds no checkpointed seed run")
+    return pd.DataFrame(rows)
+
+
+def configuration_label(out: Path) -> str:
+    """``algorithm (preset)`` of a seeds folder, from its first seed's config."""
+    first = next(iter(sorted(Path(out).glob("seed_*"))), None)
+    if first is None:
+        raise ValueError(f"{str(out)!r} holds no seed run folder")
+    preset = ck.read_config(first)["preset"]
+    return f"{preset['algorithm']} ({preset['name']})"
+
+
+def compare_configurations(folders: Sequence[Path]) -> Any:
+    """One row per aggregated seeds folder (:func:`aggregate_seeds` first): speed means over
+    seeds, and per level the final error and peak reduction (mean and CI) and ``p_pass``."""
+    import pandas as pd
+
+    rows = []
+    for out in map(Path, folders):
+        path = out / "aggregate.csv"
+        if not path.is_file():
+            raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate {out}`")
+        summary = pd.read_csv(path, index_col="level")
+        speed = training_speed(out)
+        row: dict[str, Any] = {
+            "configuration": configuration_label(out),
+            "folder": str(out),
+            "seeds": int(summary["seeds"].max()),
+        }
+        for col in ("wall_time_min", "env_steps", "env_steps_per_s", "updates_per_s"):
+            row[col] = float(speed[col].mean())
+        for level, lv in summary.iterrows():
+            for metric in ("abs_final_error_deg", "peak_reduction_pct"):
+                for stat in ("mean", "ci_low", "ci_high"):
+                    row[f"L{level}_{metric}_{stat}"] = float(lv[f"{metric}_{stat}"])
+            row[f"L{level}_p_pass"] = float(lv["p_pass"])
+        row["p_pass_mean"] = float(summary["p_pass"].mean())
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def markdown_comparison(table: Any) -> str:
+    """The comparison as a Markdown table (one row per configuration)."""
+    levels = sorted({int(c[1]) for c in table.columns if c[:1] == "L" and c[1].isdigit()})
+    head = ["configuration", "seeds", "wall (min/seed)", "env steps", "env steps/s", "updates/s"]
+    head += [f"L{lv} final error (deg)" for lv in levels]
+    head += [f"L{lv} peak reduction (%)" for lv in levels]
+    head += ["criteria met (share of seed-levels)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cell(row: Any, level: int, metric: str, fmt: str) -> str:
+        m, lo, hi = (row[f"L{level}_{metric}_{s}"] for s in ("mean", "ci_low", "ci_high"))
+        return f"{m:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
+
+    for _, row in table.iterrows():
+        cells = [
+            row["configuration"],
+            str(int(row["seeds"])),
+            f"{row['wall_time_min']:.1f}",
+            f"{row['env_steps']:,.0f}",
+            f"{row['env_steps_per_s']:.0f}",
+            f"{row['updates_per_s']:.0f}",
+        ]
+        cells += [cell(row, lv, "abs_final_error_deg", ".2f") for lv in levels]
+        cells += [cell(row, lv, "peak_reduction_pct", ".1f") for lv in levels]
+        cells.append(f"{row['p_pass_mean']:.2f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def compare_seeds(args: argparse.Namespace) -> int:
+    """``myoexo seeds compare``."""
+    table = compare_configurations(args.folders)
+    text = markdown_comparison(table)
+    if args.out:
+        stem = Path(args.out)
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        table.to_csv(stem.with_suffix(".csv"), index=False)
+        write_text_atomic(stem.with_suffix(".md"), text)
+        print(f"wrote {stem.with_suffix('.csv')} and {stem.with_suffix('.md')}")
+    print(text)
+    return 0
+
+
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``myoexo seeds``."""
@@ -386,12 +516,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sh.add_argument("out", help="an aggregated `myoexo seeds` folder")
     sh.add_argument("--to", type=Path, help="write STEM.npz + STEM.json")
     sh.add_argument("--name", help="write it into the package as NAME (e.g. sac)")
+    co = sub.add_parser("compare", help="aggregated seeds folders side by side (speed, criteria)")
+    co.add_argument("folders", nargs="+", type=Path, help="folders aggregated by `seeds aggregate`")
+    co.add_argument("--out", help="write STEM.csv and STEM.md")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo seeds train|aggregate``."""
+    """Run ``myoexo seeds train|aggregate|ship|compare``."""
     if args.action == "train":
         return train_seeds(args)
+    if args.action == "compare":
+        return compare_seeds(args)
     if args.action == "ship":
         if not (args.to or args.name):
             raise ValueError("myoexo seeds ship: give --to STEM and/or --name NAME")

@@ -142,7 +142,7 @@ class _EnvFactory:
 
 def make_vec_env(preset: SACPreset, seed: int) -> Any:
     """The training envs: ``n_envs`` copies in a Dummy/SubprocVecEnv, seeded ``seed + i``,
-    wrapped in ``VecNormalize`` (observations only) if the preset says so."""
+    wrapped in ``VecNormalize`` (observations and/or rewards) if the preset says so."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     subproc = preset.vec_env == "subproc"
@@ -160,9 +160,13 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
     ]
     venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(seed)
-    if preset.normalize_obs:
+    if preset.normalize_obs or preset.normalize_reward:
         venv = VecNormalize(
-            venv, norm_obs=True, norm_reward=False, clip_obs=preset.clip_obs, gamma=preset.gamma
+            venv,
+            norm_obs=preset.normalize_obs,
+            norm_reward=preset.normalize_reward,
+            clip_obs=preset.clip_obs,
+            gamma=preset.gamma,
         )
     return venv
 
@@ -186,32 +190,51 @@ def _activation(name: str, framework: str) -> Any:
     return {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}[name]
 
 
-def build_sac(preset: SACPreset, venv: Any, seed: int) -> Any:
-    """An untrained agent of the preset's algorithm (SB3 SAC by default; TQC or CrossQ
-    from sb3-contrib; SBX's SAC, TQC or CrossQ in JAX) with the preset's networks and
-    hyper-parameters."""
+def build_model(preset: SACPreset, venv: Any, seed: int) -> Any:
+    """An untrained agent of the preset's algorithm with the preset's networks and
+    hyper-parameters: off-policy (SB3 SAC by default; TQC or CrossQ from sb3-contrib; SBX's
+    SAC, TQC or CrossQ in JAX) or on-policy (SB3 PPO: ``net_arch_qf`` is its value
+    network)."""
     algorithm = get_algorithm(preset.algorithm, trainable=True)
     cls = algorithm.load_class()
+    activation = _activation(preset.activation, algorithm.framework)
+    common: dict[str, Any] = {
+        "learning_rate": preset.learning_rate,
+        "batch_size": preset.batch_size,
+        "gamma": preset.gamma,
+        "ent_coef": preset.ent_coef,
+        "seed": seed,
+        "device": "cpu",
+        "verbose": 0,
+    }
+    if algorithm.on_policy:
+        return cls(
+            "MlpPolicy",
+            venv,
+            n_steps=preset.n_steps,
+            n_epochs=preset.n_epochs,
+            gae_lambda=preset.gae_lambda,
+            clip_range=preset.clip_range,
+            policy_kwargs={
+                "net_arch": {"pi": list(preset.net_arch_pi), "vf": list(preset.net_arch_qf)},
+                "activation_fn": activation,
+            },
+            **common,
+        )
     extra: dict[str, Any] = {} if algorithm.class_name == "CrossQ" else {"tau": preset.tau}
     return cls(
         "MlpPolicy",
         venv,
-        learning_rate=preset.learning_rate,
         buffer_size=preset.buffer_size,
         learning_starts=preset.learning_starts,
-        batch_size=preset.batch_size,
         **extra,
-        gamma=preset.gamma,
         train_freq=(preset.train_freq, "step"),
         gradient_steps=preset.gradient_steps,
-        ent_coef=preset.ent_coef,
         policy_kwargs={
             "net_arch": {"pi": list(preset.net_arch_pi), "qf": list(preset.net_arch_qf)},
-            "activation_fn": _activation(preset.activation, algorithm.framework),
+            "activation_fn": activation,
         },
-        seed=seed,
-        device="cpu",
-        verbose=0,
+        **common,
     )
 
 
@@ -334,7 +357,11 @@ def _learn(
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
-    from myoexo.training.callbacks import RewardTermsCallback, StopOnSignalCallback
+    from myoexo.training.callbacks import (
+        RewardTermsCallback,
+        StopOnSignalCallback,
+        StopOnWallTimeCallback,
+    )
 
     torch.set_num_threads(preset.torch_threads)
     session = _next_session(run_dir)
@@ -345,6 +372,10 @@ def _learn(
     )
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
+    budget_s = preset.max_wall_time_s - wall_time_offset_s if preset.max_wall_time_s > 0 else None
+    wall_stop = StopOnWallTimeCallback(budget_s) if budget_s is not None else None
+    if budget_s is not None and budget_s <= 0:
+        remaining = 0  # the run has spent its wall-time budget
     record: dict[str, Any] = {
         "session": session,
         "start_step": start_step,
@@ -360,6 +391,7 @@ def _learn(
                 *([evaluator] if evaluator else []),
                 checkpointer,
                 StopOnSignalCallback(stop),
+                *([wall_stop] if wall_stop else []),
                 *options.callbacks,
             ]
             model.learn(
@@ -376,6 +408,8 @@ def _learn(
     record.update(
         end_step=steps, wall_time_s=round(elapsed, 3), ended_utc=_utc_now(), stopped_by=stopped_by
     )
+    if budget_s is not None and (budget_s <= 0 or (wall_stop is not None and wall_stop.fired)):
+        record["ended_by"] = "wall_time_budget"
     with open(run_dir / ck.SESSIONS_FILE, "a") as f:
         f.write(json.dumps(record) + "\n")
     return TrainResult(
@@ -391,7 +425,7 @@ def _learn(
 def _final_checkpoint(run_dir: Path, checkpointer: Any) -> Path:
     """The session's last resumable checkpoint (one is written if the run has none)."""
     last = checkpointer.last_checkpoint
-    if last is None or not (last / ck.REPLAY_FILE).is_file():
+    if last is None or not ck.is_resumable(last):
         last = ck.latest_checkpoint(run_dir, with_replay=True)
     if last is None:  # nothing left to do and never checkpointed
         last = checkpointer.save(with_replay=True)
@@ -471,7 +505,7 @@ def _start(preset: SACPreset, run_dir: Path, seed: int, options: SessionOptions)
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
         write_json_atomic(run_dir / ck.CONFIG_FILE, config)
-        model = build_sac(preset, venv, seed)
+        model = build_model(preset, venv, seed)
         return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, options)
     finally:
         venv.close()
@@ -484,12 +518,13 @@ def _load_checkpoint(checkpoint: Path, preset: SACPreset, seed: int) -> tuple[An
     step = int(ck.read_state(checkpoint)["num_timesteps"])
     venv = make_vec_env(preset, seed + step)
     try:
-        if preset.normalize_obs:
+        if preset.normalize_obs or preset.normalize_reward:
             venv = VecNormalize.load(str(checkpoint / ck.VECNORM_FILE), venv.venv)
             venv.training = True
         cls = algorithm_class(preset.algorithm)
         model = cls.load(checkpoint / ck.MODEL_FILE, env=venv, device="cpu")
-        model.load_replay_buffer(checkpoint / ck.REPLAY_FILE)
+        if (checkpoint / ck.REPLAY_FILE).is_file():  # off-policy; on-policy has none
+            model.load_replay_buffer(checkpoint / ck.REPLAY_FILE)
         model.set_random_seed(seed + step)
     except BaseException:
         venv.close()
@@ -567,7 +602,7 @@ def resume(
         try:
             state = ck.read_state(last)
             step = int(state["num_timesteps"])
-            if verbose and model.replay_buffer is not None:
+            if verbose and getattr(model, "replay_buffer", None) is not None:
                 print(
                     f"[resume] {run_dir} from {last.name}: {step} steps, "
                     f"{model.replay_buffer.size() * model.n_envs} transitions in the replay "
