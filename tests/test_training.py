@@ -444,3 +444,18 @@ def test_the_wall_time_budget_ends_a_run_and_a_resume_keeps_it(tmp_path):
     assert sessions[-1]["ended_by"] == "wall_time_budget" and sessions[-1]["stopped_by"] is None
     again = resume(run_dir, verbose=0)  # the budget is spent: nothing more is trained
     assert again.num_timesteps == first.num_timesteps
+
+
+@pytest.mark.slow
+def test_jax_crossq_evaluates_during_training_through_its_model(tmp_path):
+    """SBX's CrossQ keeps its actor's batch-renormalization state beside the layers: the
+    periodic evaluation and the checkpoints act through the JAX model, not the numpy actor."""
+    pytest.importorskip("sbx")
+    from myoexo.control.policy import SB3Controller
+    from myoexo.training.export import load_checkpoint_controller
+
+    run_dir = tmp_path / "crossq"
+    train(_tiny_preset(algorithm="sbx_crossq", eval_levels=(1,)), run_dir, seed=0, verbose=0)
+    assert len((run_dir / ck.EVAL_FILE).read_text().splitlines()) == 1 + 2
+    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
+    assert isinstance(controller, SB3Controller)

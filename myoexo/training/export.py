@@ -84,7 +84,9 @@ def _jax_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]],
     Dense_{n-1}`` hidden, ``Dense_n`` the mean, ``Dense_{n+1}`` the log-std (flax kernels
     are (in, out): transposed). Other layers (CrossQ's batch renormalization) or an
     approximate GELU raise ``ValueError``: such an actor acts through its model."""
-    params = policy.actor_state.params["params"]
+    params = policy.actor_state.params
+    if "params" in params:  # SAC / TQC wrap the layers; CrossQ's batch-norm state does not
+        params = params["params"]
     names = sorted(params, key=lambda k: int(k.rpartition("_")[2]) if k[-1].isdigit() else -1)
     if not names or any(not n.startswith("Dense_") for n in names):
         raise ValueError(f"actor layers {sorted(params)} are not a plain MLP")
