@@ -70,3 +70,27 @@ def test_shaped_pid_specs_parse():
     configs = [pid_config(parse_controller_spec(s).options) for s in specs]
     assert {c.ramp_s for c in configs} >= set(F.RAMPS_S)
     assert {c.output_limit for c in configs} >= set(F.LIMITS)
+
+
+def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path):
+    """Two weight sweeps each have a seed_0: their points must not share a label."""
+    import json
+
+    from myoexo.control.specs import parse_controller_spec
+    from myoexo.evaluation.frontier import seed_controllers
+
+    labels = []
+    for name in ("inter0p1", "inter1p0"):
+        ckpt = tmp_path / name / "seed_0" / "checkpoints" / "step_0000000100"
+        ckpt.mkdir(parents=True)
+        (ckpt / "model.zip").write_bytes(b"")
+        (ckpt.parent.parent / "config.json").write_text(
+            json.dumps({"preset": {"algorithm": "sbx_sac"}, "seed": 0})
+        )
+        (tmp_path / name / "aggregate.json").write_text(
+            json.dumps({"selected_checkpoints": {"0": str(ckpt)}})
+        )
+        (spec,) = seed_controllers(tmp_path / name)
+        assert spec.startswith("sbx_sac:")
+        labels.append(parse_controller_spec(spec).label)
+    assert labels == ["inter0p1-seed_0-step_0000000100", "inter1p0-seed_0-step_0000000100"]

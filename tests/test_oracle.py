@@ -90,3 +90,46 @@ def test_distance_to_bound_uses_the_subjects_in_common():
     assert "distance (deg)" in bound_markdown(table)
     with pytest.raises(ValueError, match="no oracle"):
         distance_to_bound(table[table.controller == "pid"])
+
+
+# ------------------------------------------------------------------ torque-aware cost
+def test_the_planner_reads_the_interaction_torque_as_the_env_reports_it():
+    env = make_env(2, episode_duration_s=0.3)
+    oracle = OracleMPC.from_env(env, **FAST, interaction_weight=0.1)
+    env.reset(seed=0)
+    for k in range(20):
+        _, _, _, _, info = env.step(np.array([-0.8 if k < 12 else 0.3], np.float32))
+        planned = oracle._interaction_torque_nm(env.unwrapped.data)
+        # the env evaluates the muscles' knee transmission at the substep's start angle
+        assert planned == pytest.approx(info["interaction_torque_nm"], abs=2.0)
+
+
+def test_a_peak_penalty_lowers_the_peak_and_a_ramp_starts_the_reference_at_the_knee():
+    env = make_env(1, episode_duration_s=0.4)
+    plain = run_episode(env, OracleMPC.from_env(env, **FAST), seed=3)
+    capped = run_episode(env, OracleMPC.from_env(env, **FAST, peak_weight=30.0), seed=3)
+    assert (
+        capped.metrics.peak_interaction_torque_nm < plain.metrics.peak_interaction_torque_nm - 5.0
+    )
+    oracle = OracleMPC.from_env(env, **FAST, ramp_s=1.0)
+    env.reset(seed=3)
+    oracle.reset(3)
+    oracle.act(None, {})
+    start = oracle._start_rad
+    assert start == pytest.approx(env.unwrapped.data.qpos[oracle._knee_qadr])
+    assert oracle._reference_rad(0.0) == pytest.approx(start)
+    assert oracle._reference_rad(0.5) == pytest.approx(0.5 * (start + oracle._target_rad))
+    assert oracle._reference_rad(2.0) == oracle._target_rad
+    for bad in ({"peak_weight": -1.0}, {"interaction_weight": float("nan")}, {"ramp_s": 100.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            OracleConfig(**bad)
+
+
+def test_frontier_oracle_specs_parse():
+    from myoexo.evaluation.frontier import CHEAP_ORACLE, oracle_specs
+
+    specs = oracle_specs()
+    assert specs[0] == f"oracle:{CHEAP_ORACLE}"
+    for text in specs:
+        spec = parse_controller_spec(text)
+        assert spec.kind == "oracle" and spec.options["samples"] == 8

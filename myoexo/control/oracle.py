@@ -7,9 +7,18 @@ into a private ``MjData`` (the same ``MjModel``, so a perturbed twin is planned 
 is), rolls out ``samples`` torque plans over ``horizon_s`` (the best plan so far, shifted,
 plus Gaussian perturbations of it and the two saturated constants), and keeps the cheapest.
 A plan is piecewise linear between ``knots`` values; the cost per control step is
-``(e / 1 rad)^2 + torque_weight * u^2`` with ``e`` the human knee error, the last step of
-the horizon counts ``terminal_weight`` times and adds ``velocity_weight * (knee
-velocity)^2`` (end at rest).
+``(e / 1 rad)^2 + torque_weight * u^2 + interaction_weight * (tau / 100 Nm)^2`` with ``e``
+the human knee error and ``tau`` the interaction torque (``|exo| + |muscle knee torque|``, as
+the env reports it); the last step of the horizon counts ``terminal_weight`` times and adds
+``velocity_weight * (knee velocity)^2`` (end at rest). With ``peak_weight``, a plan whose
+interaction torque rises above the episode's peak so far pays ``peak_weight * (new peak^2 -
+old peak^2) / (100 Nm)^2`` once: the planner trades the peak and the RMS of the interaction
+torque against the error term, whose integral is what settling costs. With ``ramp_s``, the
+error is taken against a reference that moves from the start angle to the target in
+``ramp_s`` seconds (the oracle's counterpart of a ramped-setpoint PID: a slower start stretches
+the muscles more slowly, so the reflex pushes back less). Sweeping ``ramp_s`` and
+``peak_weight`` (``myoexo frontier --oracle``) traces the twin's frontier with a planner that
+knows everything.
 
 It knows the subject (its reflex parameters are in the copied stage) and the exact dynamics,
 which no real controller does; what it reaches is what the 100 Nm motor can reach on this
@@ -32,7 +41,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model.leg import KNEE_JOINT
 from myoexo.spasticity.stage import SpasticityStage, StageHost
+
+#: Scale of the interaction torque in the cost (Nm): the motor's peak torque.
+_TORQUE_SCALE_NM = 100.0
 
 
 @dataclass(frozen=True)
@@ -54,6 +68,12 @@ class OracleConfig:
         terminal_weight: Weight of the horizon's last step.
         velocity_weight: Weight of ``(knee velocity / 1 rad/s)^2`` in the last step's cost
             (the plan must end at rest, not swing through the target).
+        interaction_weight: Weight of ``(interaction torque / 100 Nm)^2`` per control step
+            (the RMS of the interaction torque; 0: the final-error bound).
+        peak_weight: Weight of the rise of the squared episode peak of the interaction torque
+            (in (100 Nm)^2) a plan causes (0: the peak is free).
+        ramp_s: Duration (s) of the reference's ramp from the start angle to the target, in
+            episode time (0: the target from the start).
     """
 
     samples: int = 12
@@ -66,6 +86,9 @@ class OracleConfig:
     torque_weight: float = 1e-3
     terminal_weight: float = 10.0
     velocity_weight: float = 0.01
+    interaction_weight: float = 0.0
+    peak_weight: float = 0.0
+    ramp_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("samples", "replan", "knots", "iters"):
@@ -83,6 +106,9 @@ class OracleConfig:
             ("torque_weight", 0.0, 1e6),
             ("terminal_weight", 0.0, 1e6),
             ("velocity_weight", 0.0, 1e6),
+            ("interaction_weight", 0.0, 1e6),
+            ("peak_weight", 0.0, 1e6),
+            ("ramp_s", 0.0, 60.0),
         ):
             v = float(getattr(self, name))
             if not (math.isfinite(v) and low <= v <= high):
@@ -130,6 +156,8 @@ class OracleMPC:
         self._exo_act = int(e._exo_act)
         self._knee_qadr = int(e._knee_qadr)
         self._knee_dadr = int(e._knee_dadr)
+        self._knee_torque = CoupledJointTorque(e.model, KNEE_JOINT)
+        self._torque_aware = self.config.interaction_weight > 0 or self.config.peak_weight > 0
         self._target_rad = math.radians(e.target_angle_deg)
         self._steps = max(2, round(self.config.horizon_s / e.dt))
         self._ctrl = np.zeros(e.model.nu)
@@ -161,6 +189,8 @@ class OracleMPC:
         self._knots = np.full(self.config.knots, -1.0)  # start: full extension torque
         self._plan = self._basis @ self._knots
         self._step_in_plan = 0
+        self._peak_nm = 0.0  # the episode's peak interaction torque so far
+        self._start_rad: float | None = None  # knee angle at the first plan (ramp_s > 0)
         self.plans = 0
 
     # ------------------------------------------------------------------ planning
@@ -169,22 +199,45 @@ class OracleMPC:
         mujoco.mj_setState(m, d, self._state, self._state_spec)
         stage.set_history_state(delay)
         ctrl, host = self._ctrl, self._host
+        cfg = self.config
         cost = 0.0
-        tw = self.config.torque_weight
+        tw, iw = cfg.torque_weight, cfg.interaction_weight
+        peak = self._peak_nm
         for k in range(self._steps):
             u = float(plan[k])
             ctrl.fill(0.0)
             ctrl[self._exo_act] = u
             d.ctrl[:] = stage.apply(host, ctrl)
             mujoco.mj_step(m, d, self._frame_skip)
-            e = d.qpos.item(self._knee_qadr) - self._target_rad
-            cost += self._weights[k] * (e * e + tw * u * u)
+            e = d.qpos.item(self._knee_qadr) - self._reference_rad(d.time)
+            step_cost = e * e + tw * u * u
+            if self._torque_aware:
+                tau = self._interaction_torque_nm(d)
+                step_cost += iw * (tau / _TORQUE_SCALE_NM) ** 2
+                peak = max(peak, tau)
+            cost += self._weights[k] * step_cost
         v = d.qvel.item(self._knee_dadr)
-        return cost + self.config.terminal_weight * self.config.velocity_weight * v * v
+        rise = (peak**2 - self._peak_nm**2) / _TORQUE_SCALE_NM**2
+        return cost + cfg.terminal_weight * cfg.velocity_weight * v * v + cfg.peak_weight * rise
+
+    def _reference_rad(self, time_s: float) -> float:
+        """The angle the error is taken against at episode time *time_s* (rad)."""
+        ramp = self.config.ramp_s
+        if ramp <= 0 or self._start_rad is None or time_s >= ramp:
+            return self._target_rad
+        return self._start_rad + (self._target_rad - self._start_rad) * time_s / ramp
+
+    def _interaction_torque_nm(self, d: mujoco.MjData) -> float:
+        """``|exo torque| + |muscle torque along the knee|`` of the step just taken (Nm), as
+        the env's ``interaction_torque_nm``."""
+        muscle = self._knee_torque.torque_at(d.qpos.item(self._knee_qadr), d.qfrc_actuator)
+        return abs(d.actuator_force.item(self._exo_act)) + abs(muscle)
 
     def _plan_now(self) -> None:
         e, cfg = self.env, self.config
         mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
+        if self._start_rad is None:
+            self._start_rad = e.data.qpos.item(self._knee_qadr)
         stage = e.spasticity.planning_copy(e.model, e.dt)
         delay = e.spasticity.history_state()  # delay line + after-discharge
         # the best plan so far, shifted by the steps it has run
@@ -211,7 +264,10 @@ class OracleMPC:
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         """The next command of the current plan (a new plan every ``replan`` steps)."""
-        del obs, info
+        del obs
+        tau = info.get("interaction_torque_nm") if self._torque_aware else None
+        if tau is not None:  # the env's own reading of the last step
+            self._peak_nm = max(self._peak_nm, float(tau))
         if self._step_in_plan % self.config.replan == 0 or self._step_in_plan >= self._steps:
             self._plan_now()
         u = float(self._plan[min(self._step_in_plan, self._steps - 1)])

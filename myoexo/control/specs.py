@@ -143,9 +143,12 @@ def parse_controller_spec(text: str) -> ControllerSpec:
 
 def _model_label(path: Path) -> str:
     """A model file's label: its stem, or ``<run>-<checkpoint>`` for the ``model.zip`` of a
-    ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``)."""
+    ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``), prefixed with the
+    seeds folder for a ``myoexo seeds`` run (``<seeds>-seed_<N>-<checkpoint>``)."""
     if path.name == "model.zip" and path.parent.parent.name == "checkpoints":
-        return f"{path.parent.parent.parent.name}-{path.parent.name}"
+        run = path.parent.parent.parent
+        label = f"{run.name}-{path.parent.name}"
+        return f"{run.parent.name}-{label}" if re.fullmatch(r"seed_\d+", run.name) else label
     return path.stem
 
 

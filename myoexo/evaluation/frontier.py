@@ -2,24 +2,29 @@
 
     myoexo frontier --out results/frontier --subjects 10
     myoexo frontier --out results/frontier --subjects 10 --controllers sac --seeds-dir runs/s5
+    myoexo frontier --out results/frontier --subjects 10 --oracle   # + the torque-aware oracle
 
 Every controller runs on the same subjects (evaluation root seed 0) through the evaluation
 protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in ``OUT/evaluation``): the
 paper's PID, the device PID on the exo encoder (``pid:feedback=exo``), the *shaped* PIDs a
 reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, a command clipped at
 ``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), and whatever ``--controllers``
-adds (the shipped policies, model files, the oracle). Per level and controller: the mean
+adds (the shipped policies, model files), and with ``--oracle`` the torque-aware oracle
+(:mod:`myoexo.control.oracle`: predictive sampling on a copy of the true twin) at the
+settings of :data:`ORACLE_SWEEP`, in its cheap configuration (:data:`CHEAP_ORACLE`). Per
+level and controller: the mean
 settling time, peak interaction torque, RMS interaction torque up to settling and absolute
 final error. A controller is **accurate** at a level when its mean absolute final error is
 within ``--accuracy-deg`` (1 deg) of the best any of them reaches there (at levels 0-1 that is
 the target itself; at levels 2-3 the stall that the motor limit sets). The **frontier** of a
 level is the set of accurate controllers that no other accurate one beats on both settling
 time and peak torque: the achievable trade-off among the controllers tried, an upper bound
-of the twin's true one (a torque-aware planner could only push it further down).
+of the twin's true one.
 
 The study's SAC is placed at its reported reductions from *our* paper's-PID values (peak and
 RMS reduced by the study's percentages, its settling times), so that it can be read against
-the frontier on this twin. With ``--seeds-dir``, each seed's selected policy
+the frontier on this twin. With ``--seeds-dir`` (one or more folders), each seed's selected
+policy
 (``aggregate.json`` of ``myoexo seeds aggregate``) is a point of its own (the spread over
 seeds). Files: ``frontier.csv`` (every point, with ``accurate`` and ``on_frontier``),
 ``frontier.md``, ``frontier_level<L>.png`` and ``frontier.png`` (all levels).
@@ -41,6 +46,13 @@ from myoexo.spasticity.levels import VALID_LEVELS
 RAMPS_S: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5, 3.0)
 #: Command limits (x 100 Nm) of the clipped PIDs.
 LIMITS: tuple[float, ...] = (0.5, 0.6, 0.8)
+#: The oracle's cheap configuration for the frontier: 8 rollouts per plan, a plan every 4th
+#: control step (5-6x fewer rollouts than :class:`~myoexo.control.oracle.OracleConfig`'s
+#: default; docs/reference.md section 10 compares the two).
+CHEAP_ORACLE = "samples=8,replan=4"
+#: Torque-aware oracle settings of ``myoexo frontier --oracle``: none (the final-error bound),
+#: a reference ramped over 0.6 s and 1.5 s, and a penalty on the rise of the peak.
+ORACLE_SWEEP: tuple[str, ...] = ("", "ramp_s=0.6", "ramp_s=1.5", "peak_weight=3")
 #: Accuracy band of the frontier (deg above the best mean |final error| of the level).
 ACCURACY_DEG = 1.0
 #: Columns of a frontier point (per level and controller, means over subjects).
@@ -60,6 +72,11 @@ def shaped_pid_specs(
     specs += [f"pid:ramp_s={r:g}" for r in ramps_s]
     specs += [f"pid:limit={lim:g}" for lim in limits]
     return specs
+
+
+def oracle_specs(sweep: Sequence[str] = ORACLE_SWEEP, base: str = CHEAP_ORACLE) -> list[str]:
+    """Controller specs of the oracle at each setting of *sweep* on top of *base*."""
+    return [f"oracle:{base}" + (f",{extra}" if extra else "") for extra in sweep]
 
 
 def points(table: Any) -> Any:
@@ -179,6 +196,8 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
                 color, marker, name = "tab:cyan", "s", "clipped PID"
             elif label.startswith("paper"):
                 color, marker, name = "tab:red", "*", "paper SAC (its reductions)"
+            elif label.startswith("oracle"):
+                color, marker, name = "tab:purple", "P", "oracle (true state; settings)"
             else:
                 color, marker, name = "tab:orange", "D", label
             ax.scatter(
@@ -211,20 +230,22 @@ def build_frontier(
     out: Path,
     subjects: int,
     controllers: Sequence[str] = (),
-    seeds_dir: Path | None = None,
+    seeds_dirs: Sequence[Path] = (),
     workers: int | None = None,
     accuracy_deg: float = ACCURACY_DEG,
     levels: Sequence[int] = VALID_LEVELS,
     progress: bool = True,
+    oracle: bool = False,
 ) -> Any:
-    """Evaluate the controllers on the same subjects and write the frontier files."""
+    """Evaluate the controllers on the same subjects and write the frontier files (with
+    ``oracle``, also the torque-aware oracle at :data:`ORACLE_SWEEP`)."""
     import pandas as pd
 
     from myoexo.evaluation.config import EvaluationConfig
     from myoexo.evaluation.runner import evaluate
 
-    specs = [*shaped_pid_specs(), *controllers]
-    if seeds_dir is not None:
+    specs = [*shaped_pid_specs(), *controllers, *(oracle_specs() if oracle else [])]
+    for seeds_dir in seeds_dirs:
         specs += seed_controllers(seeds_dir)
     config = EvaluationConfig(controllers=tuple(specs), levels=tuple(levels), subjects=subjects)
     run = evaluate(config, Path(out) / "evaluation", workers=workers, progress=progress)
@@ -249,8 +270,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--controllers", nargs="*", default=[], help="more controller specs (e.g. sac oracle)"
     )
-    parser.add_argument("--seeds-dir", type=Path, help="a `myoexo seeds` folder (aggregated)")
+    parser.add_argument(
+        "--seeds-dir",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="aggregated `myoexo seeds` folders (each seed's selected checkpoint a point)",
+    )
     parser.add_argument("--workers", type=int, help="worker processes (default: all cores)")
+    parser.add_argument(
+        "--oracle",
+        action="store_true",
+        help="add the torque-aware oracle at its sweep settings (slow: ~6 s per episode)",
+    )
     parser.add_argument(
         "--accuracy-deg",
         type=float,
@@ -272,6 +304,7 @@ def run(args: argparse.Namespace) -> int:
         args.workers,
         args.accuracy_deg,
         progress=not args.no_progress,
+        oracle=args.oracle,
     )
     print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
     print(f"wrote {args.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")
