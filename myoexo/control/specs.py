@@ -24,6 +24,8 @@ spec                               controller
 ``oracle``                         sampling-based MPC on a copy of the twin (true state):
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
+                                   and the torque-aware ``interaction_weight``,
+                                   ``peak_weight``, ``ramp_s``
 ``path/to/actor.npz``              an exported numpy actor (``myoexo export-policy``), with
                                    its ``.json`` beside it
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
