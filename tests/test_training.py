@@ -276,6 +276,18 @@ def test_reward_weight_overrides_reach_the_training_envs():
         get_preset("cpu", reward_weights=(("nope", 1.0),))
 
 
+def _assert_newest_checkpoint_acts(run_dir):
+    """The run's newest checkpoint, loaded as a controller, gives one command in [-1, 1]."""
+    from myoexo.envs import make_env
+    from myoexo.training.export import load_checkpoint_controller
+
+    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
+    env = make_env(1, episode_duration_s=0.5)
+    obs, info = env.reset(seed=0)
+    action = controller.act(obs, info)
+    assert action.shape == (1,) and abs(float(action[0])) <= 1.0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("algorithm", ["tqc", "crossq"])
 def test_contrib_algorithms_train_evaluate_and_resume(algorithm, tmp_path):
@@ -295,14 +307,7 @@ def test_contrib_algorithms_train_evaluate_and_resume(algorithm, tmp_path):
     assert second.num_timesteps == 600
     assert ck.read_config(run_dir)["preset"]["algorithm"] == algorithm
     # its checkpoints act as controllers (numpy actor for TQC, the SB3 model for CrossQ)
-    from myoexo.envs import make_env
-    from myoexo.training.export import load_checkpoint_controller
-
-    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
-    env = make_env(1, episode_duration_s=0.5)
-    obs, info = env.reset(seed=0)
-    action = controller.act(obs, info)
-    assert action.shape == (1,) and abs(float(action[0])) <= 1.0
+    _assert_newest_checkpoint_acts(run_dir)
 
 
 @pytest.mark.slow
@@ -423,14 +428,7 @@ def test_ppo_trains_checkpoints_resumes_and_acts(tmp_path):
     assert second.num_timesteps == 512
     # only the newest keep_resumable_checkpoints stay resumable
     assert len(ck.resumable_checkpoints(run_dir)) == 2
-    from myoexo.envs import make_env
-    from myoexo.training.export import load_checkpoint_controller
-
-    controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
-    env = make_env(1, episode_duration_s=0.5)
-    obs, info = env.reset(seed=0)
-    action = controller.act(obs, info)
-    assert action.shape == (1,) and abs(float(action[0])) <= 1.0
+    _assert_newest_checkpoint_acts(run_dir)
 
 
 @pytest.mark.slow
