@@ -94,3 +94,11 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
         assert spec.startswith("sbx_sac:")
         labels.append(parse_controller_spec(spec).label)
     assert labels == ["inter0p1-seed_0-step_0000000100", "inter1p0-seed_0-step_0000000100"]
+
+
+def test_seeds_of_one_folder_share_a_legend_entry():
+    from myoexo.evaluation.frontier import point_group
+
+    assert point_group("inter0p3-seed_2-step_0000100000") == "inter0p3 (seeds)"
+    assert point_group("sac") == "sac"
+    assert point_group("run-step_0000100000") == "run-step_0000100000"

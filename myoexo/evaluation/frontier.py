@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -163,28 +164,43 @@ def seed_controllers(seeds_dir: Path) -> list[str]:
     return specs
 
 
+#: Colours of the other controllers' groups (a policy, or one seeds folder's seeds), in order.
+_GROUP_COLORS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "gold", "tab:gray")
+_SEED_LABEL = re.compile(r"^(?P<group>.+)-seed_\d+-step_\d+$")
+
+
+def point_group(label: str) -> str:
+    """Legend entry of a point: a seeds run's seeds share their folder's (``<seeds>-seed_<N>-
+    <step>`` -> ``<seeds> (seeds)``); any other label is its own."""
+    m = _SEED_LABEL.match(label)
+    return f"{m.group('group')} (seeds)" if m else label
+
+
 def plot_frontier(pts: Any, level: int | None = None) -> Any:
-    """Peak interaction torque vs settling time, one panel per level (or one level)."""
+    """Peak interaction torque vs settling time, one panel per level (or one level), one
+    legend beside the panels."""
     from matplotlib.figure import Figure
 
     levels = [level] if level is not None else sorted(pts.level.unique())
-    fig = Figure(figsize=(4.2 * len(levels), 3.8), layout="constrained")
+    fig = Figure(figsize=(3.6 * len(levels) + 3.0, 3.6), layout="constrained")
     axes = fig.subplots(1, len(levels), squeeze=False)[0]
     styles = {
         "pid": ("black", "^", "paper's PID"),
         "pid:feedback=exo": ("grey", "v", "device PID (exo encoder)"),
     }
+    others = sorted({point_group(str(c)) for c in pts.controller})
+    legend: dict[str, Any] = {}
     for ax, lv in zip(axes, levels, strict=True):
         group = pts[pts.level == lv]
         front = group[group.on_frontier].sort_values("settling_time_s")
-        ax.step(
+        (line,) = ax.step(
             front.settling_time_s,
             front.peak_interaction_torque_nm,
             where="post",
             color="tab:green",
             lw=1.5,
-            label="frontier (accurate, non-dominated)",
         )
+        legend.setdefault("frontier (accurate, non-dominated)", line)
         for _, p in group.iterrows():
             label = str(p.controller)
             ts = p.settling_time_s if math.isfinite(p.settling_time_s) else 8.0
@@ -199,23 +215,23 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
             elif label.startswith("oracle"):
                 color, marker, name = "tab:purple", "P", "oracle (true state; settings)"
             else:
-                color, marker, name = "tab:orange", "D", label
-            ax.scatter(
+                name = point_group(label)
+                color = _GROUP_COLORS[others.index(name) % len(_GROUP_COLORS)]
+                marker = "D"
+            handle = ax.scatter(
                 ts,
                 p.peak_interaction_torque_nm,
                 color=color,
                 marker=marker,
                 s=60 if marker == "*" else 28,
                 facecolors=color if p.accurate or label.startswith("paper") else "none",
-                label=name,
             )
+            legend.setdefault(name, handle)
         ax.set_title(f"level {lv}")
         ax.set_xlabel("settling time (s; 8 = never)")
         ax.set_ylabel("peak interaction torque (Nm)")
         ax.grid(alpha=0.3)
-        handles, labels = ax.get_legend_handles_labels()
-        unique = dict(zip(labels, handles, strict=True))
-        ax.legend(unique.values(), unique.keys(), fontsize=6, loc="best")
+    fig.legend(legend.values(), legend.keys(), fontsize=7, loc="outside right center")
     fig.suptitle("Torque vs settling on the twin (filled: accurate; hollow: not)", fontsize=9)
     return fig
 
