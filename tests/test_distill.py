@@ -280,6 +280,11 @@ def test_shipped_student_loads_and_acts(env_exo, tmp_path):
     assert isinstance(student, StudentController)
     assert student.obs_preset == "exo"
     assert student.metadata.get("teacher") == "sac"
+    # it was distilled from the shipped teacher: its provenance names the same seeds
+    teacher = myoexo.load_policy("sac").metadata
+    provenance = student.metadata["teacher_provenance"]
+    assert provenance["training_seeds"] == teacher["training_seeds"]
+    assert provenance["ship_seed"] == teacher["ship_seed"]
     assert int(student.metadata.get("selection_root_seed")) == 1
     for o in _episode_obs(env_exo, seed=0, steps=10):
         a = student.act(o, {})

@@ -636,10 +636,23 @@ def _copy_student(src: Path, dst: Path) -> None:
     save_student(load_student(src), dst)
 
 
+#: Provenance of the teacher copied into a student's metadata (which ``sac`` labelled it).
+TEACHER_KEYS: tuple[str, ...] = ("checkpoint", "training_seeds", "ship_seed", "num_timesteps")
+
+
+def teacher_provenance(name: str) -> dict[str, Any]:
+    """The shipped teacher's own provenance (:data:`TEACHER_KEYS` present in its metadata)."""
+    from myoexo.policies import load_policy
+
+    meta = load_policy(name, check=False).metadata
+    return {k: meta[k] for k in TEACHER_KEYS if k in meta}
+
+
 def _provenance(config: DistillConfig, r: int, n: int, scores: dict[str, float]) -> dict[str, Any]:
     return {
         "trained_by": "myoexo distill (DAgger)",
         "teacher": config.teacher,
+        "teacher_provenance": teacher_provenance(config.teacher),
         "fine_gain": config.fine_gain,
         "fine_width_rad": config.fine_width_rad,
         "round": r,
