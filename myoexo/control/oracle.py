@@ -23,8 +23,9 @@ knows everything.
 It knows the subject (its reflex parameters are in the copied stage) and the exact dynamics,
 which no real controller does; what it reaches is what the 100 Nm motor can reach on this
 twin. The paper never computed such a bound. It is slow (a few hundred rollouts per second of
-simulated time: ~20-60 s per 8-s episode on one core), so it is evaluated on a few subjects
-per level (``myoexo evaluate --controllers oracle --subjects 10``).
+simulated time: ~15 s per 8-s episode on a quiet core, 5 s in the frontier's cheap setting,
+~40 s under load), so it is evaluated on a few subjects per level (``myoexo evaluate
+--controllers oracle --subjects 10``).
 
     from myoexo.control.oracle import OracleMPC
     env = make_env(3)

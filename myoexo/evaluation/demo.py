@@ -21,7 +21,7 @@ from pathlib import Path
 #: Defaults of the demo.
 DEMO_SUBJECTS = 20
 DEMO_CONTROLLERS = ("pid", "pid:feedback=exo", "sac", "student_exo")
-#: Subjects per level of the oracle (the bound); it costs ~40 s of a core per episode.
+#: Subjects per level of the oracle (the bound); it costs ~15 s of a quiet core per episode.
 DEMO_BOUND_SUBJECTS = 2
 DEMO_OUT = Path("results") / "demo"
 
