@@ -457,3 +457,29 @@ def test_jax_crossq_evaluates_during_training_through_its_model(tmp_path):
     assert len((run_dir / ck.EVAL_FILE).read_text().splitlines()) == 1 + 2
     controller = load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1])
     assert isinstance(controller, SB3Controller)
+
+
+def test_a_budget_stop_leaves_a_checkpoint_past_the_budget(tmp_path):
+    """A cadence checkpoint written in the step the budget ran out records a wall time just
+    under it; the stop then writes one more, so that a resume does not train on."""
+    import json as _json
+
+    from myoexo.training.train import _checkpoint_spent_budget
+
+    step = tmp_path / ck.CHECKPOINTS_DIR / ck.checkpoint_name(128)
+    step.mkdir(parents=True)
+    (step / ck.STATE_FILE).write_text(_json.dumps({"num_timesteps": 128, "wall_time_s": 1.999}))
+    (step / ck.ON_POLICY_FILE).write_text("{}")
+
+    class Checkpointer:
+        run_dir = tmp_path
+        saves = 0
+
+        def save(self, with_replay=True):
+            Checkpointer.saves += 1
+
+    _checkpoint_spent_budget(Checkpointer(), 2.0)
+    assert Checkpointer.saves == 1
+    (step / ck.STATE_FILE).write_text(_json.dumps({"num_timesteps": 128, "wall_time_s": 2.001}))
+    _checkpoint_spent_budget(Checkpointer(), 2.0)
+    assert Checkpointer.saves == 1

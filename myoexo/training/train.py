@@ -401,6 +401,8 @@ def _learn(
                 progress_bar=options.progress_bar,
                 log_interval=max(1, preset.n_envs),
             )
+            if wall_stop is not None and wall_stop.fired:
+                _checkpoint_spent_budget(checkpointer, preset.max_wall_time_s)
         elapsed = time.monotonic() - t0
         last = _final_checkpoint(run_dir, checkpointer)
     steps = int(model.num_timesteps)
@@ -420,6 +422,15 @@ def _learn(
         session_env_steps_per_s=(steps - start_step) / max(elapsed, 1e-9),
         stopped_by=stopped_by,
     )
+
+
+def _checkpoint_spent_budget(checkpointer: Any, budget_s: float) -> None:
+    """After the wall-time budget stopped a session: make sure the newest resumable checkpoint
+    records a wall time at or past the budget (a cadence checkpoint written in the same step,
+    just before the budget ran out, would otherwise let a resume train a few steps more)."""
+    last = ck.latest_checkpoint(checkpointer.run_dir, with_replay=True)
+    if last is None or float(ck.read_state(last)["wall_time_s"]) < budget_s:
+        checkpointer.save(with_replay=True)
 
 
 def _final_checkpoint(run_dir: Path, checkpointer: Any) -> Path:
