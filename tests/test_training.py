@@ -440,6 +440,8 @@ def test_the_wall_time_budget_ends_a_run_and_a_resume_keeps_it(tmp_path):
     assert 2.0 <= first.wall_time_s < 30.0
     sessions = [json.loads(x) for x in (run_dir / ck.SESSIONS_FILE).read_text().splitlines()]
     assert sessions[-1]["ended_by"] == "wall_time_budget" and sessions[-1]["stopped_by"] is None
+    newest = ck.latest_checkpoint(run_dir, with_replay=True)
+    assert float(ck.read_state(newest)["wall_time_s"]) >= 2.0
     again = resume(run_dir, verbose=0)  # the budget is spent: nothing more is trained
     assert again.num_timesteps == first.num_timesteps
 
@@ -460,26 +462,26 @@ def test_jax_crossq_evaluates_during_training_through_its_model(tmp_path):
 
 
 def test_a_budget_stop_leaves_a_checkpoint_past_the_budget(tmp_path):
-    """A cadence checkpoint written in the step the budget ran out records a wall time just
-    under it; the stop then writes one more, so that a resume does not train on."""
-    import json as _json
+    """In the step the budget runs out (a cadence checkpoint is due in the same step), the
+    checkpointer writes one resumable checkpoint that records a wall time at or past the
+    budget and ends the session, so that a resume does not train on."""
+    import time as _time
 
-    from myoexo.training.train import _checkpoint_spent_budget
+    from myoexo.training.callbacks import PeriodicCheckpointCallback
 
-    step = tmp_path / ck.CHECKPOINTS_DIR / ck.checkpoint_name(128)
-    step.mkdir(parents=True)
-    (step / ck.STATE_FILE).write_text(_json.dumps({"num_timesteps": 128, "wall_time_s": 1.999}))
-    (step / ck.ON_POLICY_FILE).write_text("{}")
+    def checkpointer(offset_s):
+        cb = PeriodicCheckpointCallback(
+            tmp_path, every_s=0.0, every_steps=128, wall_time_offset_s=offset_s, max_wall_time_s=2.0
+        )
+        cb.num_timesteps, cb._step_last_full = 128, 0  # the step cadence is due
+        cb._t_start = _time.monotonic() - 0.01
+        cb.saved = []
+        cb.save = lambda with_replay=True: cb.saved.append((with_replay, cb.wall_time_s()))
+        return cb
 
-    class Checkpointer:
-        run_dir = tmp_path
-        saves = 0
-
-        def save(self, with_replay=True):
-            Checkpointer.saves += 1
-
-    _checkpoint_spent_budget(Checkpointer(), 2.0)
-    assert Checkpointer.saves == 1
-    (step / ck.STATE_FILE).write_text(_json.dumps({"num_timesteps": 128, "wall_time_s": 2.001}))
-    _checkpoint_spent_budget(Checkpointer(), 2.0)
-    assert Checkpointer.saves == 1
+    spent = checkpointer(1.999)
+    assert spent._on_step() is False and spent.budget_spent
+    assert len(spent.saved) == 1 and spent.saved[0][0] and spent.saved[0][1] >= 2.0
+    running = checkpointer(1.0)
+    assert running._on_step() is True and not running.budget_spent
+    assert len(running.saved) == 1 and running.saved[0][1] < 2.0  # the cadence checkpoint

@@ -295,7 +295,9 @@ class PeriodicCheckpointCallback(BaseCallback):
     ``learning_starts + first_after_steps`` transitions are collected or ``first_after_s``
     seconds have passed, whichever comes first (each only with its cadence on), so that a
     run killed early does not start over. A policy snapshot (no replay buffer) is also saved
-    at every evaluated step.
+    at every evaluated step. With a wall-time budget, the callback also ends the run once
+    :meth:`wall_time_s` reaches it, with a resumable checkpoint that records that wall time
+    (one clock for the budget and the checkpoints, so a resume sees the budget spent).
 
     Args:
         run_dir: Run folder.
@@ -307,6 +309,7 @@ class PeriodicCheckpointCallback(BaseCallback):
         first_after_steps: Transitions after ``learning_starts`` of the first checkpoint
             (0: off).
         first_after_s: Wall time of the first checkpoint (0: off).
+        max_wall_time_s: The run's training wall-time budget, all sessions (0: none).
     """
 
     def __init__(
@@ -320,9 +323,13 @@ class PeriodicCheckpointCallback(BaseCallback):
         verbose: int = 0,
         first_after_steps: int = 0,
         first_after_s: float = 0.0,
+        max_wall_time_s: float = 0.0,
     ) -> None:
         super().__init__(verbose)
         self.run_dir = Path(run_dir)
+        self.max_wall_time_s = float(max_wall_time_s)
+        #: The session ended because the wall-time budget was spent.
+        self.budget_spent = False
         self.every_s = float(every_s)
         self.every_steps = int(every_steps)
         self.wall_time_offset_s = float(wall_time_offset_s)
@@ -363,6 +370,10 @@ class PeriodicCheckpointCallback(BaseCallback):
         return due_time or due_steps
 
     def _on_step(self) -> bool:
+        if self.max_wall_time_s > 0 and self.wall_time_s() >= self.max_wall_time_s:
+            self.budget_spent = True
+            self.save(with_replay=True)
+            return False
         if self._due(time.monotonic()):
             self.save(with_replay=True)
         elif (
@@ -430,26 +441,3 @@ class StopOnSignalCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         return self.signals.received is None
-
-
-class StopOnWallTimeCallback(BaseCallback):
-    """End training once the run's wall-time budget is spent (runs compared on the same
-    wall-clock budget): ``learn`` then ends as at its normal end, with the final resumable
-    checkpoint.
-
-    Args:
-        budget_s: Wall time (s) this session may still train.
-    """
-
-    def __init__(self, budget_s: float, verbose: int = 0) -> None:
-        super().__init__(verbose)
-        self.budget_s = float(budget_s)
-        self.fired = False
-        self._t0 = 0.0
-
-    def _on_training_start(self) -> None:
-        self._t0 = time.monotonic()
-
-    def _on_step(self) -> bool:
-        self.fired = time.monotonic() - self._t0 >= self.budget_s
-        return not self.fired

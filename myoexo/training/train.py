@@ -335,6 +335,7 @@ def _run_callbacks(
         verbose=verbose,
         first_after_steps=preset.first_checkpoint_steps,
         first_after_s=preset.first_checkpoint_s,
+        max_wall_time_s=preset.max_wall_time_s,
     )
     return evaluator, checkpointer
 
@@ -357,11 +358,7 @@ def _learn(
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
-    from myoexo.training.callbacks import (
-        RewardTermsCallback,
-        StopOnSignalCallback,
-        StopOnWallTimeCallback,
-    )
+    from myoexo.training.callbacks import RewardTermsCallback, StopOnSignalCallback
 
     torch.set_num_threads(preset.torch_threads)
     session = _next_session(run_dir)
@@ -372,10 +369,9 @@ def _learn(
     )
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
-    budget_s = preset.max_wall_time_s - wall_time_offset_s if preset.max_wall_time_s > 0 else None
-    wall_stop = StopOnWallTimeCallback(budget_s) if budget_s is not None else None
-    if budget_s is not None and budget_s <= 0:
-        remaining = 0  # the run has spent its wall-time budget
+    budget_spent = 0 < preset.max_wall_time_s <= wall_time_offset_s
+    if budget_spent:
+        remaining = 0  # earlier sessions spent the wall-time budget
     record: dict[str, Any] = {
         "session": session,
         "start_step": start_step,
@@ -391,7 +387,6 @@ def _learn(
                 *([evaluator] if evaluator else []),
                 checkpointer,
                 StopOnSignalCallback(stop),
-                *([wall_stop] if wall_stop else []),
                 *options.callbacks,
             ]
             model.learn(
@@ -401,8 +396,6 @@ def _learn(
                 progress_bar=options.progress_bar,
                 log_interval=max(1, preset.n_envs),
             )
-            if wall_stop is not None and wall_stop.fired:
-                _checkpoint_spent_budget(checkpointer, preset.max_wall_time_s)
         elapsed = time.monotonic() - t0
         last = _final_checkpoint(run_dir, checkpointer)
     steps = int(model.num_timesteps)
@@ -410,7 +403,7 @@ def _learn(
     record.update(
         end_step=steps, wall_time_s=round(elapsed, 3), ended_utc=_utc_now(), stopped_by=stopped_by
     )
-    if budget_s is not None and (budget_s <= 0 or (wall_stop is not None and wall_stop.fired)):
+    if budget_spent or checkpointer.budget_spent:
         record["ended_by"] = "wall_time_budget"
     with open(run_dir / ck.SESSIONS_FILE, "a") as f:
         f.write(json.dumps(record) + "\n")
@@ -422,15 +415,6 @@ def _learn(
         session_env_steps_per_s=(steps - start_step) / max(elapsed, 1e-9),
         stopped_by=stopped_by,
     )
-
-
-def _checkpoint_spent_budget(checkpointer: Any, budget_s: float) -> None:
-    """After the wall-time budget stopped a session: make sure the newest resumable checkpoint
-    records a wall time at or past the budget (a cadence checkpoint written in the same step,
-    just before the budget ran out, would otherwise let a resume train a few steps more)."""
-    last = ck.latest_checkpoint(checkpointer.run_dir, with_replay=True)
-    if last is None or float(ck.read_state(last)["wall_time_s"]) < budget_s:
-        checkpointer.save(with_replay=True)
 
 
 def _final_checkpoint(run_dir: Path, checkpointer: Any) -> Path:
