@@ -204,13 +204,16 @@ class OracleMPC:
         cost = 0.0
         tw, iw = cfg.torque_weight, cfg.interaction_weight
         peak = self._peak_nm
+        ramping = cfg.ramp_s > 0 and d.time < cfg.ramp_s  # else the target is the reference
+        target = self._target_rad
         for k in range(self._steps):
             u = float(plan[k])
             ctrl.fill(0.0)
             ctrl[self._exo_act] = u
             d.ctrl[:] = stage.apply(host, ctrl)
             mujoco.mj_step(m, d, self._frame_skip)
-            e = d.qpos.item(self._knee_qadr) - self._reference_rad(d.time)
+            reference = self._reference_rad(d.time) if ramping else target
+            e = d.qpos.item(self._knee_qadr) - reference
             step_cost = e * e + tw * u * u
             if self._torque_aware:
                 tau = self._interaction_torque_nm(d)

@@ -570,7 +570,9 @@ def _distill(
         keep = data.rounds < start
         data = _subset(data, keep)
     student = load_student(_round_stem(run_dir, start - 1)) if start else None
-    teacher = Expert(load_teacher(config.teacher), config.fine_gain, config.fine_width_rad)
+    actor = load_teacher(config.teacher)
+    provenance = teacher_provenance(actor)
+    teacher = Expert(actor, config.fine_gain, config.fine_width_rad)
     envs = EnvPool(config.episode_duration_s)
     try:
         for r in range(start, config.rounds):
@@ -596,7 +598,7 @@ def _distill(
                 "train_s": round(t2 - t1, 1),
                 "select_s": round(time.time() - t2, 1),
             }
-            student.metadata.update(_provenance(config, r, data.size, scores))
+            student.metadata.update(_provenance(config, provenance, r, data.size, scores))
             save_student(student, _round_stem(run_dir, r))
             history["rounds"].append(entry)
             best = _best_round(history["rounds"])
@@ -640,19 +642,22 @@ def _copy_student(src: Path, dst: Path) -> None:
 TEACHER_KEYS: tuple[str, ...] = ("checkpoint", "training_seeds", "ship_seed", "num_timesteps")
 
 
-def teacher_provenance(name: str) -> dict[str, Any]:
-    """The shipped teacher's own provenance (:data:`TEACHER_KEYS` present in its metadata)."""
-    from myoexo.policies import load_policy
-
-    meta = load_policy(name, check=False).metadata
-    return {k: meta[k] for k in TEACHER_KEYS if k in meta}
+def teacher_provenance(teacher: MLPActor) -> dict[str, Any]:
+    """The teacher's own provenance (:data:`TEACHER_KEYS` present in its metadata)."""
+    return {k: teacher.metadata[k] for k in TEACHER_KEYS if k in teacher.metadata}
 
 
-def _provenance(config: DistillConfig, r: int, n: int, scores: dict[str, float]) -> dict[str, Any]:
+def _provenance(
+    config: DistillConfig,
+    teacher: dict[str, Any],
+    r: int,
+    n: int,
+    scores: dict[str, float],
+) -> dict[str, Any]:
     return {
         "trained_by": "myoexo distill (DAgger)",
         "teacher": config.teacher,
-        "teacher_provenance": teacher_provenance(config.teacher),
+        "teacher_provenance": teacher,
         "fine_gain": config.fine_gain,
         "fine_width_rad": config.fine_width_rad,
         "round": r,
