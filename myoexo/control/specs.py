@@ -143,6 +143,11 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     )
 
 
+#: A ``myoexo seeds`` run folder's name, and the label of one of its checkpoints.
+_SEED_RUN = re.compile(r"seed_\d+")
+_SEED_CHECKPOINT_LABEL = re.compile(r"(?P<seeds>.+)-seed_\d+-step_\d+")
+
+
 def _model_label(path: Path) -> str:
     """A model file's label: its stem, or ``<run>-<checkpoint>`` for the ``model.zip`` of a
     ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``), prefixed with the
@@ -150,8 +155,15 @@ def _model_label(path: Path) -> str:
     if path.name == "model.zip" and path.parent.parent.name == "checkpoints":
         run = path.parent.parent.parent
         label = f"{run.name}-{path.parent.name}"
-        return f"{run.parent.name}-{label}" if re.fullmatch(r"seed_\d+", run.name) else label
+        return f"{run.parent.name}-{label}" if _SEED_RUN.fullmatch(run.name) else label
     return path.stem
+
+
+def seeds_folder_of(label: str) -> str | None:
+    """The seeds folder of a checkpoint label written by :func:`_model_label`
+    (``<seeds>-seed_<N>-<step>``), or ``None`` for any other label."""
+    m = _SEED_CHECKPOINT_LABEL.fullmatch(label)
+    return m.group("seeds") if m else None
 
 
 def _pid_options(tail: str) -> dict[str, Any]:

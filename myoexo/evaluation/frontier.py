@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -166,14 +165,15 @@ def seed_controllers(seeds_dir: Path) -> list[str]:
 
 #: Colours of the other controllers' groups (a policy, or one seeds folder's seeds), in order.
 _GROUP_COLORS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "gold", "tab:gray")
-_SEED_LABEL = re.compile(r"^(?P<group>.+)-seed_\d+-step_\d+$")
 
 
 def point_group(label: str) -> str:
     """Legend entry of a point: a seeds run's seeds share their folder's (``<seeds>-seed_<N>-
     <step>`` -> ``<seeds> (seeds)``); any other label is its own."""
-    m = _SEED_LABEL.match(label)
-    return f"{m.group('group')} (seeds)" if m else label
+    from myoexo.control.specs import seeds_folder_of
+
+    folder = seeds_folder_of(label)
+    return f"{folder} (seeds)" if folder else label
 
 
 def plot_frontier(pts: Any, level: int | None = None) -> Any:
