@@ -36,7 +36,9 @@ def plot_stretch_test(result: StretchTestResult) -> Figure:
     fig = Figure(figsize=(4.2 * (len(speeds) + 1), 4), constrained_layout=True)
     axes = fig.subplots(1, len(speeds) + 1)
     traces = result.traces
-    moving = traces["phase"].isin(["accelerate", "constant", "decelerate"])
+    from myoexo.clinical.stretch import MOVING_PHASES
+
+    moving = traces["phase"].isin(MOVING_PHASES)
     for ax, speed in zip(axes[:-1], speeds, strict=True):
         for level in result.params.levels:
             sel = moving & (traces["level"] == level) & (traces["vel_rad_s"] == speed)

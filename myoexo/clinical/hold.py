@@ -40,7 +40,7 @@ from myoexo.clinical.common import (
     reflex_name,
     resolve_twin,
 )
-from myoexo.clinical.stretch import StretchTestParams, simulate_stretch
+from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
 from myoexo.spasticity.reflex import REFLEX_PRESETS, ReflexConfig
 
@@ -148,12 +148,8 @@ def run_stretch_hold(
     for level in params.levels:
         subject = None if subjects is None else subjects.get(level)
         row: dict[str, float | int] = {"level": level}
-        for speed, vel in (("slow", params.slow_rad_s), ("fast", params.fast_rad_s)):
-            stretch = params.stretch(vel)
-            trace = simulate_stretch(
-                model, level, vel, stretch, pose=pose, subject=subject, reflex=reflex
-            )
-            trace["muscle_resisting_nm"] = -stretch.direction * trace["muscle_torque_nm"]
+        runs = simulate_two_speeds(params, model, level, pose=pose, subject=subject, reflex=reflex)
+        for speed, (vel, trace) in runs.items():
             hold = (trace["phase"] == "end_hold").to_numpy()
             t0 = float(trace["time_s"][hold].iloc[0])
             trace["hold_time_s"] = np.where(hold, trace["time_s"] - t0, np.nan)
@@ -161,7 +157,7 @@ def run_stretch_hold(
             early = (ht >= 0.5) & (ht < 1.0)
             late = ht >= params.hold_s - 0.5
             res = trace["muscle_resisting_nm"]
-            moving = trace["phase"].isin(["accelerate", "constant", "decelerate"])
+            moving = trace["phase"].isin(MOVING_PHASES)
             row[f"{speed}_early_nm"] = float(res[early].mean())
             row[f"{speed}_late_nm"] = float(res[late].mean())
             row[f"{speed}_end_sc"] = float(trace["sc_total"][hold].iloc[-1])

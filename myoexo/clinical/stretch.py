@@ -33,7 +33,7 @@ import dataclasses
 import math
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -53,6 +53,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
 __all__ = [
+    "MOVING_PHASES",
+    "PHASES",
     "StretchTestParams",
     "StretchTestResult",
     "add_arguments",
@@ -60,7 +62,13 @@ __all__ = [
     "run",
     "run_stretch_test",
     "simulate_stretch",
+    "simulate_two_speeds",
 ]
+
+#: Phases of a stretch-test trace, in order (the categories of its ``phase`` column).
+PHASES: tuple[str, ...] = ("hold", "accelerate", "constant", "decelerate", "end_hold")
+#: The phases during which the knee moves.
+MOVING_PHASES: tuple[str, ...] = PHASES[1:4]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -298,7 +306,7 @@ def simulate_stretch(
             "time_s": times,
             "phase": pd.Categorical.from_codes(
                 phase.astype(np.int64),
-                categories=pd.Index(["hold", "accelerate", "constant", "decelerate", "end_hold"]),
+                categories=pd.Index(list(PHASES)),
             ),
             "ref_deg": ref_deg,
             "exo_deg": col["exo_deg"],
@@ -314,8 +322,50 @@ def simulate_stretch(
     )
 
 
+class TwoSpeedTest(Protocol):
+    """A clinical test made of a slow and a fast stretch (Tardieu, stretch-and-hold)."""
+
+    @property
+    def slow_rad_s(self) -> float:
+        """The slow stretch's speed, rad/s."""
+        ...
+
+    @property
+    def fast_rad_s(self) -> float:
+        """The fast stretch's speed, rad/s."""
+        ...
+
+    def stretch(self, vel_rad_s: float) -> StretchTestParams:
+        """The stretch-test parameters of the stretch at *vel_rad_s*."""
+        ...
+
+
+def simulate_two_speeds(
+    test: TwoSpeedTest,
+    model: mujoco.MjModel,
+    level: int,
+    *,
+    pose: PoseFn,
+    subject: SpasticityParams | None = None,
+    reflex: str | ReflexConfig = "stretch",
+) -> dict[str, tuple[float, pd.DataFrame]]:
+    """The slow and the fast stretch of a two-speed test at one level (:func:`simulate_stretch`
+    with ``test.stretch(speed)``): ``{"slow": (speed rad/s, trace), "fast": ...}``, each trace
+    with ``muscle_resisting_nm``, the muscles' torque against the motion."""
+    runs = {}
+    for name, vel in (("slow", test.slow_rad_s), ("fast", test.fast_rad_s)):
+        stretch = test.stretch(vel)
+        trace = simulate_stretch(
+            model, level, vel, stretch, pose=pose, subject=subject, reflex=reflex
+        )
+        # flexion positive x -direction: the torque that resists the extension
+        trace["muscle_resisting_nm"] = -stretch.direction * trace["muscle_torque_nm"]
+        runs[name] = (vel, trace)
+    return runs
+
+
 def _summarize(trace: pd.DataFrame, params: StretchTestParams) -> dict[str, float]:
-    moving = trace["phase"].isin(["accelerate", "constant", "decelerate"])
+    moving = trace["phase"].isin(MOVING_PHASES)
     constant = trace["phase"] == "constant"
     if not constant.any():  # a move too short to reach its speed
         constant = moving

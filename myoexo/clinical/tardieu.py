@@ -70,7 +70,7 @@ from myoexo.clinical.common import (
     subjects_from_args,
     write_outputs,
 )
-from myoexo.clinical.stretch import StretchTestParams, simulate_stretch
+from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
 from myoexo.spasticity.reflex import ReflexConfig
 
@@ -90,9 +90,6 @@ __all__ = [
     "run",
     "run_tardieu",
 ]
-
-#: Phases of the stretch-test trace during which the knee moves.
-_MOVING = ("accelerate", "constant", "decelerate")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -181,7 +178,7 @@ class TardieuResult:
 
 
 def _moving(trace: pd.DataFrame) -> pd.DataFrame:
-    return trace[trace["phase"].isin(_MOVING)]
+    return trace[trace["phase"].isin(MOVING_PHASES)]
 
 
 def analyse_tardieu(
@@ -259,17 +256,11 @@ def run_tardieu(
     rows, traces = [], []
     for level in params.levels:
         subject = None if subjects is None else subjects.get(level)
-        runs = {}
-        for speed, vel in (("slow", params.slow_rad_s), ("fast", params.fast_rad_s)):
-            stretch = params.stretch(vel)
-            trace = simulate_stretch(
-                model, level, vel, stretch, pose=pose, subject=subject, reflex=reflex
-            )
-            # the muscles' torque against the motion (flexion positive x -direction)
-            trace["muscle_resisting_nm"] = -stretch.direction * trace["muscle_torque_nm"]
-            runs[speed] = trace
+        runs = simulate_two_speeds(params, model, level, pose=pose, subject=subject, reflex=reflex)
+        for speed, (vel, trace) in runs.items():
             traces.append(trace.assign(level=level, speed=speed, vel_rad_s=vel))
-        rows.append({"level": level, **analyse_tardieu(runs["slow"], runs["fast"], params)})
+        slow, fast = runs["slow"][1], runs["fast"][1]
+        rows.append({"level": level, **analyse_tardieu(slow, fast, params)})
     summary = pd.DataFrame(rows).assign(reflex=label)
     traces_df = pd.concat(traces, ignore_index=True)
     front = ["level", "speed", "vel_rad_s"]
@@ -290,7 +281,7 @@ def plot_tardieu(result: TardieuResult) -> Figure:
     levels = list(summary.index)
     fig = Figure(figsize=(3.6 * len(levels), 3.8), constrained_layout=True)
     axes = np.atleast_1d(fig.subplots(1, len(levels), sharey=True))
-    tr = result.traces[result.traces["phase"].isin(_MOVING)]
+    tr = result.traces[result.traces["phase"].isin(MOVING_PHASES)]
     for ax, level in zip(axes, levels, strict=True):
         color = LEVEL_COLORS[level]
         row = summary.loc[level]
