@@ -328,34 +328,15 @@ def test_evaluation_engine_runs_the_student():
     assert np.isfinite(table["abs_final_error_deg"]).all()
 
 
-def test_a_distillation_folder_in_use_is_refused(tmp_path):
+def test_a_distillation_folder_in_use_is_refused(tmp_path, lock_holder):
     """Like every run folder, a distillation's is locked: a second writer stops at once,
     naming the holder, and writes nothing."""
-    import subprocess
-    import sys
-
     from myoexo.runtime.lifecycle import LOCK_FILE, FolderInUseError
     from myoexo.training.distill import DistillConfig, distill
 
     folder = tmp_path / "busy"
     folder.mkdir()
-    holder = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "import sys, time; from myoexo.runtime.lifecycle import FolderLock; "
-            "FolderLock(sys.argv[1], command='holder').acquire(); "
-            "print('locked', flush=True); time.sleep(600)",
-            str(folder),
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
+    with lock_holder(folder) as holder:
         with pytest.raises(FolderInUseError, match=f"in use by pid {holder.pid}"):
             distill(DistillConfig(rounds=1), folder, log=lambda m: None)
         assert sorted(p.name for p in folder.iterdir()) == [LOCK_FILE]
-    finally:
-        holder.kill()
-        holder.wait()

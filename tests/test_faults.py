@@ -353,24 +353,11 @@ def test_a_full_disk_leaves_the_previous_files_and_no_temporary(tmp_path, monkey
 
 # ----------------------------------------------------------------------------- one writer
 def test_a_folder_in_use_is_refused_with_the_holder_and_freed_by_its_death(
-    tmp_path, capsys, monkeypatch
+    tmp_path, capsys, monkeypatch, lock_holder
 ):
     folder = tmp_path / "busy"
     folder.mkdir()
-    holder = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "import sys, time; from myoexo.runtime.lifecycle import FolderLock; "
-            "FolderLock(sys.argv[1], command='holder for the test').acquire(); "
-            "print('locked', flush=True); time.sleep(600)",
-            str(folder),
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
+    with lock_holder(folder, "holder for the test") as holder:
         record = json.loads((folder / LOCK_FILE).read_text())
         assert record["pid"] == holder.pid and record["command"] == "holder for the test"
         assert {"host", "started_utc"} <= set(record)
@@ -390,9 +377,6 @@ def test_a_folder_in_use_is_refused_with_the_holder_and_freed_by_its_death(
             (line,) = capsys.readouterr().err.splitlines()
             assert line.startswith("myoexo train: error: training run folder")
             assert f"in use by pid {holder.pid}" in line
-    finally:
-        holder.kill()
-        holder.wait()
     with FolderLock(folder):  # the lock died with its holder: no stale lock to clean
         assert json.loads((folder / LOCK_FILE).read_text())["pid"] == os.getpid()
     assert (folder / LOCK_FILE).read_text() == ""  # released: no holder recorded
