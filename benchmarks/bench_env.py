@@ -36,6 +36,7 @@ import mujoco
 import numpy as np
 
 import myoexo  # noqa: F401  (registers the ids)
+from myoexo.spasticity.registry import reflex_argument
 
 
 def _snapshot(env) -> mujoco.MjData:
@@ -143,7 +144,7 @@ def main() -> None:
     parser.add_argument("--block", type=int, default=1, help="steps per timed block")
     parser.add_argument("--env", default="MyoExoKnee-v2")
     parser.add_argument(
-        "--reflex", default="stretch", choices=("stretch", "uniform"), help="reflex model"
+        "--reflex", default="stretch", type=reflex_argument, help="a registered reflex model"
     )
     args = parser.parse_args()
     r = bench(args.env, args.steps, args.repeats, args.block, args.reflex)

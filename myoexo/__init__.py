@@ -10,10 +10,12 @@ every reset)::
     env = gym.make("MyoExoKnee-v2")            # or myoexo.make_env(2, reward_weights=...)
     policy = myoexo.load_policy("sac")          # a shipped controller
 
-The layers, bottom up: :mod:`myoexo.model` (the twin), :mod:`myoexo.spasticity` (the reflex),
-:mod:`myoexo.envs`, :mod:`myoexo.control` and :mod:`myoexo.policies`,
-:mod:`myoexo.clinical`, :mod:`myoexo.evaluation`, :mod:`myoexo.training`, :mod:`myoexo.viz`;
-:mod:`myoexo.runtime` (files, locks, signals, clusters) serves them all.
+The folders are floors, each importing only from those below it (``docs/architecture.md``);
+bottom up: :mod:`myoexo.runtime` (files, locks, signals, clusters), :mod:`myoexo.model` (the
+twin), :mod:`myoexo.spasticity` (the reflex), :mod:`myoexo.envs`, :mod:`myoexo.policies`,
+:mod:`myoexo.control`, :mod:`myoexo.viz`, :mod:`myoexo.clinical`, :mod:`myoexo.evaluation`,
+:mod:`myoexo.training`, :mod:`myoexo.studies` (the experiments that drive them all) and the
+command line, :mod:`myoexo.cli`.
 """
 
 from __future__ import annotations

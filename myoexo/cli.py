@@ -22,14 +22,17 @@ import importlib
 import os
 import signal
 import sys
+import textwrap
 from collections.abc import Sequence
+from importlib import metadata
+from typing import Any
 
 from myoexo.runtime.lifecycle import SIGNAL_EXIT_BASE
 
 #: sub-command -> (module implementing it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": (
-        "myoexo.evaluation.demo",
+        "myoexo.studies.demo",
         "run the main job on built-in defaults and print where results are",
     ),
     "export-model": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
@@ -43,13 +46,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stretch and hold: does the resistance last after a fast stretch?",
     ),
     "calibrate": (
-        "myoexo.spasticity.calibrate",
+        "myoexo.studies.calibrate",
         "fit the stretch reflex so that the paper's PID behaves as in the study",
     ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "frontier": (
-        "myoexo.evaluation.frontier",
+        "myoexo.studies.frontier",
         "torque vs settling per level: shaped PIDs, policies, the study's point, the frontier",
     ),
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
@@ -59,12 +62,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "train several seeds of one configuration in parallel; aggregate them with 95 % CIs",
     ),
     "sweep": (
-        "myoexo.training.sweep",
+        "myoexo.studies.sweep.cli",
         "Ray Tune over training configurations, ranked on the acceptance criteria",
     ),
     "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
     "distill": (
-        "myoexo.training.distill",
+        "myoexo.studies.distill",
         "distil the full-state teacher into an exo-sensor student with memory (DAgger)",
     ),
     "video": ("myoexo.viz.video", "render an episode of a controller to MP4 or GIF"),
@@ -96,21 +99,89 @@ EXIT_NO_SPACE = 1
 EXIT_USER_ERROR = 2
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's help layout, except that a word longer than the line (a URL) is never
+    broken, nor a word at its hyphens: a URL in a help text stays one piece to copy."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        return textwrap.wrap(
+            " ".join(text.split()), width, break_long_words=False, break_on_hyphens=False
+        )
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return textwrap.fill(
+            " ".join(text.split()),
+            width,
+            initial_indent=indent,
+            subsequent_indent=indent,
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """The parser of ``myoexo`` and of every sub-command (their own sub-parsers included):
+    :class:`HelpFormatter` by default."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
+def version() -> str:
+    """The installed distribution's version (the package's own ``__version__`` when the
+    package runs from a source tree that was never installed)."""
+    try:
+        return metadata.version("myoexo")
+    except metadata.PackageNotFoundError:
+        from myoexo import __version__
+
+        return __version__
+
+
+class PluginAction(argparse.Action):
+    """``--plugin MODULE``: import the module while the command line is read (before the
+    sub-command's options, so ``--reflex NAME`` finds what it registers) and add it to
+    ``MYOEXO_PLUGINS``, which worker processes inherit."""
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: Any = None):
+        from myoexo.spasticity.registry import PLUGINS_ENV, load_plugins
+
+        try:
+            load_plugins(str(values))
+        except ImportError as exc:
+            parser.error(str(exc))
+        names = [m for m in os.environ.get(PLUGINS_ENV, "").split(",") if m]
+        os.environ[PLUGINS_ENV] = ",".join(dict.fromkeys([*names, str(values)]))
+        setattr(namespace, self.dest, [*(getattr(namespace, self.dest, None) or []), values])
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Parser with one sub-parser per command (an import error of a command surfaces)."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="myoexo",
         description="myoexo: knee-exoskeleton digital twin with spastic reflexes on MyoSuite.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     parser.add_argument(
         "--debug",
         action="store_true",
         help="show the full traceback of errors (also: MYOEXO_DEBUG=1)",
     )
+    parser.add_argument(
+        "--plugin",
+        action=PluginAction,
+        metavar="MODULE",
+        help="import MODULE first (repeatable): a module that registers reflex models "
+        "(myoexo.spasticity.register_reflex); worker processes import it too "
+        "(also: MYOEXO_PLUGINS=mod1,mod2)",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():
         module = importlib.import_module(module_name)
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        # argparse %-formats a sub-command's help (for %(prog)s and the like): a literal
+        # "%" of the one-line help is doubled, the description is printed as written
+        p = sub.add_parser(name, help=help_text.replace("%", "%%"), description=help_text)
         module.add_arguments(p)
         p.set_defaults(_module=module)
     return parser

@@ -1,5 +1,5 @@
 """The deployable student controller (myoexo.policies.student) and its DAgger distillation
-(myoexo.training.distill)."""
+(myoexo.studies.distill)."""
 
 from __future__ import annotations
 
@@ -136,7 +136,7 @@ def test_frame_indices_refuses_unknown_layouts():
 
 def test_training_stacks_equal_the_controller_memory():
     """Episodes.stack_index builds exactly the input the controller's memory gives."""
-    from myoexo.training.distill import Episodes
+    from myoexo.studies.distill import Episodes
 
     rng = np.random.default_rng(0)
     lengths = [7, 12]
@@ -196,7 +196,8 @@ def test_onnx_parity(tmp_path, env_exo):
 
 
 def test_tiny_dagger_run_and_resume(tmp_path):
-    from myoexo.training.distill import DistillConfig, Episodes, distill
+    from myoexo.envs.options import TwinOptions
+    from myoexo.studies.distill import DistillConfig, Episodes, distill
 
     cfg = DistillConfig(
         rounds=1,
@@ -209,7 +210,7 @@ def test_tiny_dagger_run_and_resume(tmp_path):
         epochs_first=1,
         epochs=1,
         selection_subjects=1,
-        episode_duration_s=0.2,
+        twin=TwinOptions().replace(episode_duration_s=0.2),
     )
     run = tmp_path / "run"
     hist = distill(cfg, run, log=lambda m: None)
@@ -243,7 +244,7 @@ def test_tiny_dagger_run_and_resume(tmp_path):
 
 
 def test_distill_refuses_the_evaluation_root():
-    from myoexo.training.distill import DistillConfig
+    from myoexo.studies.distill import DistillConfig
 
     with pytest.raises(ValueError, match="evaluation root"):
         DistillConfig(root_seed=0)
@@ -252,7 +253,7 @@ def test_distill_refuses_the_evaluation_root():
 def test_teacher_labels_from_the_true_state():
     """On a perturbed twin the teacher's input is the exact state, not the sensed one."""
     from myoexo.envs import make_env
-    from myoexo.training.distill import true_full_observation
+    from myoexo.studies.distill import true_full_observation
 
     env = make_env(0, robustness=True, episode_duration_s=0.2)
     nominal = make_env(0, episode_duration_s=0.2)
@@ -303,7 +304,7 @@ def test_wrong_layout_is_refused(env_full):
 
 def test_expert_fine_term_acts_only_near_the_target():
     import myoexo
-    from myoexo.training.distill import Expert
+    from myoexo.studies.distill import Expert
 
     teacher = myoexo.load_policy("sac")
     rng = np.random.default_rng(0)
@@ -332,7 +333,7 @@ def test_a_distillation_folder_in_use_is_refused(tmp_path, lock_holder):
     """Like every run folder, a distillation's is locked: a second writer stops at once,
     naming the holder, and writes nothing."""
     from myoexo.runtime.lifecycle import LOCK_FILE, FolderInUseError
-    from myoexo.training.distill import DistillConfig, distill
+    from myoexo.studies.distill import DistillConfig, distill
 
     folder = tmp_path / "busy"
     folder.mkdir()

@@ -165,7 +165,7 @@ def test_sb3_make_vec_env_by_id_with_env_kwargs():
     venv = make_vec_env("MyoExoKnee-v2", n_envs=2, seed=0, env_kwargs=kwargs)
     assert venv.get_attr("render_mode") == ["rgb_array"] * 2
     assert venv.observation_space.shape == (6 + 12,)
-    assert [s.reflex.model for s in venv.get_attr("spasticity")] == ["uniform"] * 2
+    assert [s.reflex_name for s in venv.get_attr("spasticity")] == ["uniform"] * 2
     venv.reset()
     for _ in range(5):
         _, rewards, dones, infos = venv.step(np.zeros((2, 1), np.float32))
@@ -214,7 +214,7 @@ def test_rllib_env_runner_builds_the_env_by_id_with_env_config():
         done = [e for e in episodes if e.is_done]
         assert done and all(len(e) == 10 and e.is_truncated for e in done)
         base = runner.env.unwrapped.envs[0].unwrapped
-        assert base.spasticity.reflex.model == "uniform" and base.episode_steps == 10
+        assert base.spasticity.reflex_name == "uniform" and base.episode_steps == 10
     finally:
         runner.stop()
     bad = ppo.PPOConfig().environment("MyoExoKnee-v1", env_config={"x": 1})

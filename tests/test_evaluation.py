@@ -15,6 +15,7 @@ import pytest
 
 from myoexo.cli import main as cli_main
 from myoexo.envs import make_env
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate, load_traces, subject_seed
 from myoexo.evaluation.engine import resolve_controllers
 from myoexo.evaluation.report import write_report
@@ -25,7 +26,7 @@ CONFIG = EvaluationConfig(
     controllers=("pid", "pid:feedback=exo"),
     levels=(0, 3),
     subjects=3,
-    episode_duration_s=SHORT_S,
+    twin=TwinOptions().replace(episode_duration_s=SHORT_S),
     chunk_size=2,
 )
 
@@ -167,7 +168,10 @@ def test_an_sb3_model_file_is_evaluated(tmp_path):
     path = tmp_path / "tiny_sac.zip"
     model.save(path)
     config = EvaluationConfig(
-        controllers=(str(path),), levels=(0,), subjects=1, episode_duration_s=0.5
+        controllers=(str(path),),
+        levels=(0,),
+        subjects=1,
+        twin=TwinOptions().replace(episode_duration_s=0.5),
     )
     run = evaluate(config, tmp_path / "out", workers=1, progress=False)
     assert run.table.controller.tolist() == ["tiny_sac"]

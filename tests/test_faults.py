@@ -26,6 +26,7 @@ import pytest
 
 from myoexo.cli import EXIT_NO_SPACE
 from myoexo.cli import main as cli_main
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate
 from myoexo.evaluation.storage import chunk_done
 from myoexo.runtime.lifecycle import LOCK_FILE, FolderLock, StopSignals, signal_exit_status
@@ -63,7 +64,11 @@ EVAL_ARGS = [
     "--no-progress",
 ]
 EVAL_CONFIG = EvaluationConfig(
-    controllers=("pid",), levels=(0, 1), subjects=6, episode_duration_s=0.5, chunk_size=1
+    controllers=("pid",),
+    levels=(0, 1),
+    subjects=6,
+    twin=TwinOptions().replace(episode_duration_s=0.5),
+    chunk_size=1,
 )
 #: A longer one (60 chunks), for the tests that interrupt a run in progress ...
 LONG_EVAL_ARGS = [*EVAL_ARGS]

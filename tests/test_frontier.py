@@ -8,7 +8,7 @@ import math
 import pandas as pd
 import pytest
 
-from myoexo.evaluation import frontier as F
+from myoexo.studies import frontier as F
 
 
 def _pts(rows):
@@ -77,7 +77,7 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
     import json
 
     from myoexo.control.specs import parse_controller_spec
-    from myoexo.evaluation.frontier import seed_controllers
+    from myoexo.studies.frontier import seed_controllers
 
     labels = []
     for name in ("inter0p1", "inter1p0"):
@@ -97,7 +97,7 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
 
 
 def test_seeds_of_one_folder_share_a_legend_entry():
-    from myoexo.evaluation.frontier import point_group
+    from myoexo.studies.frontier import point_group
 
     assert point_group("inter0p3-seed_2-step_0000100000") == "inter0p3 (seeds)"
     assert point_group("sac") == "sac"

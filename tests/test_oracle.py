@@ -126,7 +126,7 @@ def test_a_peak_penalty_lowers_the_peak_and_a_ramp_starts_the_reference_at_the_k
 
 
 def test_frontier_oracle_specs_parse():
-    from myoexo.evaluation.frontier import CHEAP_ORACLE, oracle_specs
+    from myoexo.studies.frontier import CHEAP_ORACLE, oracle_specs
 
     specs = oracle_specs()
     assert specs[0] == f"oracle:{CHEAP_ORACLE}"

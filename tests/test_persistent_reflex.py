@@ -16,14 +16,14 @@ import torch
 
 from myoexo.spasticity.levels import sample_subject
 from myoexo.spasticity.reflex import (
+    DEFAULT_REFLEX,
     PERSISTENT,
-    REFLEX_MODELS,
-    REFLEX_PRESETS,
     PersistentParams,
-    ReflexConfig,
+    PersistentReflex,
     persistent_step,
     persistent_step_torch,
 )
+from myoexo.spasticity.registry import get_reflex, reflex_names
 from myoexo.spasticity.stage import SpasticityStage
 
 DT = 0.01
@@ -38,11 +38,17 @@ def _run(params: PersistentParams, vel: float, steps: int, r0: float = 0.0) -> f
 
 
 def test_presets_list_the_persistent_model_and_the_default_stays_stretch() -> None:
-    assert "persistent" in REFLEX_MODELS and "persistent" in REFLEX_PRESETS
-    assert ReflexConfig().model == "stretch"
-    cfg = REFLEX_PRESETS["persistent"]
-    assert cfg.persistent.gain(0) == 0.0
-    assert 0.0 < cfg.persistent.gain(1) < cfg.persistent.gain(2) <= cfg.persistent.gain(3)
+    assert "persistent" in reflex_names()
+    assert DEFAULT_REFLEX == "stretch" and SpasticityStage().reflex_name == "stretch"
+    cfg = get_reflex("persistent")
+    assert isinstance(cfg, PersistentReflex)
+    assert cfg.after_discharge.gain(0) == 0.0
+    assert (
+        0.0
+        < cfg.after_discharge.gain(1)
+        < cfg.after_discharge.gain(2)
+        <= cfg.after_discharge.gain(3)
+    )
 
 
 def test_after_discharge_rises_fast_at_fast_extension_and_decays_slowly() -> None:
@@ -80,14 +86,12 @@ def test_stage_adds_the_after_discharge_to_the_flexors_only_and_not_at_level_0()
         ext = out[stage.actuator_ids[len(stage.flexors) :]]
         sc = stage.sc_now(math.degrees(d.qpos[stage._qpos_adr]), -3.0)
         if expect_memory:
-            assert stage.after_discharge > 0.95
-            assert stage.after_discharge_gain > 0.0
-            np.testing.assert_allclose(
-                flex, min(1.0, sc + stage.after_discharge_gain * stage.after_discharge)
-            )
+            assert stage.memory[0] > 0.95
+            assert stage.constants.gain > 0.0
+            np.testing.assert_allclose(flex, min(1.0, sc + stage.constants.gain * stage.memory[0]))
             np.testing.assert_allclose(ext, min(1.0, sc))
         else:
-            assert stage.after_discharge_gain == 0.0
+            assert stage.constants.gain == 0.0
             np.testing.assert_allclose(flex, min(1.0, sc))
             np.testing.assert_allclose(ext, min(1.0, sc))
         env.close()
@@ -138,8 +142,8 @@ def test_history_state_is_saved_and_restored_by_the_planning_copy_and_reset_clea
     for _ in range(5):
         stage.apply(base, ctrl.copy())
     saved = stage.history_state()
-    r = stage.after_discharge
-    assert 0.3 < r < 1.0 and saved[1] == r
+    r = stage.memory[0]
+    assert 0.3 < r < 1.0 and saved[1] == (r,)
 
     twin = stage.planning_copy(base.model, base.dt)
     import mujoco
@@ -148,18 +152,18 @@ def test_history_state_is_saved_and_restored_by_the_planning_copy_and_reset_clea
 
     host = StageHost(base.model, mujoco.MjData(base.model), base.dt)
     twin.set_history_state(saved)
-    assert twin.after_discharge == r
+    assert twin.memory[0] == r
     host.data.qvel[:] = base.data.qvel
     host.data.qpos[:] = base.data.qpos
     for _ in range(10):
         twin.apply(host, ctrl.copy())
-    assert twin.after_discharge > r  # ran ahead on its own copy
-    assert stage.after_discharge == r and stage.history_state() == saved  # untouched
+    assert twin.memory[0] > r  # ran ahead on its own copy
+    assert stage.memory[0] == r and stage.history_state() == saved  # untouched
     twin.set_history_state(saved)
     assert twin.history_state() == saved
 
     env.reset(seed=5)
-    assert stage.after_discharge == 0.0 and stage.history_state()[1] == 0.0
+    assert stage.memory[0] == 0.0 and stage.history_state()[1] == (0.0,)
     env.close()
 
 
@@ -170,7 +174,7 @@ def test_the_oracle_plans_on_the_after_discharge_without_touching_the_env() -> N
     env = make_env(2, reflex="persistent")
     obs, info = env.reset(seed=1)
     stage = env.unwrapped.spasticity
-    stage._pic_r = 0.6  # a lasting after-discharge the planner must see
+    stage.memory = (0.6,)  # a lasting after-discharge the planner must see
     saved = stage.history_state()
     oracle = OracleMPC.from_env(env, samples=3, horizon_s=0.05)
     oracle.act(obs, info)
@@ -192,7 +196,7 @@ def test_reset_draws_the_gain_without_advancing_the_envs_stream() -> None:
         stage.reset(host)
         rng_states[reflex] = host.np_random.bit_generator.state
         subjects[reflex] = stage.subject
-        gains.append(stage.after_discharge_gain)
+        gains.append(getattr(stage.constants, "gain", 0.0))  # only "persistent" has one
     assert rng_states["uniform"] == rng_states["persistent"] == rng_states["stretch"]
     assert subjects["uniform"] == subjects["persistent"]
     assert subjects["persistent"] == sample_subject(2, np.random.default_rng(11))
@@ -207,8 +211,8 @@ def test_zero_gains_give_the_uniform_trajectory_and_other_models_have_no_memory(
     from myoexo.envs import make_env
 
     zero = dataclasses.replace(
-        REFLEX_PRESETS["persistent"],
-        persistent=dataclasses.replace(
+        get_reflex("persistent"),
+        after_discharge=dataclasses.replace(
             PERSISTENT, gains=MappingProxyType({lv: 0.0 for lv in range(4)})
         ),
     )
@@ -222,16 +226,16 @@ def test_zero_gains_give_the_uniform_trajectory_and_other_models_have_no_memory(
     for reflex in ("stretch", "uniform"):
         env = make_env(2, reflex=reflex)
         rollout(env, PID.from_env(env), seed=7, until_s=1.0)
-        assert env.unwrapped.spasticity.after_discharge == 0.0
+        assert env.unwrapped.spasticity.memory == ()  # no memory
         env.close()
 
 
 def test_a_ramped_target_reaches_where_the_pid_stalls() -> None:
     """Mean over three level-2 subjects: the paper's PID (fast extension) ignites the
     after-discharge and stops short; the same PID on a target ramped over 3 s does not."""
-    from myoexo.spasticity.calibrate import pid_outcome
+    from myoexo.studies.calibrate import pid_outcome
 
-    cfg = REFLEX_PRESETS["persistent"]
+    cfg = get_reflex("persistent")
     gentle = pid_outcome(2, cfg, 3, root_seed=0, ramp_s=3.0)
     assert abs(gentle.final_error_deg) < 1.0
     fast = pid_outcome(2, cfg, 3, root_seed=0)

@@ -24,6 +24,7 @@ import pandas as pd
 import pytest
 
 from myoexo.cli import main as cli_main
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate
 
 ray = pytest.importorskip("ray")
@@ -31,7 +32,11 @@ ray = pytest.importorskip("ray")
 CPUS = 2
 #: A tiny protocol: 2 levels x 3 subjects of the PID, one subject per chunk.
 TINY = EvaluationConfig(
-    controllers=("pid",), levels=(0, 3), subjects=3, episode_duration_s=0.5, chunk_size=1
+    controllers=("pid",),
+    levels=(0, 3),
+    subjects=3,
+    twin=TwinOptions().replace(episode_duration_s=0.5),
+    chunk_size=1,
 )
 #: Seconds a killed driver's processes get to disappear.
 ORPHAN_TIMEOUT_S = 5.0
@@ -121,7 +126,7 @@ def wait_for(condition, proc: subprocess.Popen, what: str) -> None:
 def test_importing_myoexo_does_not_import_ray():
     code = (
         "import sys, myoexo, myoexo.evaluation, myoexo.training, myoexo.runtime.ray_cluster\n"
-        "import myoexo.evaluation.ray_backend, myoexo.training.sweep\n"
+        "import myoexo.evaluation.ray_backend, myoexo.studies, myoexo.studies.sweep.cli\n"
         "from myoexo.cli import build_parser\n"
         "build_parser()\n"
         "assert 'ray' not in sys.modules, 'ray imported'\n"
@@ -308,7 +313,7 @@ max_concurrent_trials: 2
 
 
 def test_sweep_file_is_checked_before_ray_starts(tmp_path):
-    from myoexo.training.sweep import build_preset, read_sweep_file
+    from myoexo.studies.sweep.spec import build_preset, read_sweep_file
 
     good = tmp_path / "good.toml"
     text = (
@@ -323,7 +328,10 @@ def test_sweep_file_is_checked_before_ray_starts(tmp_path):
     spec = read_sweep_file(good)
     assert spec.name == "good" and spec.seeds == (0, 1)
     preset = build_preset("cpu", spec.fixed, {"batch_size": 64}, {"inter": -0.5, "act": -0.25})
-    assert preset.batch_size == 64 and dict(preset.reward_weights) == {"inter": -0.5, "act": -0.25}
+    assert preset.batch_size == 64 and dict(preset.twin.reward_weights) == {
+        "inter": -0.5,
+        "act": -0.25,
+    }
     bad = {
         "preset: gpu\n": "unknown preset",
         "search:\n  batchsize: [1, 2]\n": "unknown preset field",
@@ -343,7 +351,7 @@ def test_sweep_file_is_checked_before_ray_starts(tmp_path):
 
 def test_eval_rows_survive_a_cut_line_and_a_repeated_step(tmp_path):
     from myoexo.evaluation.criteria import CRITERIA_METRICS
-    from myoexo.training.sweep import evaluation_metrics, read_eval_rows
+    from myoexo.studies.sweep.table import evaluation_metrics, read_eval_rows
 
     header = ["step", "level", *CRITERIA_METRICS, "unstable", "peak_vs_pid_pct", "score"]
 

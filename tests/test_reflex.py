@@ -16,14 +16,14 @@ from myoexo.spasticity.delay import DelayLine
 from myoexo.spasticity.levels import LEVELS, SPASTIC_EXTENSORS, SPASTIC_FLEXORS, SpasticityParams
 from myoexo.spasticity.reflex import (
     CALIBRATION,
-    REFLEX_PRESETS,
     UNCALIBRATED,
     LevelCalibration,
-    ReflexConfig,
+    StretchReflex,
+    UniformReflex,
     group_excitations,
     group_excitations_torch,
-    reflex_config,
 )
+from myoexo.spasticity.registry import get_reflex, resolve_reflex
 
 THETA = np.linspace(-20.0, 110.0, 27)
 VEL = np.linspace(-4.0, 4.0, 17)
@@ -100,15 +100,15 @@ def test_delay_line_returns_the_state_delay_steps_ago() -> None:
 
 
 def test_bad_reflex_settings_are_rejected() -> None:
-    with pytest.raises(ValueError, match="unknown"):
-        ReflexConfig(model="clonus")
+    with pytest.raises(ValueError, match=r"not a registered reflex model.*persistent, stretch"):
+        get_reflex("clonus")
     with pytest.raises(ValueError, match=r"outside \[0, 0.2\]"):
-        ReflexConfig(delay_s=0.5)
+        StretchReflex(delay_s=0.5)
     with pytest.raises(ValueError, match="outside"):
         LevelCalibration(flexor_gain=-1.0)
-    with pytest.raises(ValueError, match="expected one of"):
-        reflex_config("spastic")
-    assert reflex_config("uniform") is REFLEX_PRESETS["uniform"]
+    with pytest.raises(ValueError, match="registered name"):
+        resolve_reflex(3)  # type: ignore[arg-type]
+    assert resolve_reflex("uniform") is get_reflex("uniform")
 
 
 # ------------------------------------------------------------------------------ the stage
@@ -118,7 +118,7 @@ def test_stretch_stage_drives_each_group_with_its_delayed_part(walk_env_factory)
     model = host.model
     env.reset(seed=0)
     stage = env.spasticity
-    assert stage.delay_steps == round(REFLEX_PRESETS["stretch"].delay_s / host.dt)
+    assert stage.delay_steps == round(get_reflex("stretch").delay_s / host.dt)
     flex_ids = np.array([model.actuator(n).id for n in SPASTIC_FLEXORS])
     ext_ids = np.array([model.actuator(n).id for n in SPASTIC_EXTENSORS])
     others = np.setdiff1d(np.arange(model.nu), np.concatenate([flex_ids, ext_ids]))
@@ -150,8 +150,9 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
 
     stretch = gym.make("MyoExoKnee-v3")
     uniform = gym.make("MyoExoKnee-v3", reflex="uniform")
-    assert stretch.unwrapped.spasticity.reflex == REFLEX_PRESETS["stretch"]
-    assert uniform.unwrapped.spasticity.reflex.model == "uniform"
+    assert stretch.unwrapped.spasticity.reflex == get_reflex("stretch") == StretchReflex()
+    assert uniform.unwrapped.spasticity.reflex == UniformReflex()
+    assert uniform.unwrapped.spasticity.reflex_name == "uniform"
     states = []
     for env in (stretch, uniform, pickle.loads(pickle.dumps(uniform.unwrapped))):
         env.reset(seed=4)
@@ -160,7 +161,7 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
         states.append(info["knee_angle_deg"])
     assert states[1] == states[2]  # the pickled env is the same uniform twin
     assert states[0] != states[1]  # the models differ
-    custom = dataclasses.replace(REFLEX_PRESETS["stretch"], delay_s=0.0)
+    custom = dataclasses.replace(get_reflex("stretch"), delay_s=0.0)
     assert gym.make("MyoExoKnee-v1", reflex=custom).unwrapped.spasticity.reflex.delay_s == 0.0
 
 

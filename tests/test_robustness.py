@@ -116,6 +116,7 @@ def test_bad_settings_raise():
 
 
 def test_perturbed_evaluation_is_paired_reproducible_and_kept_apart(tmp_path):
+    from myoexo.envs.options import TwinOptions
     from myoexo.evaluation import EvaluationConfig, evaluate
 
     def run(name, perturbed):
@@ -123,8 +124,7 @@ def test_perturbed_evaluation_is_paired_reproducible_and_kept_apart(tmp_path):
             controllers=("pid",),
             levels=(2,),
             subjects=2,
-            episode_duration_s=0.5,
-            perturbed=perturbed,
+            twin=TwinOptions().replace(episode_duration_s=0.5, robustness=perturbed),
         )
         return evaluate(config, tmp_path / name, workers=1, progress=False).table
 

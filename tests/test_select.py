@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from myoexo.cli import main
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.criteria import Criteria, compare, level_means, shortfall
 from myoexo.training import checkpoints as ck
 from myoexo.training.select import (
@@ -284,7 +285,10 @@ def test_table_mode_on_an_evaluation_folder(tmp_path, capsys):
 
     out = tmp_path / "eval"
     config = EvaluationConfig(
-        controllers=("pid", "sac"), levels=(0, 3), subjects=1, episode_duration_s=0.5
+        controllers=("pid", "sac"),
+        levels=(0, 3),
+        subjects=1,
+        twin=TwinOptions().replace(episode_duration_s=0.5),
     )
     run = evaluate(config, out, workers=1, progress=False)
     table = compare_evaluation(out)

@@ -237,7 +237,7 @@ def test_bad_input_raises_clear_errors() -> None:
         sc_total(np.array([10.0, 20.0]), np.array([0.0, np.inf]), LEVELS[1])
     with pytest.raises(ValueError, match="theta_deg must be finite"):
         sc_total_torch(torch.tensor([float("nan")], dtype=torch.float64), 0.0, LEVELS[1])
-    with pytest.raises(ValueError, match="Knee state must be finite"):
+    with pytest.raises(ValueError, match="theta_deg must be finite"):
         SpasticityStage(level=1).sc_now(float("nan"), 0.0)
     with pytest.raises(ValueError, match="rel_std"):
         sample_subject(1, np.random.default_rng(0), rel_std=-0.1)

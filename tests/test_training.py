@@ -262,13 +262,12 @@ def test_train_cli_arguments():
 
 
 def test_reward_weight_overrides_reach_the_training_envs():
-    from myoexo.training.presets import get_preset, parse_override, preset_from_dict
+    from myoexo.training.presets import apply_overrides, get_preset, preset_from_dict
     from myoexo.training.train import make_env_fn
 
-    key, value = parse_override("reward_weights=inter:-0.5,act:-0.25")
-    preset = get_preset("cpu", **{key: value})
+    preset = apply_overrides(get_preset("cpu"), ["reward_weights=inter:-0.5,act:-0.25"])
     assert preset_from_dict(preset.to_dict()) == preset  # survives the run's config.json
-    env = make_env_fn(ENV_ID, 0, reward_weights=preset.reward_weights)()
+    env = make_env_fn(ENV_ID, 0, preset.twin)()
     weights = env.unwrapped.rwd_keys_wt
     assert weights["inter"] == -0.5 and weights["act"] == -0.25 and weights["pose"] == 1.0
     env.close()
@@ -371,8 +370,11 @@ def test_exo_preset_and_robustness_reach_the_training_envs():
     plain = make_vec_env(_tiny_preset(n_envs=1), seed=0)
     assert plain.get_attr("robustness")[0] is None
     plain.close()
-    key, value = parse_override("robustness=true")
-    assert get_preset("cpu", **{key: value}).robustness is True
+    from myoexo.training.presets import apply_overrides
+
+    assert apply_overrides(get_preset("cpu"), ["robustness=true"]).twin.robustness is True
+    with pytest.raises(ValueError, match="twin option in"):
+        parse_override("robustness=true")  # a twin option, not a preset field
 
 
 # ---------------------------------------------------------------------------- on-policy (PPO)

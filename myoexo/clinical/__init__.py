@@ -14,7 +14,7 @@ function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
   (:mod:`myoexo.clinical.hold`)?
 
 Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
-:class:`~myoexo.spasticity.ReflexConfig`) so the reflex models can be compared side by side,
+:class:`~myoexo.spasticity.ReflexModel`) so the reflex models can be compared side by side,
 and runs the nominal Table I subject of each level unless ``subjects`` gives individual ones.
 The shared machinery (the exo-driven knee, checks, CLI options) is
 :mod:`myoexo.clinical.common`, which :mod:`myoexo.clinical.stretch` uses too.

@@ -26,7 +26,8 @@ from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.model.leg import KNEE_JOINT
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams, sample_subject
-from myoexo.spasticity.reflex import REFLEX_PRESETS, ReflexConfig, reflex_config
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel, add_reflex_argument
 from myoexo.spasticity.stage import SpasticityStage, StageHost
 
 if TYPE_CHECKING:
@@ -49,7 +50,6 @@ __all__ = [
     "draw_subjects",
     "interp_on_angle",
     "motor_nm_per_ctrl",
-    "reflex_name",
     "simulate_drive",
     "twin_model",
     "write_outputs",
@@ -168,16 +168,6 @@ def check_levels(levels: Iterable[Any]) -> tuple[int, ...]:
     return tuple(checked)
 
 
-def reflex_name(reflex: str | ReflexConfig) -> str:
-    """A label for *reflex*: the preset's name, or ``"<model> (custom)"`` for a config that
-    is no preset. Raises ``ValueError`` for an unknown preset name."""
-    config = reflex_config(reflex)
-    for name, preset in REFLEX_PRESETS.items():
-        if preset == config:
-            return name
-    return f"{config.model} (custom)"
-
-
 def draw_subjects(levels: Iterable[int], seed: int) -> dict[int, SpasticityParams]:
     """One individual subject per level (10 % noise on Table I,
     :func:`~myoexo.spasticity.sample_subject`), drawn in the order of *levels* from one
@@ -246,7 +236,7 @@ def simulate_drive(
     start_deg: float,
     powered: np.ndarray | None = None,
     drive: DriveParams = DriveParams(),
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
     subject: SpasticityParams | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Run the relaxed spastic twin with the exo driving (or released from) a reference.
@@ -266,7 +256,7 @@ def simulate_drive(
         start_deg: Knee angle of the initial (static) pose, deg.
         powered: Per step, whether the PD drives the exo (default: every step).
         drive: Controller gains, control period and joint names.
-        reflex: Reflex model (preset name or :class:`~myoexo.spasticity.reflex.ReflexConfig`).
+        reflex: Reflex model (a registered name or :class:`~myoexo.spasticity.ReflexModel`).
         subject: Individual reflex parameters (default: the level's Table I values).
 
     Returns:
@@ -351,10 +341,7 @@ def add_common_arguments(parser: argparse.ArgumentParser, levels: Iterable[int])
         "--levels", type=int, nargs="+", default=list(levels),
         help=f"spasticity levels among {list(VALID_LEVELS)} (default: %(default)s)",
     )  # fmt: skip
-    parser.add_argument(
-        "--reflex", choices=sorted(REFLEX_PRESETS), default="stretch",
-        help="reflex model (default: %(default)s)",
-    )  # fmt: skip
+    add_reflex_argument(parser, default=DEFAULT_REFLEX)
     parser.add_argument(
         "--subject-seed", type=int, default=None,
         help="draw one individual subject per level with this seed (default: the nominal "

@@ -37,12 +37,12 @@ from myoexo.clinical.common import (
     check_levels,
     check_two_speeds,
     print_table,
-    reflex_name,
     resolve_twin,
 )
 from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
-from myoexo.spasticity.reflex import REFLEX_PRESETS, ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel, add_reflex_argument, reflex_label
 
 if TYPE_CHECKING:
     import mujoco
@@ -122,7 +122,7 @@ class StretchHoldResult:
 def run_stretch_hold(
     params: StretchHoldParams = StretchHoldParams(),
     *,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
     subjects: Mapping[int, SpasticityParams] | None = None,
     model: mujoco.MjModel | None = None,
     pose: PoseFn | None = None,
@@ -131,7 +131,7 @@ def run_stretch_hold(
 
     Args:
         params: Test parameters.
-        reflex: Reflex model, a preset name or a :class:`~myoexo.spasticity.ReflexConfig`.
+        reflex: Reflex model, a registered name or a :class:`~myoexo.spasticity.ReflexModel`.
         subjects: Individual reflex parameters per level (default: nominal Table I).
         model: The twin (default: the seated twin).
         pose: Its posing function.
@@ -142,7 +142,7 @@ def run_stretch_hold(
     import numpy as np
     import pandas as pd
 
-    label = reflex_name(reflex)
+    label = reflex_label(reflex)
     model, pose = resolve_twin(model, pose)
     rows, traces = [], []
     for level in params.levels:
@@ -187,7 +187,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``myoexo stretch-hold``."""
     d = StretchHoldParams()
     parser.add_argument("--levels", type=int, nargs="+", default=list(d.levels))
-    parser.add_argument("--reflex", choices=sorted(REFLEX_PRESETS), default="stretch")
+    add_reflex_argument(parser, default=DEFAULT_REFLEX)
     parser.add_argument("--hold-s", type=float, default=d.hold_s, help="hold after the stretch")
     parser.add_argument("--end-deg", type=float, default=d.end_deg, help="held angle, deg")
 

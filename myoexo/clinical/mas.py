@@ -57,14 +57,14 @@ from myoexo.clinical.common import (
     control_substeps,
     interp_on_angle,
     print_table,
-    reflex_name,
     resolve_twin,
     simulate_drive,
     subjects_from_args,
     write_outputs,
 )
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel, reflex_label
 
 if TYPE_CHECKING:
     import mujoco
@@ -184,7 +184,7 @@ def _simulate(
     pose: PoseFn,
     level: int,
     params: MASExamParams,
-    reflex: str | ReflexConfig,
+    reflex: str | ReflexModel,
     subject: SpasticityParams | None,
 ) -> pd.DataFrame:
     import pandas as pd
@@ -251,7 +251,7 @@ def _analyse(trace: pd.DataFrame, params: MASExamParams) -> dict[str, Any]:
 def run_mas_exam(
     params: MASExamParams = MASExamParams(),
     *,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
     subjects: Mapping[int, SpasticityParams] | None = None,
     model: mujoco.MjModel | None = None,
     pose: PoseFn | None = None,
@@ -260,8 +260,8 @@ def run_mas_exam(
 
     Args:
         params: Exam parameters.
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel`.
         subjects: Individual reflex parameters per level (default: nominal Table I; the
             level-0 reference stays nominal unless given).
         model: The twin (default: the seated twin, ``TwinParams()``).
@@ -275,7 +275,7 @@ def run_mas_exam(
     """
     import pandas as pd
 
-    label = reflex_name(reflex)
+    label = reflex_label(reflex)
     model, pose = resolve_twin(model, pose)
     sims = {}
     for level in dict.fromkeys((REFERENCE_LEVEL, *params.levels)):

@@ -72,14 +72,14 @@ from myoexo.clinical.common import (
     check_positive,
     control_substeps,
     print_table,
-    reflex_name,
     simulate_drive,
     subjects_from_args,
     twin_model,
     write_outputs,
 )
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel, reflex_label
 
 if TYPE_CHECKING:
     import mujoco
@@ -302,7 +302,7 @@ def analyse_swing(
 def run_pendulum(
     params: PendulumParams = SEATED,
     *,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
     subjects: Mapping[int, SpasticityParams] | None = None,
     twin: TwinParams | None = None,
 ) -> PendulumResult:
@@ -310,8 +310,8 @@ def run_pendulum(
 
     Args:
         params: Test parameters (:data:`SEATED`, :data:`RECLINED` or your own).
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel`.
         subjects: Individual reflex parameters per level (default: nominal Table I).
         twin: Twin parameters (default ``TwinParams()``); their hip flexion is replaced by
             ``params.hip_flexion_deg``.
@@ -326,7 +326,7 @@ def run_pendulum(
 
     from myoexo.model import TwinParams, pose_twin
 
-    label = reflex_name(reflex)
+    label = reflex_label(reflex)
     twin = dataclasses.replace(twin or TwinParams(), hip_flexion_deg=params.hip_flexion_deg)
     model: mujoco.MjModel = twin_model(twin)
     model.opt.gravity[:] = reclined_gravity(params.recline_deg)

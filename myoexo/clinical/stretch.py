@@ -46,7 +46,8 @@ from myoexo.clinical.common import (
 )
 from myoexo.model.leg import KNEE_JOINT
 from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel
 
 if TYPE_CHECKING:
     import mujoco
@@ -255,7 +256,7 @@ def simulate_stretch(
     *,
     pose: PoseFn,
     subject: SpasticityParams | None = None,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
 ) -> pd.DataFrame:
     """Simulate one stretch of the twin at one level and one speed.
 
@@ -268,8 +269,8 @@ def simulate_stretch(
         pose: ``pose(model, data, knee_angle_deg=...)`` that puts the twin at the start angle.
         subject: Individual reflex parameters (e.g. from
             :func:`~myoexo.spasticity.sample_subject`).
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel`.
 
     Returns:
         One row per control step (see :class:`StretchTestResult`); the state columns are at
@@ -347,7 +348,7 @@ def simulate_two_speeds(
     *,
     pose: PoseFn,
     subject: SpasticityParams | None = None,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
 ) -> dict[str, tuple[float, pd.DataFrame]]:
     """The slow and the fast stretch of a two-speed test at one level (:func:`simulate_stretch`
     with ``test.stretch(speed)``): ``{"slow": (speed rad/s, trace), "fast": ...}``, each trace
@@ -388,7 +389,7 @@ def run_stretch_test(
     pose: PoseFn | None = None,
     subjects: dict[int, SpasticityParams] | None = None,
     progress: bool = False,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
 ) -> StretchTestResult:
     """Run the stretch test for every level and speed of *params*.
 
@@ -398,8 +399,8 @@ def run_stretch_test(
         pose: Posing function of the twin; default ``myoexo.model.pose_twin``.
         subjects: Optional individual reflex parameters per level (default: Table I).
         progress: Show a tqdm progress bar.
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel`.
 
     Returns:
         Traces and summary (see :class:`StretchTestResult`).

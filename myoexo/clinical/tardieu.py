@@ -65,14 +65,14 @@ from myoexo.clinical.common import (
     check_two_speeds,
     interp_on_angle,
     print_table,
-    reflex_name,
     resolve_twin,
     subjects_from_args,
     write_outputs,
 )
 from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel, reflex_label
 
 if TYPE_CHECKING:
     import mujoco
@@ -227,7 +227,7 @@ def analyse_tardieu(
 def run_tardieu(
     params: TardieuParams = TardieuParams(),
     *,
-    reflex: str | ReflexConfig = "stretch",
+    reflex: str | ReflexModel = DEFAULT_REFLEX,
     subjects: Mapping[int, SpasticityParams] | None = None,
     model: mujoco.MjModel | None = None,
     pose: PoseFn | None = None,
@@ -236,8 +236,8 @@ def run_tardieu(
 
     Args:
         params: Test parameters.
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel`.
         subjects: Individual reflex parameters per level (default: the nominal Table I
             subjects; :func:`~myoexo.clinical.common.draw_subjects` draws some).
         model: The twin (default: the seated twin, ``TwinParams()``).
@@ -251,7 +251,7 @@ def run_tardieu(
     """
     import pandas as pd
 
-    label = reflex_name(reflex)
+    label = reflex_label(reflex)
     model, pose = resolve_twin(model, pose)
     rows, traces = [], []
     for level in params.levels:

@@ -50,7 +50,9 @@ from typing import Any
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
+from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
+from myoexo.policies.run_files import CHECKPOINTS_DIR, MODEL_FILE, STATE_FILE, VECNORM_FILE
 
 _PID_KEYS = (
     "kp",
@@ -152,7 +154,7 @@ def _model_label(path: Path) -> str:
     """A model file's label: its stem, or ``<run>-<checkpoint>`` for the ``model.zip`` of a
     ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``), prefixed with the
     seeds folder for a ``myoexo seeds`` run (``<seeds>-seed_<N>-<checkpoint>``)."""
-    if path.name == "model.zip" and path.parent.parent.name == "checkpoints":
+    if path.name == MODEL_FILE and path.parent.parent.name == CHECKPOINTS_DIR:
         run = path.parent.parent.parent
         label = f"{run.name}-{path.parent.name}"
         return f"{run.parent.name}-{label}" if _SEED_RUN.fullmatch(run.name) else label
@@ -223,9 +225,6 @@ def load_obs_normalizer(model_path: str) -> Any:
     ``vecnormalize.pkl`` next to ``model.zip``.
     """
     import pickle
-    from pathlib import Path
-
-    from myoexo.training.checkpoints import VECNORM_FILE
 
     path = Path(model_path).with_name(VECNORM_FILE)
     if not path.is_file():
@@ -272,35 +271,53 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     raise ValueError(f"unknown controller kind {spec.kind!r}")
 
 
-def _run_config_of_model(model_path: str) -> dict[str, Any]:
-    """``config.json`` of the ``myoexo train`` run a model file belongs to (``{}`` if none):
-    ``<run>/checkpoints/<step>/model.zip``."""
+def _checkpoint_state(model_path: str) -> dict[str, Any]:
+    """The state file beside a model file (``<checkpoint>/state.json``: what the checkpoint
+    was trained on; ``{}`` for a model file outside a checkpoint)."""
     import json
 
-    config = Path(model_path).parent.parent.parent / "config.json"
     try:
-        return dict(json.loads(config.read_text()))
+        return dict(json.loads((Path(model_path).parent / STATE_FILE).read_text()))
     except (OSError, ValueError):
         return {}
 
 
 def policy_metadata(spec: ControllerSpec) -> dict[str, Any]:
-    """Provenance a policy carries: the shipped actor's metadata, or the training run's
-    preset for a model file (``{}`` for the PID and the oracle)."""
+    """Provenance a policy carries in its own files: the shipped or exported actor's
+    metadata, or the checkpoint state beside a model file (``{}`` for the PID and the
+    oracle)."""
     if spec.kind == "shipped":
         return dict(load_shipped_policy(spec.path or "sac").metadata)
     if spec.kind == "actor" and spec.path is not None:
         return dict(load_actor_file(spec.path).metadata)
     if spec.kind == "sb3" and spec.path is not None:
-        config = _run_config_of_model(spec.path)
-        return {"obs_preset": config.get("preset", {}).get("obs_preset", "full")}
+        return _checkpoint_state(spec.path)
     return {}
 
 
+def policy_twin(spec: ControllerSpec) -> TwinOptions | None:
+    """The twin a policy was trained on, from its own files (``None`` for the PID, the
+    oracle, and a model file that records none). A record written before the twin options
+    existed gives its observation preset and reward weights."""
+    meta = policy_metadata(spec)
+    if isinstance(meta.get("twin"), dict):
+        return TwinOptions.from_dict(meta["twin"])
+    if "obs_preset" in meta:
+        return TwinOptions(
+            obs_preset=str(meta.get("obs_preset") or "full"),
+            reward_weights=tuple(tuple(p) for p in meta.get("reward_weights") or ()),
+        )
+    return None
+
+
 def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
-    """Env keyword arguments a controller needs (the observation preset of a policy)."""
-    preset = policy_metadata(spec).get("obs_preset") or "full"
-    return {} if preset == "full" else {"obs_preset": preset}
+    """Env keyword arguments a controller needs: the observation of the twin it was trained
+    on (its ``obs_preset`` or ``obs_keys``; ``{}`` for the full observation)."""
+    twin = policy_twin(spec)
+    if twin is None:
+        return {}
+    observation = TwinOptions(obs_preset=twin.obs_preset, obs_keys=twin.obs_keys)
+    return observation.env_kwargs()
 
 
 def check_no_selection_leak(spec: ControllerSpec, root_seed: int) -> None:

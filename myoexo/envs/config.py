@@ -11,15 +11,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-#: Reward terms and their default weights (MyoSuite ``weighted_reward_keys`` convention: the
-#: dense reward is the weighted sum of these keys of ``rwd_dict``; penalties are returned as
-#: positive magnitudes and enter with negative weights).
+#: Weighted reward terms and their default weights (MyoSuite ``weighted_reward_keys``
+#: convention: the dense reward is the weighted sum of these keys of ``rwd_dict``; penalties
+#: are returned as positive magnitudes and enter with negative weights). The terms
+#: themselves: :data:`myoexo.envs.reward.REWARD_TERMS`.
 DEFAULT_REWARD_WEIGHTS: dict[str, float] = {
-    "pose": 1.0,  # exp(-e^2 / (2 sigma^2)) - |e|, e in rad
-    "bonus": 1.0,  # +0.01 while |e| < 0.05 rad and |knee vel| < 0.05 rad/s
-    "inter": -1.0,  # (d tau_knee / tau_scale)^2 + (tau_knee / tau_scale)^2 above 75 Nm
-    "vel": -0.05,  # |d knee vel| per control step, rad/s
-    "act": -0.5,  # (d ctrl)^2 per control step, normalized command
+    "pose": 1.0,
+    "bonus": 1.0,
+    "inter": -1.0,
+    "vel": -0.05,
+    "act": -0.5,
 }
 
 

@@ -14,44 +14,20 @@ Action (1-D, ``Box(-1, 1)``): exo motor command; ``u * 100 Nm`` at the exo knee 
 positive = flexion. Out-of-range values are clipped to [-1, 1] (what the motor driver does);
 NaN/inf or a wrong shape raise ``ValueError``.
 
-Observation (``obs_keys``, flattened in this order; each entry of ``obs_dict`` is in the
-physical unit its name gives and is multiplied by the scale below in the vector):
-
-============================  =====  ==========================================  =======
-key                           size   meaning (unit)                              scale
-============================  =====  ==========================================  =======
-knee_angle_rad                1      human knee flexion (rad)                    1
-knee_vel_rad_s                1      human knee flexion velocity (rad/s)         0.1
-exo_angle_rad                 1      exo knee encoder (rad)                      1
-exo_vel_rad_s                 1      exo knee velocity (rad/s)                   0.1
-target_rad                    1      target knee flexion (rad)                   1
-error_rad                     1      knee - target (rad), > 0 while flexed       1
-command                       1      last applied motor command (-)              1
-exo_torque_nm                 1      exo motor torque (Nm)                       0.01
-muscle_knee_torque_nm         1      muscle torque along the coupled knee (Nm)   0.01
-thigh_cuff_force_n            3      thigh cuff interaction force (N)            0.01
-thigh_cuff_torque_nm          3      thigh cuff interaction torque (Nm)          0.02
-shank_cuff_force_n            3      shank cuff interaction force (N)            0.01
-shank_cuff_torque_nm          3      shank cuff interaction torque (Nm)          0.02
-coupling_qpos                 n_c    strap coupling joints (m for the slide,     per joint:
-                                     rad for the pins)                           1/range
-coupling_qvel                 n_c    their velocities (m/s, rad/s)               0.1/range
-spastic_act                   11     activation of the 11 spastic muscles (-)    1
-spastic_force                 11     their force / max isometric force (-)       1
-spastic_length                11     their length, 0..1 over the length range    1
-spastic_velocity              11     their velocity / length range (1/s)         0.1
-time_frac                     1      time / episode duration (-)                 1
-============================  =====  ==========================================  =======
+Observation (``obs_keys``, flattened in the order given): each entry of ``obs_dict`` is in
+the physical unit its name gives and is multiplied by a fixed scale in the vector. The keys,
+their meaning and unit are defined once in :data:`myoexo.envs.observation.OBS_KEY_DOCS`
+(scales: :data:`~myoexo.envs.observation.OBS_SCALES`); the documentation site's
+environment page (``docs/envs.md``) shows them as a table with sizes and scales.
 
 Timing after a step (details in :meth:`MyoExoKneeEnv.step`): angles, velocities, activations
 and time are the state after the step; torques, cuff sensors and muscle force/length/velocity
 are those MuJoCo computed in the step's last physics substep (one timestep earlier).
 
-Reward (MyoSuite ``weighted_reward_keys``; docs/reference.md section 3, defaults in
-:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`): ``pose`` = exp(-e^2/(2 sigma^2)) - |e|;
-``bonus`` = 0.01 while |e| < 0.05 rad and |knee vel| < 0.05 rad/s; ``inter`` =
-(d tau_knee / 100 Nm)^2 + (tau_knee / 100 Nm)^2 when tau_knee > 75 Nm; ``vel`` = |d knee
-vel|; ``act`` = (d u)^2. Penalties are magnitudes with negative weights.
+Reward (MyoSuite ``weighted_reward_keys``; docs/reference.md section 3): the terms are
+:data:`myoexo.envs.reward.REWARD_TERMS`, their default weights
+:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`. Penalties are magnitudes with negative
+weights.
 
 Interaction torque (the paper's "sum of the torques applied at the knee: exo actuation and
 spastic reflexes"): ``|exo torque| + |muscle torque at the human knee|``. A signed sum would
@@ -94,7 +70,8 @@ from myoexo.envs.robustness import (
 )
 from myoexo.model import EXO_ACTUATOR, TwinParams, build_model, pose_twin
 from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel
 from myoexo.spasticity.stage import SpasticityStage
 
 __all__ = [
@@ -143,9 +120,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         weighted_reward_keys: Shortcut overriding ``reward.weights``.
         subject_noise: Draw an individual subject (10 % variability) at every reset;
             ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
-        reflex: Reflex model (:mod:`myoexo.spasticity.reflex`): ``"stretch"`` (the calibrated
-            stretch reflex with a 20 ms delay, default), ``"uniform"`` (the paper's ``SC_total`` on
-            all 11 muscles, no delay: the first reading) or a ``ReflexConfig``.
+        reflex: Reflex model: a registered name (:func:`~myoexo.spasticity.reflex_names`;
+            ``"stretch"``, the calibrated stretch reflex with a 20 ms delay, default;
+            ``"uniform"``, the paper's ``SC_total`` on all 11 muscles, no delay: the first
+            reading; ``"persistent"``, with the flexors' after-discharge; any the user
+            registered) or a :class:`~myoexo.spasticity.ReflexModel` instance.
         robustness: Draw the twin's uncertain parts (strap stiffness and damping, masses,
             slide friction, motor torque constant) and sensor noise and latency at every
             reset (:class:`~myoexo.envs.robustness.RobustnessParams`; ``True``: the default
@@ -179,7 +158,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         obs_preset: str = "full",
         weighted_reward_keys: dict[str, float] | None = None,
         subject_noise: bool = True,
-        reflex: str | ReflexConfig = "stretch",
+        reflex: str | ReflexModel = DEFAULT_REFLEX,
         robustness: RobustnessParams | bool | None = None,
         seed: int | None = None,
         render_mode: str | None = None,
@@ -562,7 +541,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     def _add_info(
         self, info: dict[str, Any], values: list[float], unstable: bool, sensed: np.ndarray
     ) -> dict[str, Any]:
-        """Per-step quantities in clinical units (documented in the README's info table).
+        """Per-step quantities in clinical units (listed on the documentation site's
+        environment page, ``docs/envs.md``).
 
         Args:
             info: The dict to complete (in place; returned).

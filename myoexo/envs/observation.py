@@ -1,9 +1,11 @@
 """What the MyoExoKnee env observes: the keys, presets and scales, and where every quantity
 lives in one model's ``MjData``.
 
-The table of keys, units and scales is in :mod:`myoexo.envs.knee_exo`'s docstring. This
-module only defines constants and the :class:`ObsLayout` class: it builds no model and does
-not import the env (``myoexo.training.presets`` reads :data:`OBS_PRESETS` from here).
+Every key is described once, in :data:`OBS_KEY_DOCS` (meaning and unit); the documentation
+site's environment page (``docs/envs.md``) shows it as a table, with each key's size and
+scale in the vector read from a built twin. This module only defines constants and the
+:class:`ObsLayout` class: it builds no model and does not import the env
+(``myoexo.training.presets`` reads :data:`OBS_PRESETS` from here).
 
 Each step the env *gathers* every observed quantity, in physical units, into one fresh
 float64 **raw buffer** laid out as :data:`RAW_KEYS` (:meth:`ObsLayout.gather`); ``obs_dict``
@@ -103,6 +105,53 @@ RAW_KEYS: tuple[str, ...] = (
     *COUPLING_OBS_KEYS,
     *MUSCLE_OBS_KEYS,
 )
+
+
+class ObsKeyDoc(NamedTuple):
+    """What one key of ``obs_dict`` holds."""
+
+    key: str
+    meaning: str
+    unit: str
+
+
+#: Every key of ``obs_dict`` (:data:`RAW_KEYS`, in its order): meaning and physical unit.
+#: The value in ``obs_dict`` is in that unit; the vector holds it times its scale
+#: (:data:`OBS_SCALES`; the coupling joints: one over each joint's half range).
+OBS_KEY_DOCS: tuple[ObsKeyDoc, ...] = (
+    ObsKeyDoc("time", "simulated time since the reset (obs_dict and info only)", "s"),
+    ObsKeyDoc("knee_angle_rad", "human knee flexion", "rad"),
+    ObsKeyDoc("knee_vel_rad_s", "human knee flexion velocity", "rad/s"),
+    ObsKeyDoc("exo_angle_rad", "exo knee encoder angle", "rad"),
+    ObsKeyDoc("exo_vel_rad_s", "exo knee velocity", "rad/s"),
+    ObsKeyDoc("target_rad", "target knee flexion", "rad"),
+    ObsKeyDoc("error_rad", "knee - target, > 0 while the knee is flexed short of it", "rad"),
+    ObsKeyDoc("command", "last applied (clipped) motor command", "-"),
+    ObsKeyDoc("exo_torque_nm", "exo motor torque", "Nm"),
+    ObsKeyDoc("muscle_knee_torque_nm", "muscle torque along the coupled human knee", "Nm"),
+    ObsKeyDoc(
+        "interaction_torque_nm",
+        "|exo torque| + |muscle knee torque| (obs_dict and info only)",
+        "Nm",
+    ),
+    ObsKeyDoc("time_frac", "time / episode duration", "-"),
+    ObsKeyDoc("thigh_cuff_force_n", "thigh cuff interaction force, cuff frame", "N"),
+    ObsKeyDoc("thigh_cuff_torque_nm", "thigh cuff interaction torque, cuff frame", "Nm"),
+    ObsKeyDoc("shank_cuff_force_n", "shank cuff interaction force, cuff frame", "N"),
+    ObsKeyDoc("shank_cuff_torque_nm", "shank cuff interaction torque, cuff frame", "Nm"),
+    ObsKeyDoc(
+        "coupling_qpos",
+        "strap coupling joints: thigh slide, thigh pin, shank pin, shank ab/adduction "
+        "and axial pins",
+        "m (slide), rad (pins)",
+    ),
+    ObsKeyDoc("coupling_qvel", "their velocities", "m/s, rad/s"),
+    ObsKeyDoc("spastic_act", "activation of the 11 spastic muscles", "-"),
+    ObsKeyDoc("spastic_force", "their force / maximum isometric force", "-"),
+    ObsKeyDoc("spastic_length", "their length, 0-1 over each muscle's length range", "-"),
+    ObsKeyDoc("spastic_velocity", "their velocity / length range", "1/s"),
+)
+
 
 # Positions of the scalars in the raw buffer.
 (

@@ -1,17 +1,12 @@
 """The MyoExoKnee reward (docs/reference.md section 3) as a pure function of two
 consecutive states: no MuJoCo, no env.
 
-Terms (MyoSuite ``rwd_dict`` convention: penalties are magnitudes that enter with negative
-weights, ``dense`` is the weighted sum of the ``weighted_reward_keys``):
-
-* ``pose`` = exp(-e^2 / (2 sigma^2)) - |e|, e = knee - target (rad);
-* ``bonus`` = ``params.bonus`` while |e| < ``bonus_error_rad`` and |knee vel| <
-  ``bonus_vel_rad_s``;
-* ``inter`` = (d tau / tau_scale)^2, plus (tau / tau_scale)^2 while tau >
-  ``torque_threshold_nm`` (tau: the interaction torque, ``|exo| + |muscle knee torque|``);
-* ``vel`` = |d knee vel|; ``act`` = (d u)^2 (u: the clipped motor command);
-* ``sparse`` = -|e|, ``solved`` = |e| < ``bonus_error_rad``, ``done`` = False (the task has
-  no terminal state).
+MyoSuite ``rwd_dict`` convention: penalties are magnitudes that enter with negative weights,
+``dense`` is the weighted sum of the ``weighted_reward_keys``
+(:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`). Each term is defined once, in
+:data:`REWARD_TERMS` (its formula, in terms of :class:`~myoexo.envs.config.RewardParams`);
+the documentation site's environment page (``docs/envs.md``) shows them as a table with
+their default weights.
 
 The differences are against the previous control step; the first step of an episode
 differences against the reset state (command 0, the reset's torque, knee at rest).
@@ -19,11 +14,49 @@ differences against the reset state (command 0, the reset's torque, knee at rest
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 from myoexo.envs.config import RewardParams
+
+
+class RewardTerm(NamedTuple):
+    """One entry of ``rwd_dict``: its key and its formula, with ``{field}`` placeholders
+    for the :class:`~myoexo.envs.config.RewardParams` fields it depends on (e = knee -
+    target, rad; tau: the interaction torque; u: the clipped motor command; d: the change
+    since the previous control step)."""
+
+    key: str
+    formula: str
+
+    def describe(self, params: RewardParams | None = None) -> str:
+        """The formula with *params*' values (default: ``RewardParams()``)."""
+        values = dataclasses.asdict(params if params is not None else RewardParams())
+        return self.formula.format(**values)
+
+
+#: Every entry of ``rwd_dict`` but ``dense``, in the order :func:`reward_dict` returns them;
+#: the weighted ones are the keys of :data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`.
+REWARD_TERMS: tuple[RewardTerm, ...] = (
+    RewardTerm("pose", "exp(-e^2 / (2 sigma^2)) - |e|, sigma = {sigma_rad:g} rad"),
+    RewardTerm(
+        "bonus",
+        "{bonus:g} while |e| < {bonus_error_rad:g} rad and |knee vel| < {bonus_vel_rad_s:g} "
+        "rad/s, else 0",
+    ),
+    RewardTerm(
+        "inter",
+        "(d tau / {torque_scale_nm:g} Nm)^2, plus (tau / {torque_scale_nm:g} Nm)^2 while "
+        "tau > {torque_threshold_nm:g} Nm; tau = |exo torque| + |muscle knee torque|",
+    ),
+    RewardTerm("vel", "|d knee vel| (rad/s)"),
+    RewardTerm("act", "(d u)^2"),
+    RewardTerm("sparse", "-|e|"),
+    RewardTerm("solved", "|e| < {bonus_error_rad:g} rad"),
+    RewardTerm("done", "False: the task has no terminal state (episodes end by truncation)"),
+)
 
 
 def reward_dict(

@@ -21,9 +21,11 @@ import signal
 import sys
 from pathlib import Path
 
+from myoexo.envs.options import add_twin_arguments, twin_from_args
 from myoexo.evaluation.backends import available_cores
 from myoexo.evaluation.config import EvaluationConfig
 from myoexo.evaluation.ray_backend import BACKENDS
+from myoexo.runtime.docs import docs_url
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
@@ -68,7 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="process",
         help="'process': worker processes on this machine (default); 'ray': Ray tasks, on a "
         "local cluster of --workers CPUs or on the cluster of --address (needs the 'ray' "
-        "extra; docs/cluster.md)",
+        f"extra; {docs_url('cluster')})",
     )
     parser.add_argument(
         "--address",
@@ -81,13 +83,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--seed", type=int, default=d.root_seed, help="root seed of the subjects (default: 0)"
-    )
-    parser.add_argument(
-        "--episode-duration",
-        type=float,
-        default=None,
-        metavar="S",
-        help="simulated seconds per episode (default: the env's, 8 s)",
     )
     parser.add_argument(
         "--trace-stride",
@@ -103,19 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=d.env_id,
         help="gymnasium id of a level's env, with '{level}' (default: %(default)s)",
     )
-    parser.add_argument(
-        "--perturbed",
-        action="store_true",
-        help="a perturbed twin per episode (strap stiffness/damping x0.5-2, masses +-10 %%, "
-        "slide friction +-50 %%, motor constant +-5 %%, sensor noise, 10 ms latency; "
-        "myoexo.envs.robustness), drawn from the subject's seed",
-    )
-    parser.add_argument(
-        "--reflex",
-        default=d.reflex,
-        help="reflex model of the twin: stretch (default), uniform or persistent "
-        "(docs/reference.md sections 2 and 11)",
-    )
+    add_twin_arguments(parser)
     parser.add_argument("--report", action="store_true", help="write the report when done")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -131,12 +114,10 @@ def run(args: argparse.Namespace) -> int:
             levels=tuple(args.levels),
             subjects=args.subjects,
             root_seed=args.seed,
-            episode_duration_s=args.episode_duration,
             trace_stride=args.trace_stride,
             chunk_size=args.chunk_size,
             env_id=args.env_id,
-            perturbed=args.perturbed,
-            reflex=args.reflex,
+            twin=twin_from_args(args),
         )
         result = evaluate(
             config,

@@ -18,17 +18,16 @@ import dataclasses
 import functools
 import hashlib
 import json
-import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from myoexo.control.specs import ControllerSpec
-from myoexo.envs.config import TaskParams
+from myoexo.control.specs import ControllerSpec, policy_twin, spec_env_kwargs
+from myoexo.envs.options import TwinOptions
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -58,36 +57,29 @@ class EvaluationConfig:
         levels: Spasticity levels, each in :data:`~myoexo.spasticity.VALID_LEVELS`.
         subjects: Subjects per level (paper: 1000).
         root_seed: Root of every subject seed (:func:`subject_seed`).
-        episode_duration_s: Simulated time per episode; ``None`` = the env's default (8 s).
         trace_stride: Keep every n-th control step in the stored traces.
         chunk_size: Subjects per unit of work (and per resume file).
         env_id: Gymnasium id of the env of a level, formatted with ``level``; any env
             registered with the MyoExoKnee API (e.g. a variant with other ``TaskParams`` or
             wrappers, ``"module:EnvId-v{level}"`` imports its module first).
-        perturbed: Evaluate on perturbed twins: each episode draws the twin's uncertain
-            parts and sensor noise/latency (``make_env(..., robustness=True)``,
-            :mod:`myoexo.envs.robustness`) from its subject seed, the same for every
-            controller.
-        reflex: Reflex model of the twin, a preset of
-            :data:`~myoexo.spasticity.REFLEX_PRESETS` (default ``"stretch"``).
+        twin: The twin every controller runs on (:class:`~myoexo.envs.options.TwinOptions`:
+            task, e.g. ``episode_duration_s``; reflex model; ``robustness``, a perturbed twin
+            per episode drawn from its subject seed, the same for every controller; the
+            reward weights and observation are each policy's own, from its files).
     """
 
     controllers: tuple[str, ...] = ("pid",)
     levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 1000
     root_seed: int = EVALUATION_ROOT_SEED
-    episode_duration_s: float | None = None
     trace_stride: int = 2
     chunk_size: int = 10
     env_id: str = "MyoExoKnee-v{level}"
-    perturbed: bool = False
-    reflex: str = "stretch"
+    twin: TwinOptions = field(default_factory=TwinOptions)
 
     def __post_init__(self) -> None:
-        from myoexo.spasticity.reflex import REFLEX_PRESETS
-
-        if self.reflex not in REFLEX_PRESETS:
-            raise ValueError(f"reflex = {self.reflex!r}; accepted: {sorted(REFLEX_PRESETS)}")
+        if not isinstance(self.twin, TwinOptions):
+            raise ValueError(f"twin = {self.twin!r}: expected TwinOptions")
         object.__setattr__(self, "controllers", tuple(self.controllers))
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
         if not self.controllers:
@@ -107,17 +99,17 @@ class EvaluationConfig:
             raise ValueError(f"root_seed = {self.root_seed!r} must be an integer >= 0")
         if "{level}" not in self.env_id:
             raise ValueError(f"env_id = {self.env_id!r} must contain '{{level}}'")
-        d = self.episode_duration_s
-        if d is not None and not (math.isfinite(d) and 0.0 < d <= 3600.0):
-            raise ValueError(f"episode_duration_s = {d!r} must be in (0, 3600] s or None")
+
+    @property
+    def episode_duration_s(self) -> float | None:
+        """The twin's episode length if overridden (``None``: the env's 8 s)."""
+        return self.twin.episode_duration_s
 
     @property
     def env_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of every env of the run (on top of a controller's own)."""
-        kwargs: dict[str, Any] = {"robustness": True} if self.perturbed else {}
-        if self.reflex != "stretch":
-            kwargs["reflex"] = self.reflex
-        return kwargs
+        """Keyword arguments of every env of the run: the twin's task, reflex model and
+        robustness (a controller's own observation on top; the reward is not scored)."""
+        return self.twin.dynamics().env_kwargs()
 
     def level_env_id(self, level: int) -> str:
         """The env id of one level."""
@@ -126,10 +118,7 @@ class EvaluationConfig:
     @property
     def trace_samples(self) -> int:
         """Samples per stored trace (reset + every ``trace_stride``-th step)."""
-        task = TaskParams()
-        if self.episode_duration_s is not None:
-            task = dataclasses.replace(task, episode_duration_s=self.episode_duration_s)
-        return task.episode_steps // self.trace_stride + 1
+        return self.twin.task_params.episode_steps // self.trace_stride + 1
 
     def run_key(self) -> dict[str, Any]:
         """Settings that change the content of an episode's file (checked on resume),
@@ -137,12 +126,10 @@ class EvaluationConfig:
         model is never silently extended."""
         return {
             "root_seed": int(self.root_seed),
-            "episode_duration_s": self.episode_duration_s,
             "trace_stride": int(self.trace_stride),
             "env_id": self.env_id,
             "env_fingerprint": env_fingerprint(self.level_env_id(self.levels[0])),
-            **({"perturbed": True} if self.perturbed else {}),
-            **({"reflex": self.reflex} if self.reflex != "stretch" else {}),
+            "twin": self.twin.dynamics().to_dict(),
         }
 
 
@@ -207,13 +194,23 @@ def write_config(
             )
     controllers = dict(previous.get("controllers", {}))
     for spec in specs:
-        entry = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
+        entry: dict[str, Any] = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
         if spec.kind in ("sb3", "actor") and spec.path:
             entry["sha256"] = _file_sha256(spec.path)
         elif spec.kind == "shipped":  # a re-exported policy is another controller
             from myoexo.policies import shipped_path
 
             entry["sha256"] = _file_sha256(str(shipped_path(spec.path or "sac")) + ".npz")
+        # the twin this controller runs on (the run's, with the controller's observation)
+        # and, for a policy, the one it was trained on
+        observation = spec_env_kwargs(spec)
+        entry["twin"] = config.twin.replace(
+            obs_preset=observation.get("obs_preset", "full"),
+            obs_keys=tuple(observation.get("obs_keys", ())),
+        ).to_dict()
+        trained = policy_twin(spec)
+        if trained is not None:
+            entry["trained_on"] = trained.to_dict()
         old = controllers.get(spec.slug)
         if old is not None and old != entry:
             raise ValueError(
@@ -223,7 +220,7 @@ def write_config(
         controllers[spec.slug] = entry
     doc = {
         "run_key": config.run_key(),
-        "config": dataclasses.asdict(config),
+        "config": {**dataclasses.asdict(config), "twin": config.twin.to_dict()},
         "controllers": controllers,
         "versions": package_versions(),
         "seed_rule": SEED_RULE,

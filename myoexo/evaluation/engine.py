@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,8 +30,10 @@ from myoexo.control.specs import (
     load_actor_file,
     load_shipped_policy,
     parse_controller_spec,
+    policy_twin,
     spec_env_kwargs,
 )
+from myoexo.envs.options import TwinOptions, twin_mismatch
 from myoexo.evaluation.config import EvaluationConfig, subject_seed
 from myoexo.evaluation.metrics import EpisodeMetrics, episode_metrics
 from myoexo.evaluation.storage import (
@@ -184,7 +187,7 @@ def plan_chunks(specs: Sequence[ControllerSpec], config: EvaluationConfig) -> li
 #: Per-process caches of the workers: one env per env id, duration and env keyword arguments
 #: (a policy's observation preset), one controller per spec, the env keyword arguments of
 #: each spec.
-_ENVS: dict[tuple[str, float | None, str, str], Any] = {}
+_ENVS: dict[tuple[str, str, str], Any] = {}
 _CONTROLLERS: dict[str, Controller] = {}
 _SPEC_ENV_KWARGS: dict[str, dict[str, Any]] = {}
 
@@ -220,12 +223,10 @@ def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chu
     # the oracle plans on a copy of its env: it gets an env of its own, per level
     owner = chunk.spec.text if chunk.spec.kind == "oracle" else ""
     env_id = config.level_env_id(chunk.level)
-    key = (env_id, config.episode_duration_s, repr(sorted(env_kwargs.items())), owner)
+    key = (env_id, repr(sorted(env_kwargs.items())), owner)
     env = _ENVS.get(key)
     if env is None:
-        env = _ENVS[key] = make_env(
-            env_id, episode_duration_s=config.episode_duration_s, **env_kwargs
-        )
+        env = _ENVS[key] = make_env(env_id, **env_kwargs)
     controller_key = f"{chunk.spec.text}@{env_id}" if owner else chunk.spec.text
     controller = _CONTROLLERS.get(controller_key)
     if controller is None:
@@ -246,17 +247,24 @@ def run_chunk(chunk: Chunk, config: EvaluationConfig, out_dir: str) -> tuple[Chu
 
 
 # ----------------------------------------------------------------------------- controllers
+class TwinMismatchWarning(UserWarning):
+    """A policy is evaluated on another twin than the one it was trained on."""
+
+
 def resolve_controllers(
     specs_text: Iterable[str],
     log: Callable[[str], None] = print,
     root_seed: int | None = None,
+    twin: TwinOptions | None = None,
 ) -> tuple[list[ControllerSpec], dict[str, str]]:
     """Parse and check every controller before anything is written.
 
     A model file that cannot be loaded raises ``ValueError``; ``sac`` without a shipped
     policy is skipped with a message (and reported in the second return value). With
     ``root_seed``, a policy selected on that root's subjects raises ``ValueError``
-    (:func:`~myoexo.control.specs.check_no_selection_leak`).
+    (:func:`~myoexo.control.specs.check_no_selection_leak`). With ``twin``, a policy trained
+    on another twin (task, reflex model or robustness) is evaluated with a
+    :class:`TwinMismatchWarning` that names both twins (also logged).
     """
     specs: list[ControllerSpec] = []
     skipped: dict[str, str] = {}
@@ -276,6 +284,12 @@ def resolve_controllers(
                 continue
         if root_seed is not None:
             check_no_selection_leak(spec, root_seed)
+        trained = policy_twin(spec) if twin is not None else None
+        mismatch = twin_mismatch(trained, twin) if trained is not None and twin else None
+        if mismatch:
+            message = f"controller {text!r} was {mismatch}"
+            log(f"myoexo evaluate: warning: {message}")
+            warnings.warn(message, TwinMismatchWarning, stacklevel=2)
         if spec.slug in labels:
             raise ValueError(
                 f"controllers {labels[spec.slug]!r} and {text!r} have the same label "

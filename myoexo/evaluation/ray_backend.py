@@ -79,7 +79,8 @@ def run_chunks(
             chunk is submitted any more and the running ones are finished and stored.
 
     Raises:
-        The first error of a task (the others are cancelled).
+        Exception: The first error of a task, as the task raised it (the others are
+            cancelled).
     """
     if not todo:
         return 0

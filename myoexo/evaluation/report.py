@@ -29,9 +29,11 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.specs import controller_slug
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.config import load_config
 from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
 from myoexo.evaluation.storage import load_table, load_traces
+from myoexo.runtime.docs import docs_url
 
 #: Metrics summarized per controller and level (column -> label in the report).
 SUMMARY_METRICS: dict[str, str] = {
@@ -346,7 +348,8 @@ def write_report(
         f"{n_per.min()}-{n_per.max()} subjects per controller and level (paper: 1000). "
         "Subject *i* of a level is the same simulated person for every controller.",
         "",
-        "Metric definitions: `myoexo/evaluation/metrics.py` (settling time in the 2 % band "
+        f"Metric definitions: [the evaluation protocol]({docs_url('evaluation')}), "
+        "`myoexo.evaluation.metrics` (settling time in the 2 % band "
         "of the step, RMS of the interaction torque up to the settling time, peak "
         "interaction torque over the episode). Values are mean ± std over subjects.",
         "",
@@ -354,7 +357,10 @@ def write_report(
         "",
         _summary_section(summary),
         "",
-        "## Next to the paper (docs/reference.md section 5)",
+        "## Next to the paper",
+        "",
+        "The study's numbers and how this project reads them: [the reference, section 5]("
+        f"{docs_url('reference', '5-evaluation-protocol-and-the-papers-results')}).",
         "",
         _paper_section(summary, red, reference),
         "",
@@ -383,10 +389,17 @@ def write_report(
         _md_table(["package", "version"], sorted(config.get("versions", {}).items())),
         "",
     ]
-    if cfg.get("episode_duration_s") not in (None, 8.0):
+    try:
+        twin = TwinOptions.from_dict(cfg.get("twin") or {})
+    except ValueError:  # a plug-in reflex model this process has not imported
+        twin = TwinOptions(task=tuple((cfg.get("twin") or {}).get("task", {}).items()))
+        lines.insert(3, f"**Twin:** {json.dumps(cfg.get('twin'))}\n")
+    if twin.episode_duration_s not in (None, 8.0):
         lines.insert(
-            3, f"**Note:** episodes of {cfg['episode_duration_s']} s, not the paper's 8 s."
+            3, f"**Note:** episodes of {twin.episode_duration_s:g} s, not the paper's 8 s."
         )
+    if twin.dynamics() != TwinOptions():
+        lines.insert(3, f"**Twin:** {twin.dynamics().describe()} (not the default twin).\n")
     path = dest / "report.md"
     path.write_text("\n".join(lines))
     return path

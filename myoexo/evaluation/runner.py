@@ -118,7 +118,9 @@ def evaluate(
 
     check_backend(backend, address)
     pool_workers = _checked_workers(workers)
-    specs, skipped = resolve_controllers(config.controllers, log, root_seed=config.root_seed)
+    specs, skipped = resolve_controllers(
+        config.controllers, log, root_seed=config.root_seed, twin=config.twin
+    )
     out = _output_folder(out_dir)
     labels = [s.label for s in specs]
     with FolderLock(out, "evaluation folder"), StopSignals(enabled=graceful_stop) as stop:

@@ -3,21 +3,11 @@
 The study's learned controllers read the human knee angle (``sac``) or an episode clock
 (``sac_exo`` reads ``time_frac``), neither of which a real exoskeleton has. The
 :class:`StudentController` reads only what the device measures, one *frame* per control
-step (:data:`FRAME_KEYS`, in the units and scales of the env's observation vector):
-
-==========================  ====  ===============================================
-key                         size  what
-==========================  ====  ===============================================
-``exo_angle_rad``           1     exo knee encoder (rad)
-``exo_vel_rad_s``           1     its velocity (x 0.1)
-``target_rad``              1     the commanded target (rad)
-``command``                 1     the last motor command (-)
-``exo_torque_nm``           1     motor torque (x 0.01)
-``thigh_cuff_force_n``      3     thigh cuff force (x 0.01)
-``thigh_cuff_torque_nm``    3     thigh cuff torque (x 0.02)
-``shank_cuff_force_n``      3     shank cuff force (x 0.01)
-``shank_cuff_torque_nm``    3     shank cuff torque (x 0.02)
-==========================  ====  ===============================================
+step (:data:`FRAME_KEYS`, in the units and scales of the env's observation vector): the
+exo encoder angle and velocity, the target, the last motor command, the motor torque and
+the two cuffs' force and torque (:data:`FRAME_DIM` floats; each key's meaning, unit and scale:
+:data:`myoexo.envs.observation.OBS_KEY_DOCS`, shown on the documentation site's
+environment page, ``docs/envs.md``).
 
 Nothing else: no human joint angle, no muscle or strap state, and no episode clock
 (``time_frac`` is in the env's ``obs_preset="exo"`` vector; the controller drops it). Its

@@ -4,7 +4,9 @@ Every file myoexo writes for later reading (evaluation chunks and tables, run co
 checkpoint states) goes through :func:`atomic_path`: the content is written to a temporary
 file in the same folder, with a name unique to the writing process, and renamed into place.
 A reader therefore sees either the old file or the complete new one, never a partial one, and
-two processes writing the same file never share a temporary name.
+two processes writing the same file never share a temporary name. The file ends with the
+permissions a plain ``open(path, "w")`` would give it (``0o666`` less the process's umask),
+not the owner-only ones of the temporary.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import json
 import os
 import platform
 import tempfile
+import threading
 from collections.abc import Iterator
 from importlib import metadata
 from pathlib import Path
@@ -33,6 +36,30 @@ RECORDED_PACKAGES: tuple[str, ...] = (
 )
 
 
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's file-creation mask, read without changing it where the system tells
+    (Linux' ``/proc/self/status``), else set and restored at once under a lock."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    with _UMASK_LOCK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
+def default_file_mode() -> int:
+    """Permissions of a file created by a plain ``open()`` now: ``0o666 & ~umask``."""
+    return 0o666 & ~current_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it onto ``path``.
@@ -40,7 +67,8 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     The temporary name starts with ``.tmp-`` and is unique per call (``tempfile.mkstemp``),
     so concurrent writers never collide; on any exception (a full disk included) it is
     removed and ``path`` is left as it was; an ``OSError`` without a file name gets
-    ``path``'s. The parent folder is created if missing.
+    ``path``'s. The parent folder is created if missing. Before the rename the file gets
+    :func:`default_file_mode` (``mkstemp`` creates it readable by its owner only).
     """
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
@@ -49,6 +77,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     tmp = Path(tmp_name)
     try:
         yield tmp
+        os.chmod(tmp, default_file_mode())
         os.replace(tmp, final)
     except BaseException as exc:
         tmp.unlink(missing_ok=True)

@@ -28,7 +28,11 @@ The package, one module per part (each name is re-exported here):
 * :mod:`~myoexo.spasticity.coefficients`: :func:`phi`, :func:`sc_angle`,
   :func:`sc_velocity`, :func:`sc_total` (numpy, vectorized) and their torch twins (autograd
   through the inputs and every parameter);
-* :mod:`~myoexo.spasticity.reflex`: the reflex models (``"stretch"``, ``"uniform"``,
+* :mod:`~myoexo.spasticity.registry`: the plug-in protocol of a reflex model
+  (:class:`ReflexModel`: a frozen dataclass of its parameters, a numpy step, its torch twin
+  and its memory) and the registry (:func:`register_reflex`, :func:`get_reflex`,
+  :func:`reflex_names`);
+* :mod:`~myoexo.spasticity.reflex`: the built-in models (``"stretch"``, ``"uniform"``,
   ``"persistent"``), their calibration data (:data:`CALIBRATION`, :data:`PERSISTENT`) and
   their torch twins;
   :mod:`~myoexo.spasticity.delay`: the transmission delay line;
@@ -37,9 +41,10 @@ The package, one module per part (each name is re-exported here):
   :class:`StageHost`, the smallest host it runs on;
 * :mod:`~myoexo.spasticity.wrapper`: :class:`SpasticityWrapper`, a gymnasium wrapper that
   installs the stage on any MyoSuite env whose model has the 11 muscles and ``knee_angle_r``;
-* :mod:`~myoexo.spasticity.calibrate` (``myoexo calibrate``, fits the stretch reflex, or with
-  ``--reflex persistent`` the after-discharge, to the paper's PID) and
-  :mod:`~myoexo.spasticity.plots` (Fig. 2b).
+* the studies that fit the reflex (``myoexo calibrate``, :mod:`myoexo.studies.calibrate`:
+  the stretch reflex, or with ``--reflex persistent`` the after-discharge, to the paper's
+  PID) and the paper's Fig. 2b (:func:`myoexo.clinical.figures.plot_sc_curves`) live on the
+  floors above (``docs/architecture.md``).
 
 Example::
 
@@ -77,33 +82,46 @@ from myoexo.spasticity.levels import (
     sample_subject,
 )
 from myoexo.spasticity.reflex import (
+    BUILTIN_REFLEXES,
     CALIBRATION,
+    DEFAULT_REFLEX,
     PERSISTENT,
-    REFLEX_MODELS,
-    REFLEX_PRESETS,
     STRETCH_DELAY_S,
     UNCALIBRATED,
     LevelCalibration,
     PersistentParams,
-    ReflexConfig,
+    PersistentReflex,
     StretchCalibration,
+    StretchReflex,
+    UniformReflex,
     group_excitations,
     group_excitations_torch,
     persistent_step,
     persistent_step_torch,
-    reflex_config,
+)
+from myoexo.spasticity.registry import (
+    REFLEXES,
+    ReflexModel,
+    get_reflex,
+    reflex_label,
+    reflex_name,
+    reflex_names,
+    reflex_parameters,
+    register_reflex,
+    resolve_reflex,
 )
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
 from myoexo.spasticity.wrapper import SpasticityWrapper
 
 __all__ = [
+    "BUILTIN_REFLEXES",
     "CALIBRATION",
+    "DEFAULT_REFLEX",
     "KNEE_JOINT",
     "LEVELS",
     "PERSISTENT",
     "RANDOM_LEVEL",
-    "REFLEX_MODELS",
-    "REFLEX_PRESETS",
+    "REFLEXES",
     "SPASTIC_EXTENSORS",
     "SPASTIC_FLEXORS",
     "SPASTIC_MUSCLES",
@@ -115,21 +133,30 @@ __all__ = [
     "DelayLine",
     "LevelCalibration",
     "PersistentParams",
-    "ReflexConfig",
+    "PersistentReflex",
+    "ReflexModel",
     "SpasticityParams",
     "SpasticityStage",
     "SpasticityWrapper",
     "StageHost",
     "StretchCalibration",
+    "StretchReflex",
+    "UniformReflex",
     "above",
     "below",
+    "get_reflex",
     "group_excitations",
     "group_excitations_torch",
     "persistent_step",
     "persistent_step_torch",
     "phi",
     "phi_torch",
-    "reflex_config",
+    "reflex_label",
+    "reflex_name",
+    "reflex_names",
+    "reflex_parameters",
+    "register_reflex",
+    "resolve_reflex",
     "sample_subject",
     "sc_angle",
     "sc_angle_torch",

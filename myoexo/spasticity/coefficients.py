@@ -47,10 +47,42 @@ def phi(k: float, b: Any, b0: float) -> np.ndarray:
     return below(b, b0, k)
 
 
-def _outside_window(x: np.ndarray, k: float, upper: float, lower: float, scale: float):
-    """``scale * [1 - (phi(k, x, upper) - phi(k, x, lower))]``: ~0 inside ``[lower, upper]``,
-    ``scale / 2`` at a limit, -> ``scale`` far outside (the shape of eqs. 2 and 3)."""
-    out = scale * (1.0 - (phi(k, x, upper) - phi(k, x, lower)))
+def angle_term(
+    theta_deg: Any, half_k: Any, theta_ext_deg: Any, theta_flex_deg: Any, s_theta: Any, tanh: Any
+) -> Any:
+    """``sc_a`` from its constants, in any array library: ``s_theta / 2 * (2 - tanh(k/2
+    (theta - theta_ext)) + tanh(k/2 (theta - theta_flex)))``, the same as eq. 2.
+
+    The one copy of the angle term: :func:`sc_angle` (``tanh=np.tanh``), its torch twin
+    (``torch.tanh``) and the reflex models' per-step scalar path (``math.tanh``) all call it,
+    with ``half_k = k / 2``."""
+    return (
+        0.5
+        * s_theta
+        * (
+            2.0
+            - tanh(half_k * (theta_deg - theta_ext_deg))
+            + tanh(half_k * (theta_deg - theta_flex_deg))
+        )
+    )
+
+
+def velocity_term(
+    vel_rad_s: Any, half_k: Any, v_lower_rad_s: Any, v_upper_rad_s: Any, s_v: Any, tanh: Any
+) -> Any:
+    """``sc_v`` from its constants, in any array library (see :func:`angle_term`; eq. 3)."""
+    return (
+        0.5
+        * s_v
+        * (
+            2.0
+            - tanh(half_k * (vel_rad_s - v_lower_rad_s))
+            + tanh(half_k * (vel_rad_s - v_upper_rad_s))
+        )
+    )
+
+
+def _scalar_or_array(out: np.ndarray) -> np.ndarray | float:
     return float(out) if out.ndim == 0 else out
 
 
@@ -69,7 +101,9 @@ def sc_angle(theta_deg: Any, params: SpasticityParams) -> np.ndarray | float:
     """
     theta = _finite_array("theta_deg", theta_deg)
     p = params
-    return _outside_window(theta, p.k, p.theta_flex_deg, p.theta_ext_deg, p.s_theta)
+    return _scalar_or_array(
+        angle_term(theta, 0.5 * p.k, p.theta_ext_deg, p.theta_flex_deg, p.s_theta, np.tanh)
+    )
 
 
 def sc_velocity(vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
@@ -87,7 +121,9 @@ def sc_velocity(vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
     """
     vel = _finite_array("vel_rad_s", vel_rad_s)
     p = params
-    return _outside_window(vel, p.k, p.v_upper_rad_s, p.v_lower_rad_s, p.s_v)
+    return _scalar_or_array(
+        velocity_term(vel, 0.5 * p.k, p.v_lower_rad_s, p.v_upper_rad_s, p.s_v, np.tanh)
+    )
 
 
 def sc_total(theta_deg: Any, vel_rad_s: Any, params: SpasticityParams) -> np.ndarray | float:
@@ -151,12 +187,17 @@ def sc_angle_torch(theta_deg: Any, params: _TorchParams) -> torch.Tensor:
     Raises:
         ValueError: If an angle is NaN or infinite.
     """
+    import torch
+
     theta = _finite_tensor("theta_deg", theta_deg)
-    k = _torch_param(params, "k", theta)
-    window = phi_torch(k, theta, _torch_param(params, "theta_flex_deg", theta)) - phi_torch(
-        k, theta, _torch_param(params, "theta_ext_deg", theta)
-    )
-    return _torch_param(params, "s_theta", theta) * (1.0 - window)
+
+    def get(name: str) -> torch.Tensor:
+        return _torch_param(params, name, theta)
+
+    return angle_term(
+        theta, 0.5 * get("k"), get("theta_ext_deg"), get("theta_flex_deg"), get("s_theta"),
+        torch.tanh,
+    )  # fmt: skip
 
 
 def sc_velocity_torch(vel_rad_s: Any, params: _TorchParams) -> torch.Tensor:
@@ -165,12 +206,16 @@ def sc_velocity_torch(vel_rad_s: Any, params: _TorchParams) -> torch.Tensor:
     Raises:
         ValueError: If a velocity is NaN or infinite.
     """
+    import torch
+
     vel = _finite_tensor("vel_rad_s", vel_rad_s)
-    k = _torch_param(params, "k", vel)
-    window = phi_torch(k, vel, _torch_param(params, "v_upper_rad_s", vel)) - phi_torch(
-        k, vel, _torch_param(params, "v_lower_rad_s", vel)
+
+    def get(name: str) -> torch.Tensor:
+        return _torch_param(params, name, vel)
+
+    return velocity_term(
+        vel, 0.5 * get("k"), get("v_lower_rad_s"), get("v_upper_rad_s"), get("s_v"), torch.tanh
     )
-    return _torch_param(params, "s_v", vel) * (1.0 - window)
 
 
 def sc_total_torch(theta_deg: Any, vel_rad_s: Any, params: _TorchParams) -> torch.Tensor:

@@ -1,4 +1,8 @@
-"""Reflex models: which knee muscles receive which part of the spastic reflex, and when.
+"""The built-in reflex models: which knee muscles receive which part of the spastic reflex,
+and when. Each is a :class:`~myoexo.spasticity.registry.ReflexModel` plug-in (a frozen
+dataclass of its parameters), registered on import as ``"stretch"`` (the default),
+``"uniform"`` and ``"persistent"``; their maths is written once (:func:`stretch_terms`,
+:func:`uniform_sc`, :func:`after_discharge_update`) for floats, numpy and torch alike.
 
 The paper's reflex (:mod:`myoexo.spasticity`, Table I) is a sum of four one-sided terms,
 each a sigmoid "beyond a limit" of Table I's windows::
@@ -63,15 +67,17 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
-from myoexo.spasticity.coefficients import above, below
+import numpy as np
+
+from myoexo.spasticity.coefficients import angle_term, velocity_term
+from myoexo.spasticity.registry import Memory, ReflexModel, register_reflex
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
 
-#: Names of the reflex models.
-REFLEX_MODELS: tuple[str, ...] = ("uniform", "stretch", "persistent")
+    from myoexo.spasticity.levels import SpasticityParams
 
 #: Transmission delay of the stretch reflex, s. 20 ms is SCONE's knee reflex delay; the
 #: 30 ms of Falisse et al. 2018 and SpasticMyoElbow drove the paper's PID at level 1
@@ -226,7 +232,7 @@ class PersistentParams:
         return -math.expm1(-dt_s / self.rise_time_s), -math.expm1(-dt_s / self.decay_time_s)
 
 
-#: The after-discharge of the ``"persistent"`` preset. Chosen, not fitted: the ignition
+#: The after-discharge of the ``"persistent"`` model. Chosen, not fitted: the ignition
 #: threshold 1.5 rad/s, the 50 ms rise and the 30 s decay (a throwaway probe's values; the
 #: paper's PID extends at 3.5-4.5 rad/s, a target ramped over 3 s at 1.1-1.4 rad/s).
 #: Fitted with ``myoexo calibrate --reflex persistent --subjects 30 --verify-subjects 200``
@@ -249,6 +255,101 @@ PERSISTENT = PersistentParams(
 )
 
 
+# ------------------------------------------------------------------ the maths, written once
+# Each kernel takes its constants and the array library's ``tanh``: the stage's per-step
+# path passes ``math.tanh`` on floats, the public numpy functions ``np.tanh`` and the torch
+# twins ``torch.tanh`` on tensors (whose constants may carry gradients).
+
+
+class StretchConstants(NamedTuple):
+    """A subject's constants of the stretch reflex (``phi(k, x, lim) = (1 - tanh(k (x - lim)
+    / 2)) / 2``: every window uses the halved slope; the gains are multiplied in once)."""
+
+    half_k: Any
+    flex_theta_deg: Any  # flexors' angle threshold: Table I's theta_ext + calibration shift
+    theta_flex_deg: Any
+    v_lower_rad_s: Any
+    v_upper_rad_s: Any
+    flex_s_theta: Any  # flexor gain x s_theta
+    flex_s_v: Any
+    ext_s_theta: Any
+    ext_s_v: Any
+
+
+def stretch_constants(p: Any, cal: Any, get: Any = getattr) -> StretchConstants:
+    """:class:`StretchConstants` of subject *p* with the level's calibration *cal* (read with
+    *get*: ``getattr`` for dataclasses, a tensor-making getter for the torch twin)."""
+    return StretchConstants(
+        half_k=0.5 * get(p, "k"),
+        flex_theta_deg=get(p, "theta_ext_deg") + get(cal, "flexor_threshold_shift_deg"),
+        theta_flex_deg=get(p, "theta_flex_deg"),
+        v_lower_rad_s=get(p, "v_lower_rad_s"),
+        v_upper_rad_s=get(p, "v_upper_rad_s"),
+        flex_s_theta=get(cal, "flexor_gain") * get(p, "s_theta"),
+        flex_s_v=get(cal, "flexor_gain") * get(p, "s_v"),
+        ext_s_theta=get(cal, "extensor_gain") * get(p, "s_theta"),
+        ext_s_v=get(cal, "extensor_gain") * get(p, "s_v"),
+    )
+
+
+def stretch_terms(
+    theta_deg: Any, vel_rad_s: Any, c: StretchConstants, tanh: Any
+) -> tuple[Any, Any]:
+    """``(e_flex, e_ext)`` of the stretch reflex (module docstring), in any array library."""
+    hk = c.half_k
+    flex = 0.5 * (
+        c.flex_s_theta * (1.0 - tanh(hk * (theta_deg - c.flex_theta_deg)))
+        + c.flex_s_v * (1.0 - tanh(hk * (vel_rad_s - c.v_lower_rad_s)))
+    )
+    ext = 0.5 * (
+        c.ext_s_theta * (1.0 + tanh(hk * (theta_deg - c.theta_flex_deg)))
+        + c.ext_s_v * (1.0 + tanh(hk * (vel_rad_s - c.v_upper_rad_s)))
+    )
+    return flex, ext
+
+
+class UniformConstants(NamedTuple):
+    """A subject's constants of the paper's ``SC_total`` (Table I, the halved slope)."""
+
+    half_k: Any
+    theta_ext_deg: Any
+    theta_flex_deg: Any
+    v_lower_rad_s: Any
+    v_upper_rad_s: Any
+    s_theta: Any
+    s_v: Any
+
+
+def uniform_constants(p: Any, get: Any = getattr) -> UniformConstants:
+    """:class:`UniformConstants` of subject *p* (see :func:`stretch_constants` for *get*)."""
+    return UniformConstants(
+        0.5 * get(p, "k"),
+        get(p, "theta_ext_deg"),
+        get(p, "theta_flex_deg"),
+        get(p, "v_lower_rad_s"),
+        get(p, "v_upper_rad_s"),
+        get(p, "s_theta"),
+        get(p, "s_v"),
+    )
+
+
+def uniform_sc(theta_deg: Any, vel_rad_s: Any, c: UniformConstants, tanh: Any) -> Any:
+    """The paper's ``SC_total`` from its constants (the angle and velocity terms of
+    :mod:`~myoexo.spasticity.coefficients`)."""
+    return angle_term(
+        theta_deg, c.half_k, c.theta_ext_deg, c.theta_flex_deg, c.s_theta, tanh
+    ) + velocity_term(vel_rad_s, c.half_k, c.v_lower_rad_s, c.v_upper_rad_s, c.s_v, tanh)
+
+
+def after_discharge_update(
+    r: Any, vel_rad_s: Any, half_slope: Any, v_ig: Any, a_rise: Any, a_decay: Any, tanh: Any
+) -> Any:
+    """One step of the after-discharge state ``r`` (module docstring), any array library:
+    the ignition gate ``sigmoid(slope (-v - v_ig)) = (1 + tanh(slope / 2 (-v - v_ig))) / 2``."""
+    gate = 0.5 * (1.0 + tanh(half_slope * (-vel_rad_s - v_ig)))
+    return r + (gate * a_rise * (1.0 - r) - (1.0 - gate) * a_decay * r)
+
+
 def persistent_step(
     r: Any, vel_rad_s: Any, a_rise: float, a_decay: float, params: PersistentParams
 ) -> Any:
@@ -262,11 +363,34 @@ def persistent_step(
         a_decay: ``1 - exp(-dt / decay_time_s)``.
         params: The model's parameters (gate threshold and slope).
     """
-    import numpy as np
+    return after_discharge_update(
+        r,
+        np.asarray(vel_rad_s),
+        0.5 * params.ignition_slope_per_rad_s,
+        params.ignition_velocity_rad_s,
+        a_rise,
+        a_decay,
+        np.tanh,
+    )
 
-    half = 0.5 * params.ignition_slope_per_rad_s
-    s = 0.5 * (1.0 + np.tanh(half * (-np.asarray(vel_rad_s) - params.ignition_velocity_rad_s)))
-    return r + s * a_rise * (1.0 - r) - (1.0 - s) * a_decay * r
+
+def _tensor_getter(like: Any) -> Any:
+    """``get(source, name)``: a mapping's or a dataclass's entry as a tensor like *like*."""
+    import torch
+
+    def get(source: Any, name: str) -> torch.Tensor:
+        value = source[name] if isinstance(source, Mapping) else getattr(source, name)
+        if isinstance(value, torch.Tensor):
+            return value
+        return torch.as_tensor(value, dtype=like.dtype, device=like.device)
+
+    return get
+
+
+def _as_tensor(value: Any) -> torch.Tensor:
+    import torch
+
+    return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
 
 
 def persistent_step_torch(
@@ -280,70 +404,26 @@ def persistent_step_torch(
     ``rise_time_s``, ``decay_time_s``, in a mapping or a :class:`PersistentParams`)."""
     import torch
 
-    def get(name: str) -> torch.Tensor:
-        value = params[name] if isinstance(params, Mapping) else getattr(params, name)
-        return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=v.dtype)
-
-    v = vel_rad_s if isinstance(vel_rad_s, torch.Tensor) else torch.as_tensor(vel_rad_s)
+    v = _as_tensor(vel_rad_s)
+    get = _tensor_getter(v)
     dt = dt_s if isinstance(dt_s, torch.Tensor) else torch.as_tensor(dt_s, dtype=v.dtype)
-    a_rise = -torch.expm1(-dt / get("rise_time_s"))
-    a_decay = -torch.expm1(-dt / get("decay_time_s"))
-    s = torch.sigmoid(get("ignition_slope_per_rad_s") * (-v - get("ignition_velocity_rad_s")))
-    return r + s * a_rise * (1.0 - r) - (1.0 - s) * a_decay * r
-
-
-@dataclass(frozen=True)
-class ReflexConfig:
-    """Which reflex model a stage runs.
-
-    Attributes:
-        model: ``"uniform"``, ``"stretch"`` or ``"persistent"`` (:data:`REFLEX_MODELS`).
-        delay_s: Transmission delay of the knee state the reflex reads, s (rounded to whole
-            control periods of the host env; 0 = the present state).
-        calibration: Per-level parameters of the stretch model (ignored by the others).
-        persistent: The after-discharge of the ``"persistent"`` model (ignored by the others).
-    """
-
-    model: str = "stretch"
-    delay_s: float = STRETCH_DELAY_S
-    calibration: StretchCalibration = CALIBRATION
-    persistent: PersistentParams = PERSISTENT
-
-    def __post_init__(self) -> None:
-        if self.model not in REFLEX_MODELS:
-            raise ValueError(f"reflex model {self.model!r} is unknown; accepted: {REFLEX_MODELS}")
-        if not (math.isfinite(self.delay_s) and 0.0 <= self.delay_s <= 0.2):
-            raise ValueError(f"reflex delay_s = {self.delay_s!r} is outside [0, 0.2] s")
-
-
-#: The named reflex presets: ``"stretch"`` (calibrated stretch reflex, 20 ms delay; the envs'
-#: default), ``"uniform"`` (the paper's SC_total on all 11 muscles, no delay: myoexo's
-#: first reading, kept for comparison) and ``"persistent"`` (``"uniform"`` plus the
-#: calibrated after-discharge of the flexors, :data:`PERSISTENT`; no delay, as ``"uniform"``).
-REFLEX_PRESETS: Mapping[str, ReflexConfig] = MappingProxyType(
-    {
-        "stretch": ReflexConfig(),
-        "uniform": ReflexConfig(model="uniform", delay_s=0.0),
-        "persistent": ReflexConfig(model="persistent", delay_s=0.0),
-    }
-)
-
-
-def reflex_config(reflex: str | ReflexConfig) -> ReflexConfig:
-    """A :class:`ReflexConfig` from a preset name or a config (``ValueError`` otherwise)."""
-    if isinstance(reflex, ReflexConfig):
-        return reflex
-    if isinstance(reflex, str) and reflex in REFLEX_PRESETS:
-        return REFLEX_PRESETS[reflex]
-    raise ValueError(
-        f"reflex = {reflex!r}: expected one of {sorted(REFLEX_PRESETS)} or a ReflexConfig"
+    a_rise = -torch.expm1(-dt / get(params, "rise_time_s"))
+    a_decay = -torch.expm1(-dt / get(params, "decay_time_s"))
+    return after_discharge_update(
+        r,
+        v,
+        0.5 * get(params, "ignition_slope_per_rad_s"),
+        get(params, "ignition_velocity_rad_s"),
+        a_rise,
+        a_decay,
+        torch.tanh,
     )
 
 
 def group_excitations(
     theta_deg: Any, vel_rad_s: Any, params: Any, calibration: LevelCalibration | None = None
 ) -> tuple[Any, Any]:
-    """The stretch reflex's ``(e_flex, e_ext)`` at knee states (broadcast over inputs).
+    """The stretch reflex's ``(e_flex, e_ext)`` at knee states (numpy, broadcast over inputs).
 
     Args:
         theta_deg: Knee angle(s), deg, flexion positive.
@@ -352,20 +432,12 @@ def group_excitations(
         calibration: The level's fitted gains and shift (default: none; then
             ``e_flex + e_ext`` equals the paper's ``SC_total``).
     """
-    c = calibration or LevelCalibration()
-    p = params
-    flex = c.flexor_gain * (
-        p.s_theta * below(theta_deg, p.theta_ext_deg + c.flexor_threshold_shift_deg, p.k)
-        + p.s_v * below(vel_rad_s, p.v_lower_rad_s, p.k)
-    )
-    ext = c.extensor_gain * (
-        p.s_theta * above(theta_deg, p.theta_flex_deg, p.k)
-        + p.s_v * above(vel_rad_s, p.v_upper_rad_s, p.k)
-    )
-    return flex, ext
+    c = stretch_constants(params, calibration or LevelCalibration())
+    theta = np.asarray(theta_deg, dtype=np.float64)
+    vel = np.asarray(vel_rad_s, dtype=np.float64)
+    return stretch_terms(theta, vel, c, np.tanh)
 
 
-# ----------------------------------------------------------------------------- torch twin
 def group_excitations_torch(
     theta_deg: torch.Tensor,
     vel_rad_s: torch.Tensor,
@@ -377,27 +449,200 @@ def group_excitations_torch(
     names to tensors or floats) and in every calibration parameter given as a tensor."""
     import torch
 
-    def get(source: Any, name: str) -> torch.Tensor:
-        value = source[name] if isinstance(source, Mapping) else getattr(source, name)
-        return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=x.dtype)
-
-    x = theta_deg if isinstance(theta_deg, torch.Tensor) else torch.as_tensor(theta_deg)
-    v = vel_rad_s if isinstance(vel_rad_s, torch.Tensor) else torch.as_tensor(vel_rad_s)
-    cal = calibration if calibration is not None else LevelCalibration()
-    k = get(params, "k")
-
-    from myoexo.spasticity.coefficients import phi_torch  # the same sigmoid (eq. 1) in torch
-
-    def below_t(z: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
-        return phi_torch(k, z, limit)
-
-    theta_thr = get(params, "theta_ext_deg") + get(cal, "flexor_threshold_shift_deg")
-    flex = get(cal, "flexor_gain") * (
-        get(params, "s_theta") * below_t(x, theta_thr)
-        + get(params, "s_v") * below_t(v, get(params, "v_lower_rad_s"))
+    x = _as_tensor(theta_deg)
+    v = _as_tensor(vel_rad_s)
+    get = _tensor_getter(x)
+    c = stretch_constants(
+        params, calibration if calibration is not None else LevelCalibration(), get
     )
-    ext = get(cal, "extensor_gain") * (
-        get(params, "s_theta") * (1.0 - below_t(x, get(params, "theta_flex_deg")))
-        + get(params, "s_v") * (1.0 - below_t(v, get(params, "v_upper_rad_s")))
-    )
-    return flex, ext
+    return stretch_terms(x, v, c, torch.tanh)
+
+
+# ----------------------------------------------------------------------------- the models
+@dataclass(frozen=True)
+class StretchReflex(ReflexModel):
+    """``"stretch"``: each muscle group answers its own stretch (the clinical stretch
+    reflex, Lance 1980; the envs' default; module docstring).
+
+    Attributes:
+        delay_s: Transmission delay, s (:data:`STRETCH_DELAY_S`).
+        calibration: Per-level gains and flexor threshold shift (:data:`CALIBRATION`;
+            :data:`UNCALIBRATED` reads Table I literally).
+    """
+
+    delay_s: float = STRETCH_DELAY_S
+    calibration: StretchCalibration = CALIBRATION
+
+    def subject_constants(
+        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
+    ) -> StretchConstants:
+        return stretch_constants(subject, self.calibration[level])
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        flex, ext = stretch_terms(theta_deg, vel_rad_s, constants, math.tanh)
+        return flex, ext, memory
+
+    def step_torch(
+        self,
+        level: int,
+        subject: Mapping[str, Any],
+        memory: Any,
+        theta_deg: torch.Tensor,
+        vel_rad_s: torch.Tensor,
+        control_period_s: float,
+        individual: Any = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        flex, ext = group_excitations_torch(theta_deg, vel_rad_s, subject, self.calibration[level])
+        return flex, ext, tuple(memory)
+
+
+@dataclass(frozen=True)
+class UniformReflex(ReflexModel):
+    """``"uniform"``: the paper read literally, all 11 muscles receive the whole ``SC_total``
+    (myoexo's first reading, kept for comparison; no delay).
+
+    Attributes:
+        delay_s: Transmission delay, s (0: the present state).
+    """
+
+    delay_s: float = 0.0
+
+    def subject_constants(
+        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
+    ) -> Any:
+        return uniform_constants(subject)
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        sc = uniform_sc(theta_deg, vel_rad_s, constants, math.tanh)
+        return sc, sc, memory
+
+    def sc_total(self, flexor: float, extensor: float) -> float:
+        """The flexors' excitation (both groups share ``SC_total``; ``"persistent"``: plus
+        the after-discharge)."""
+        return flexor
+
+    def step_torch(
+        self,
+        level: int,
+        subject: Mapping[str, Any],
+        memory: Any,
+        theta_deg: torch.Tensor,
+        vel_rad_s: torch.Tensor,
+        control_period_s: float,
+        individual: Any = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        import torch
+
+        x = _as_tensor(theta_deg)
+        sc = uniform_sc(
+            x, _as_tensor(vel_rad_s), uniform_constants(subject, _tensor_getter(x)), torch.tanh
+        )
+        return sc, sc, tuple(memory)
+
+
+class PersistentConstants(NamedTuple):
+    """A subject's constants of the ``"persistent"`` model: the uniform ones, the gate and
+    the per-step rates of the after-discharge, and the subject's gain ``G``."""
+
+    uniform: UniformConstants
+    half_slope: float
+    v_ig: float
+    a_rise: float
+    a_decay: float
+    gain: float
+
+
+@dataclass(frozen=True)
+class PersistentReflex(UniformReflex):
+    """``"persistent"``: the uniform reading plus the flexors' after-discharge ``G r``, whose
+    state ``r`` (the model's memory) remembers fast extensions for seconds (module
+    docstring). Each subject's gain is ``G (1 + rel_std z)``, clipped at 0, with ``z`` drawn
+    from a child of the reset's generator (:meth:`draw_individual`).
+
+    Attributes:
+        delay_s: Transmission delay, s (0, as ``"uniform"``).
+        after_discharge: The after-discharge's parameters (:data:`PERSISTENT`).
+    """
+
+    after_discharge: PersistentParams = PERSISTENT
+
+    def draw_individual(self, rng: Any, rel_std: float) -> float:
+        """``max(0, 1 + rel_std z)``, the factor of the subject's gain, ``z`` from
+        ``rng.spawn(1)[0]`` (*rng*'s own stream is not advanced)."""
+        try:
+            child = rng.spawn(1)[0]
+        except (AttributeError, TypeError, ValueError):  # a generator without a seed sequence
+            z = float(rng.standard_normal())
+        else:
+            z = float(child.standard_normal())
+        return max(0.0, 1.0 + rel_std * z)
+
+    def subject_constants(
+        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
+    ) -> PersistentConstants:
+        p = self.after_discharge
+        a_rise, a_decay = p.rates(control_period_s)
+        factor = 1.0 if individual is None else float(individual)
+        return PersistentConstants(
+            uniform=uniform_constants(subject),
+            half_slope=0.5 * p.ignition_slope_per_rad_s,
+            v_ig=p.ignition_velocity_rad_s,
+            a_rise=a_rise,
+            a_decay=a_decay,
+            gain=p.gain(level) * factor,
+        )
+
+    def initial_memory(self) -> Memory:
+        """``(r,)``: no after-discharge."""
+        return (0.0,)
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        c = constants
+        sc = uniform_sc(theta_deg, vel_rad_s, c.uniform, math.tanh)
+        r = after_discharge_update(
+            memory[0], vel_rad_s, c.half_slope, c.v_ig, c.a_rise, c.a_decay, math.tanh
+        )
+        return sc + c.gain * r, sc, (r,)
+
+    def step_torch(
+        self,
+        level: int,
+        subject: Mapping[str, Any],
+        memory: Any,
+        theta_deg: torch.Tensor,
+        vel_rad_s: torch.Tensor,
+        control_period_s: float,
+        individual: Any = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        sc, _, _ = super().step_torch(level, subject, (), theta_deg, vel_rad_s, control_period_s)
+        r = persistent_step_torch(
+            _as_tensor(memory[0]), vel_rad_s, control_period_s, self.after_discharge
+        )
+        factor = 1.0 if individual is None else float(individual)
+        gain = self.after_discharge.gain(level) * factor
+        return sc + gain * r, sc, (r,)
+
+
+#: The built-in models, registered on import: ``"stretch"`` (calibrated stretch reflex,
+#: 20 ms delay; the envs' default), ``"uniform"`` (the paper's SC_total on all 11 muscles,
+#: no delay: myoexo's first reading, kept for comparison) and ``"persistent"``
+#: (``"uniform"`` plus the calibrated after-discharge of the flexors, :data:`PERSISTENT`).
+BUILTIN_REFLEXES: Mapping[str, ReflexModel] = MappingProxyType(
+    {
+        "stretch": StretchReflex(),
+        "uniform": UniformReflex(),
+        "persistent": PersistentReflex(),
+    }
+)
+
+#: The name of the envs' default reflex model.
+DEFAULT_REFLEX = "stretch"
+
+for _name, _model in BUILTIN_REFLEXES.items():
+    register_reflex(_name, _model)

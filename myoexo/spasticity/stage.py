@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from myoexo.model.leg import KNEE_JOINT  # the joint whose angle and velocity drive the reflex
+from myoexo.spasticity.coefficients import sc_total
 from myoexo.spasticity.delay import DelayLine
 from myoexo.spasticity.levels import (
     LEVELS,
@@ -28,34 +29,21 @@ from myoexo.spasticity.levels import (
     check_level_setting,
     sample_subject,
 )
-from myoexo.spasticity.reflex import LevelCalibration, ReflexConfig, reflex_config
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import Memory, ReflexModel, reflex_label, resolve_reflex
 
-#: What :meth:`SpasticityStage.history_state` returns: the delay line's state and the
-#: after-discharge ``r`` of the ``"persistent"`` model (0.0 for the others).
-HistoryState = tuple[tuple[tuple[float, ...], tuple[float, ...], int], float]
+#: What :meth:`SpasticityStage.history_state` returns: the delay line's state and the reflex
+#: model's memory (e.g. the after-discharge ``(r,)`` of ``"persistent"``; ``()`` for the
+#: models without one).
+HistoryState = tuple[tuple[tuple[float, ...], tuple[float, ...], int], Memory]
 
 #: Name of the stage in MyoSuite's muscle-command pipeline.
 STAGE_NAME = "spasticity"
 
+#: Control period the model's constants assume until the stage is bound to a host, s.
+DEFAULT_CONTROL_PERIOD_S = 0.01
+
 _RAD_TO_DEG = 180.0 / math.pi
-
-
-class _StepCoefficients(NamedTuple):
-    """A subject's constants of the per-step reflex (python floats: scalar math is fastest).
-
-    ``phi(k, x, lim) = (1 - tanh(k (x - lim) / 2)) / 2``, so every window is written with
-    the halved slope; the gains are multiplied in once per subject."""
-
-    half_k: float
-    flex_theta_deg: float  # flexors' angle threshold (Table I's theta_ext + calibration shift)
-    theta_ext_deg: float  # Table I's extension-side limit (the uniform model's)
-    theta_flex_deg: float
-    v_lower_rad_s: float
-    v_upper_rad_s: float
-    flex_s_theta: float  # gain x s_theta of the flexors' angle term
-    flex_s_v: float
-    ext_s_theta: float
-    ext_s_v: float
 
 
 class SpasticityStage:
@@ -69,19 +57,18 @@ class SpasticityStage:
     or use :class:`SpasticityWrapper`. Each control step :meth:`apply` reads the angle (deg)
     and velocity (rad/s) of ``knee_angle_r`` from ``env.data``, passes them through the
     reflex's transmission delay (:class:`~myoexo.spasticity.delay.DelayLine`, whole control
-    periods of the host's ``env.dt``), computes the current subject's reflex excitation with
-    the chosen model (:mod:`myoexo.spasticity.reflex`: ``"stretch"``, each muscle group
-    answering its own stretch, ``"uniform"``, the paper's ``SC_total`` on all 11
-    muscles, or ``"persistent"``, ``"uniform"`` plus the flexors' after-discharge ``G r``
-    whose state ``r`` remembers fast extensions for seconds) and adds it to the spastic
-    muscles' entries of ``ctrl``, clipped to ``[0, 1]``;
-    every other entry is left as it is. MyoSuite's (MuJoCo's) activation dynamics then act on
-    the excitation. :meth:`reset` draws the next subject (and, with ``level="random"``, the next
-    level, uniformly) from ``env.np_random`` and clears the delay line and the after-discharge
-    (``"persistent"`` also draws the subject's gain ``G (1 + rel_std z)``, ``z`` from a child
-    of ``env.np_random`` that leaves its stream where the other models leave it).
-    :meth:`history_state` / :meth:`set_history_state` save and restore the reflex's memory
-    (a planner's copy, :meth:`planning_copy`).
+    periods of the host's ``env.dt``), asks the reflex model for the current subject's
+    excitation of the two muscle groups (:meth:`ReflexModel.step
+    <myoexo.spasticity.registry.ReflexModel.step>`: a registered model such as
+    ``"stretch"``, ``"uniform"`` or ``"persistent"``, :mod:`myoexo.spasticity.reflex`, or
+    one of the user's, :mod:`myoexo.spasticity.registry`) and adds it to the spastic
+    muscles' entries of ``ctrl``, clipped to ``[0, 1]``; every other entry is left as it
+    is. MyoSuite's (MuJoCo's) activation dynamics then act on the excitation. :meth:`reset`
+    draws the next subject (and, with ``level="random"``, the next level, uniformly) from
+    ``env.np_random`` (plus the model's own individual draw, which leaves that stream where
+    it found it) and clears the delay line and the model's memory. :meth:`history_state` /
+    :meth:`set_history_state` save and restore the reflex's memory (a planner's copy,
+    :meth:`planning_copy`).
 
     The joint and actuator addresses are resolved once per model, so a step costs a few
     scalar operations and one fancy-indexed update of 11 entries.
@@ -91,9 +78,9 @@ class SpasticityStage:
         subject_noise: Draw individual subjects (10 % noise, :func:`sample_subject`) at
             reset; ``False`` keeps the level's nominal Table I parameters.
         rel_std: Relative standard deviation of the subject parameters.
-        reflex: Reflex model: a preset name of :data:`~myoexo.spasticity.reflex.REFLEX_PRESETS`
-            (``"stretch"``, the calibrated default, ``"uniform"`` or ``"persistent"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig`.
+        reflex: Reflex model: a registered name (:func:`~myoexo.spasticity.reflex_names`:
+            ``"stretch"``, the calibrated default, ``"uniform"``, ``"persistent"`` and any
+            the user registered) or a :class:`~myoexo.spasticity.ReflexModel` instance.
         flexors: Actuators stretched by knee extension (default: the paper's 6).
         extensors: Actuators stretched by knee flexion (default: the paper's 5).
         joint: Hinge joint whose angle and velocity drive the reflex.
@@ -104,13 +91,19 @@ class SpasticityStage:
         level: Level of the current subject. Until the first :meth:`reset` the stage uses the
             nominal parameters of its level (level 0 for ``"random"``).
         subject: :class:`SpasticityParams` of the current subject.
-        reflex: The :class:`~myoexo.spasticity.reflex.ReflexConfig` in use.
+        reflex: The :class:`~myoexo.spasticity.ReflexModel` in use.
+        reflex_name: Its registered name (``"<ClassName> (custom)"`` for an unregistered
+            instance).
+        constants: The current subject's constants of the model
+            (:meth:`~myoexo.spasticity.ReflexModel.subject_constants`).
+        memory: The model's memory after the last step (e.g. ``(r,)``, the after-discharge
+            of ``"persistent"``; ``()`` for a model without one).
         last_flexor_excitation: Reflex excitation added to the flexors at the last step.
         last_extensor_excitation: Reflex excitation added to the extensors at the last step.
-        last_sc_total: Their sum (for ``"uniform"``: ``SC_total``, which both groups get;
-            for ``"persistent"``: the flexors' ``SC_total + G r``); 0 before any step.
-        last_after_discharge: The after-discharge ``r`` after the last step
-            (``"persistent"``; 0 otherwise).
+        last_sc_total: The model's report of the two
+            (:meth:`~myoexo.spasticity.ReflexModel.sc_total`: their sum; for ``"uniform"``
+            ``SC_total``, which both groups get; for ``"persistent"`` the flexors' ``SC_total
+            + G r``); 0 before any step.
 
     Raises:
         ValueError: If *level* or *reflex* is unknown, *rel_std* invalid or a group empty.
@@ -124,7 +117,7 @@ class SpasticityStage:
         *,
         subject_noise: bool = True,
         rel_std: float = SUBJECT_REL_STD,
-        reflex: str | ReflexConfig = "stretch",
+        reflex: str | ReflexModel = DEFAULT_REFLEX,
         flexors: Sequence[str] = SPASTIC_FLEXORS,
         extensors: Sequence[str] = SPASTIC_EXTENSORS,
         joint: str = KNEE_JOINT,
@@ -137,18 +130,11 @@ class SpasticityStage:
             raise ValueError("flexors and extensors must each name at least one actuator.")
         self.subject_noise = bool(subject_noise)
         self.rel_std = float(rel_std)
-        self.reflex = reflex_config(reflex)
-        # "persistent" is the uniform reading plus the flexors' after-discharge
-        self._persistent = self.reflex.model == "persistent"
-        self._uniform = self.reflex.model == "uniform" or self._persistent
-        self._pic = self.reflex.persistent
-        self._pic_r = 0.0  # the after-discharge state r (persistent model)
-        self._pic_z = 0.0  # the subject's standard normal draw of its gain
-        self._pic_gain = 0.0  # this subject's gain G (fraction of the excitation range)
-        self._pic_rates = self._pic.rates(0.01)  # re-sized to the host's period in bind
-        self._pic_half_slope = 0.5 * self._pic.ignition_slope_per_rad_s
-        self._pic_v_ig = self._pic.ignition_velocity_rad_s
-        self.last_after_discharge = 0.0
+        self.reflex: ReflexModel = resolve_reflex(reflex)
+        self.reflex_name = reflex_label(self.reflex)
+        self.memory: Memory = self.reflex.initial_memory()
+        self._individual: Any = None  # the model's own draw for the current subject
+        self._period_s = DEFAULT_CONTROL_PERIOD_S  # the host's, from bind on
         self.flexors = tuple(flexors)
         self.extensors = tuple(extensors)
         self.muscles = self.flexors + self.extensors
@@ -164,26 +150,9 @@ class SpasticityStage:
     def _set_subject(self, level: int, subject: SpasticityParams) -> None:
         self.level = level
         self.subject = subject
-        p = subject
-        if self._uniform:
-            cal = LevelCalibration()
-        else:
-            cal = self.reflex.calibration[level]
-        self._coef = _StepCoefficients(
-            half_k=0.5 * p.k,
-            flex_theta_deg=p.theta_ext_deg + cal.flexor_threshold_shift_deg,
-            theta_ext_deg=p.theta_ext_deg,
-            theta_flex_deg=p.theta_flex_deg,
-            v_lower_rad_s=p.v_lower_rad_s,
-            v_upper_rad_s=p.v_upper_rad_s,
-            flex_s_theta=cal.flexor_gain * p.s_theta,
-            flex_s_v=cal.flexor_gain * p.s_v,
-            ext_s_theta=cal.extensor_gain * p.s_theta,
-            ext_s_v=cal.extensor_gain * p.s_v,
+        self.constants = self.reflex.subject_constants(
+            level, subject, self._individual, self._period_s
         )
-        if self._persistent:
-            noise = 1.0 + self.rel_std * self._pic_z if self.subject_noise else 1.0
-            self._pic_gain = self._pic.gain(level) * max(0.0, noise)
 
     def set_subject(self, subject: SpasticityParams, level: int | None = None) -> None:
         """Use *subject* from now until the next :meth:`reset` (e.g. a stretch test).
@@ -210,28 +179,16 @@ class SpasticityStage:
         else:
             level = int(self.level_setting)
         subject = sample_subject(level, rng, self.rel_std) if self.subject_noise else LEVELS[level]
-        if self._persistent and self.subject_noise:
-            self._pic_z = self._gain_draw(rng)
+        if self.subject_noise:
+            self._individual = self.reflex.draw_individual(rng, self.rel_std)
         self._set_subject(level, subject)
         self.clear_history()
 
-    @staticmethod
-    def _gain_draw(rng: np.random.Generator) -> float:
-        """The subject's standard normal for the after-discharge gain, from a child of *rng*
-        (``Generator.spawn``: *rng*'s own stream is not advanced, so the rest of the episode,
-        e.g. the env's start angle, draws what it draws under the other models)."""
-        try:
-            child = rng.spawn(1)[0]
-        except (AttributeError, TypeError, ValueError):  # a generator without a seed sequence
-            return float(rng.standard_normal())
-        return float(child.standard_normal())
-
     def clear_history(self) -> None:
-        """Forget the delayed knee states, the after-discharge and the last excitations (a
+        """Forget the delayed knee states, the model's memory and the last excitations (a
         new motion starts)."""
         self._delay.clear()
-        self._pic_r = 0.0
-        self.last_after_discharge = 0.0
+        self.memory = self.reflex.initial_memory()
         self.last_sc_total = 0.0
         self.last_flexor_excitation = 0.0
         self.last_extensor_excitation = 0.0
@@ -272,9 +229,11 @@ class SpasticityStage:
         self._zeros = np.zeros(len(ids))
         period = float(control_period_s or model.opt.timestep)
         self._delay = DelayLine(round(self.reflex.delay_s / period))
-        self._pic_rates = self._pic.rates(period)
         self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
         self._model = model
+        if period != self._period_s:  # the model's per-step rates follow the period
+            self._period_s = period
+            self._set_subject(self.level, self.subject)
 
     def planning_copy(self, model: Any, control_period_s: float) -> SpasticityStage:
         """A copy of this stage (bound to *model* first if it is not yet) with the same
@@ -292,25 +251,15 @@ class SpasticityStage:
         return twin
 
     def history_state(self) -> HistoryState:
-        """The reflex's memory: the delay line's state and the after-discharge ``r``, for
+        """The reflex's memory: the delay line's state and the model's memory, for
         :meth:`set_history_state` (a planner replays from here)."""
-        return self._delay.state(), self._pic_r
+        return self._delay.state(), self.memory
 
     def set_history_state(self, state: HistoryState) -> None:
         """Restore a memory taken by :meth:`history_state` (of a stage of the same delay)."""
-        delay, r = state
+        delay, memory = state
         self._delay.set_state(delay)
-        self._pic_r = float(r)
-
-    @property
-    def after_discharge(self) -> float:
-        """The after-discharge state ``r`` in [0, 1] (``"persistent"``; 0 for the others)."""
-        return self._pic_r
-
-    @property
-    def after_discharge_gain(self) -> float:
-        """This subject's gain ``G`` of the flexors' extra excitation ``G r``."""
-        return self._pic_gain
+        self.memory = tuple(memory)
 
     @property
     def delay_line(self) -> DelayLine:
@@ -331,56 +280,14 @@ class SpasticityStage:
 
     # -- the stage ----------------------------------------------------------------------------
     def sc_now(self, theta_deg: float, vel_rad_s: float) -> float:
-        """``SC_total`` of the current subject at one state (scalar fast path of
-        :func:`sc_total`; the ``"uniform"`` model's excitation of every muscle).
+        """The paper's ``SC_total`` of the current subject at one state
+        (:func:`~myoexo.spasticity.sc_total`; the ``"uniform"`` model's excitation of every
+        muscle).
 
         Raises:
             ValueError: If the angle or the velocity is NaN or infinite.
         """
-        return self._excitations(theta_deg, vel_rad_s, uniform=True)[0]
-
-    def excitations_now(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
-        """``(flexor, extensor)`` reflex excitation of the current subject at one (already
-        delayed) knee state, with the stage's model (for ``"persistent"``: without the
-        after-discharge, which depends on the history, not on one state).
-
-        Raises:
-            ValueError: If the angle or the velocity is NaN or infinite.
-        """
-        return self._excitations(theta_deg, vel_rad_s, uniform=self._uniform)
-
-    def _excitations(
-        self, theta_deg: float, vel_rad_s: float, uniform: bool
-    ) -> tuple[float, float]:
-        if not (math.isfinite(theta_deg) and math.isfinite(vel_rad_s)):
-            raise ValueError(
-                f"Knee state must be finite, got theta_deg={theta_deg!r}, vel_rad_s={vel_rad_s!r}."
-            )
-        c = self._coef
-        tanh = math.tanh
-        hk = c.half_k
-        # below(x; lim) = (1 - tanh(hk (x - lim))) / 2, above(x; lim) = (1 + tanh(...)) / 2
-        if uniform:
-            p = self.subject
-            sc = 0.5 * p.s_theta * (
-                2.0
-                - tanh(hk * (theta_deg - c.theta_ext_deg))
-                + tanh(hk * (theta_deg - c.theta_flex_deg))
-            ) + 0.5 * p.s_v * (
-                2.0
-                - tanh(hk * (vel_rad_s - c.v_lower_rad_s))
-                + tanh(hk * (vel_rad_s - c.v_upper_rad_s))
-            )
-            return sc, sc
-        flex = 0.5 * (
-            c.flex_s_theta * (1.0 - tanh(hk * (theta_deg - c.flex_theta_deg)))
-            + c.flex_s_v * (1.0 - tanh(hk * (vel_rad_s - c.v_lower_rad_s)))
-        )
-        ext = 0.5 * (
-            c.ext_s_theta * (1.0 + tanh(hk * (theta_deg - c.theta_flex_deg)))
-            + c.ext_s_v * (1.0 + tanh(hk * (vel_rad_s - c.v_upper_rad_s)))
-        )
-        return flex, ext
+        return float(sc_total(theta_deg, vel_rad_s, self.subject))
 
     def apply(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
         """Add the reflex excitation to the spastic muscles' entries of *ctrl* (in place;
@@ -406,16 +313,12 @@ class SpasticityStage:
         theta_deg, vel_rad_s = self._delay.push(
             views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
         )
-        flex, ext = self._excitations(theta_deg, vel_rad_s, self._uniform)
-        if self._persistent:  # the flexors' after-discharge: a few scalar operations
-            r = self._pic_r
-            a_rise, a_decay = self._pic_rates
-            # ignition gate sigmoid(slope (-v - v_ig)) = (1 + tanh(slope / 2 (...))) / 2
-            gate = 0.5 * (1.0 + math.tanh(self._pic_half_slope * (-vel_rad_s - self._pic_v_ig)))
-            r += gate * a_rise * (1.0 - r) - (1.0 - gate) * a_decay * r
-            self._pic_r = r
-            self.last_after_discharge = r
-            flex += self._pic_gain * r
+        if not (math.isfinite(theta_deg) and math.isfinite(vel_rad_s)):
+            raise ValueError(
+                f"Knee state must be finite, got theta_deg={theta_deg!r}, vel_rad_s={vel_rad_s!r}."
+            )
+        reflex = self.reflex
+        flex, ext, self.memory = reflex.step(self.constants, self.memory, theta_deg, vel_rad_s)
         ids = self._act_ids
         exc = self._exc  # preallocated: array-array operations, no scalar broadcasting
         nf = self._n_flex
@@ -428,7 +331,7 @@ class SpasticityStage:
         ctrl[ids] = u
         self.last_flexor_excitation = flex
         self.last_extensor_excitation = ext
-        self.last_sc_total = flex if self._uniform else flex + ext
+        self.last_sc_total = reflex.sc_total(flex, ext)
         return ctrl
 
     def __call__(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
@@ -455,7 +358,7 @@ class SpasticityStage:
     def __repr__(self) -> str:
         return (
             f"SpasticityStage(level_setting={self.level_setting!r}, level={self.level}, "
-            f"reflex={self.reflex.model!r}, delay_s={self.reflex.delay_s}, "
+            f"reflex={self.reflex_name!r}, delay_s={self.reflex.delay_s}, "
             f"subject_noise={self.subject_noise}, subject={self.subject})"
         )
 

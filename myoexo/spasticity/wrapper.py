@@ -8,7 +8,8 @@ from typing import Any
 import gymnasium as gym
 from gymnasium.utils import RecordConstructorArgs
 
-from myoexo.spasticity.reflex import ReflexConfig
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import ReflexModel
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage
 
 
@@ -26,8 +27,9 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
             spastic muscles and ``knee_angle_r`` (e.g. ``myoLegWalk-v0``).
         level: Spasticity level 0..3 or ``"random"``.
         subject_noise: Draw individual subjects at reset (see :class:`SpasticityStage`).
-        reflex: Reflex model, a preset name (``"stretch"``, ``"uniform"``) or a
-            :class:`~myoexo.spasticity.reflex.ReflexConfig` (see :class:`SpasticityStage`).
+        reflex: Reflex model, a registered name (``"stretch"``, ``"uniform"``,
+            ``"persistent"``, ...) or a :class:`~myoexo.spasticity.ReflexModel` (see
+            :class:`SpasticityStage`).
         order: MyoSuite stage order (``None``: after the built-in stages).
 
     Raises:
@@ -40,7 +42,7 @@ class SpasticityWrapper(RecordConstructorArgs, gym.Wrapper):
         env: gym.Env,
         level: int | str = 2,
         subject_noise: bool = True,
-        reflex: str | ReflexConfig = "stretch",
+        reflex: str | ReflexModel = DEFAULT_REFLEX,
         order: float | None = None,
     ) -> None:
         RecordConstructorArgs.__init__(

@@ -10,8 +10,8 @@ resumable runs, logging, and the export of a trained actor.
 Modules: :mod:`~myoexo.training.presets` (``paper`` = Table II, ``cpu``),
 :mod:`~myoexo.training.train` (runs), :mod:`~myoexo.training.callbacks` (reward terms,
 small evaluation vs the PID, checkpoints), :mod:`~myoexo.training.checkpoints` (run
-layout), :mod:`~myoexo.training.export` (numpy actor, ONNX), :mod:`~myoexo.training.cli`,
-:mod:`~myoexo.training.sweep` (Ray Tune over training configurations, ``myoexo sweep``).
+layout), :mod:`~myoexo.training.export` (numpy actor, ONNX), :mod:`~myoexo.training.cli`.
+Studies that drive training (``myoexo sweep``, ``myoexo distill``) are in :mod:`myoexo.studies`.
 Heavy dependencies (torch, SB3) are imported when a run starts, not on import. What a kill,
 a signal, a damaged file or a full disk costs a run: ``docs/long_runs.md``.
 """

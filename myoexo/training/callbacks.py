@@ -22,13 +22,14 @@ import math
 import time
 import warnings
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.criteria import CRITERIA_METRICS
@@ -114,15 +115,14 @@ class SmallEvalSpec:
         root_seed: Root seed of the subjects (:data:`SELECTION_ROOT_SEED`, never the
             reported evaluation's root; and held out from training: the training
             envs draw their subjects from the training seed, not from these).
-        episode_duration_s: Episode length (``None``: the env's 8 s).
-        obs_preset: Observation preset of the policy's env.
+        twin: The twin of the evaluation (:class:`~myoexo.envs.options.TwinOptions`: the
+            run's own, on the nominal twin: its observation, task and reflex model).
     """
 
     levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 2
     root_seed: int = SELECTION_ROOT_SEED
-    episode_duration_s: float | None = None
-    obs_preset: str = "full"
+    twin: TwinOptions = field(default_factory=TwinOptions)
 
 
 class EvaluationAborted(Exception):
@@ -197,11 +197,7 @@ class PaperMetricsEvalCallback(BaseCallback):
         if level not in self._envs:
             from myoexo.envs import make_env
 
-            self._envs[level] = make_env(
-                level,
-                episode_duration_s=self.spec.episode_duration_s,
-                obs_preset=self.spec.obs_preset,
-            )
+            self._envs[level] = make_env(level, **self.spec.twin.env_kwargs())
         return self._envs[level]
 
     def _on_training_start(self) -> None:
@@ -310,6 +306,8 @@ class PeriodicCheckpointCallback(BaseCallback):
             (0: off).
         first_after_s: Wall time of the first checkpoint (0: off).
         max_wall_time_s: The run's training wall-time budget, all sessions (0: none).
+        provenance: What every checkpoint's state records so that its policy's env can be
+            rebuilt from the checkpoint alone (``twin``, ``env_id``, ``algorithm``).
     """
 
     def __init__(
@@ -324,9 +322,11 @@ class PeriodicCheckpointCallback(BaseCallback):
         first_after_steps: int = 0,
         first_after_s: float = 0.0,
         max_wall_time_s: float = 0.0,
+        provenance: dict[str, Any] | None = None,
     ) -> None:
         super().__init__(verbose)
         self.run_dir = Path(run_dir)
+        self.provenance = dict(provenance or {})
         self.max_wall_time_s = float(max_wall_time_s)
         #: The session ended because the wall-time budget was spent.
         self.budget_spent = False
@@ -401,6 +401,7 @@ class PeriodicCheckpointCallback(BaseCallback):
             "eval_step": ev.last_eval_step if ev is not None else None,
             "resumable": with_replay,
             "saved_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            **self.provenance,
         }
         self.last_checkpoint = ck.save_checkpoint(
             self.model, self.run_dir, state, with_replay, self.keep_replay

@@ -37,25 +37,29 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+# the names that the layers below training read a model file by (control.specs) are
+# defined with the policies, and are part of this layout: re-exported here
+from myoexo.policies.run_files import (
+    CHECKPOINTS_DIR,
+    CONFIG_FILE,
+    MODEL_FILE,
+    STATE_FILE,
+    VECNORM_FILE,
+)
 from myoexo.runtime.files import remove_stale_temporaries, write_json_atomic
 
-CONFIG_FILE = "config.json"
 SESSIONS_FILE = "sessions.jsonl"
 EVAL_FILE = "eval.csv"
 EVAL_PID_FILE = "eval_pid.json"
 LATEST_FILE = "latest.json"
-CHECKPOINTS_DIR = "checkpoints"
 TB_DIR = "tb"
 
-MODEL_FILE = "model.zip"
 REPLAY_FILE = "replay_buffer.pkl"
 #: What makes an on-policy learner's checkpoint resumable (it has no replay buffer; a resumed
 #: run starts a new rollout, the one in progress when the checkpoint was written is dropped).
 ON_POLICY_FILE = "on_policy.json"
 #: The files that make a checkpoint resumable, one per kind of learner.
 RESUME_FILES: tuple[str, ...] = (REPLAY_FILE, ON_POLICY_FILE)
-VECNORM_FILE = "vecnormalize.pkl"
-STATE_FILE = "state.json"
 
 _PREFIX = "step_"
 _TMP_PREFIX = ".tmp_"

@@ -19,12 +19,13 @@ on a folder without a checkpoint, is a one-line error with exit status 2. See
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import signal
 import sys
 import time
 from pathlib import Path
 
-from myoexo.training.presets import PRESETS, get_preset, parse_override
+from myoexo.training.presets import PRESETS, apply_overrides, get_preset
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,7 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="override a preset field, e.g. --set n_envs=2 (repeatable)",
+        help="override a preset field (--set n_envs=2) or a twin option by its own name "
+        "(--set reflex=persistent, --set robustness=true, --set episode_duration_s=4, "
+        "--set reward_weights=inter:-0.5, --set obs_preset=exo); repeatable",
     )
     parser.add_argument(
         "--total-timesteps", type=int, help="step budget (new run: a preset override)"
@@ -85,13 +88,16 @@ def run(args: argparse.Namespace) -> int:
             run_dir = Path(args.restart)
             result = restart(run_dir, progress, args.verbose)
     else:
-        overrides = dict(parse_override(s) for s in args.set)
+        preset = apply_overrides(get_preset(args.preset), args.set)
         if args.total_timesteps is not None:
-            overrides["total_timesteps"] = args.total_timesteps
-        preset = get_preset(args.preset, **overrides)
+            preset = dataclasses.replace(preset, total_timesteps=args.total_timesteps)
         stamp = time.strftime("%Y%m%d-%H%M%S")
         run_dir = Path(args.run_dir or f"runs/sac_{preset.name}_seed{args.seed}_{stamp}")
-        print(f"[train] preset {preset.name}, seed {args.seed} -> {run_dir}", flush=True)
+        print(
+            f"[train] preset {preset.name}, seed {args.seed}, {preset.twin.describe()} -> "
+            f"{run_dir}",
+            flush=True,
+        )
         result = train(preset, run_dir, args.seed, progress, args.verbose)
     if result.stopped_by is not None:
         print(

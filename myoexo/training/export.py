@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.envs.options import TwinOptions
 from myoexo.policies.actor import MLPActor, save_actor
 from myoexo.training import checkpoints as ck
 
@@ -178,11 +179,15 @@ def _checkpoint_parts(
         if not isinstance(vn, VecNormalize):
             raise ValueError(f"{checkpoint / ck.VECNORM_FILE} is not a VecNormalize pickle")
     state = ck.read_state(checkpoint)
+    # the twin the policy was trained on: the checkpoint's own record (older checkpoints:
+    # the run's preset)
+    twin = TwinOptions.from_dict(state.get("twin") or preset.get("twin") or {})
     meta = {
         "env_id": config.get("env_id"),
         "obs_keys": config.get("obs_keys"),
-        "obs_preset": preset.get("obs_preset", "full"),
-        "reward_weights": preset.get("reward_weights", []),
+        "obs_preset": twin.obs_preset,
+        "reward_weights": [list(p) for p in twin.reward_weights],
+        "twin": twin.to_dict(),
         "selection_root_seed": selection_root_seed,
         "preset": preset.get("name"),
         "algorithm": algorithm,

@@ -43,10 +43,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from myoexo.envs.observation import OBS_PRESETS
+from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
 from myoexo.policies.algorithms import get_algorithm
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -63,9 +64,13 @@ class SACPreset:
 
     Attributes:
         name: Preset name (recorded in the run config).
-        env_id: Gymnasium id of the training env.
-        episode_duration_s: Simulated time per episode; ``None`` keeps the env's 8 s
-            (shorter only for tests).
+        env_id: Gymnasium id of the training env (any id whose constructor takes the
+            options of *twin*).
+        twin: The twin trained on (:class:`~myoexo.envs.options.TwinOptions`: task, e.g.
+            ``episode_duration_s``; reward weights; observation preset or keys; reflex
+            model; robustness, a perturbed twin per episode). The periodic evaluation runs
+            on the same twin without its robustness (the nominal twin). :func:`get_preset`
+            and ``--set`` take each option by its own name (``reflex=persistent``).
         total_timesteps: Env transitions (all envs together) to train for.
         n_envs: Parallel envs; each vector step adds ``n_envs`` transitions.
         vec_env: ``"dummy"`` (envs in this process) or ``"subproc"`` (one process each).
@@ -102,15 +107,6 @@ class SACPreset:
         eval_every_steps: Transitions between two small evaluations (0: none).
         eval_subjects: Fixed subjects per level in each small evaluation.
         eval_levels: Levels of the small evaluation.
-        reward_weights: Overrides of the env's ``weighted_reward_keys`` as ``(key, weight)``
-            pairs (e.g. ``(("inter", -0.5),)``); empty keeps the env's defaults. MyoExoKnee
-            envs only.
-        obs_preset: Observation preset of the MyoExoKnee envs (``"full"``: the twin's whole
-            state; ``"exo"``: only what the exoskeleton measures, a deployable policy).
-        robustness: Train on perturbed twins (``make_env(..., robustness=True)``: strap
-            stiffness/damping, masses, friction, motor constant, sensor noise and latency
-            drawn per episode, :mod:`myoexo.envs.robustness`); the periodic evaluation stays
-            on the nominal twin.
         algorithm: ``"sac"`` (stable-baselines3), or from sb3-contrib (the ``contrib``
             extra) ``"tqc"`` (truncated quantile critics, Kuznetsov 2020) or ``"crossq"``
             (batch-renormalized critics without target networks, Bhatt 2024; ``tau`` is not
@@ -132,7 +128,7 @@ class SACPreset:
 
     name: str = "custom"
     env_id: str = DEFAULT_ENV_ID
-    episode_duration_s: float | None = None
+    twin: TwinOptions = field(default_factory=TwinOptions)
     total_timesteps: int = 1_000_000
     n_envs: int = 1
     vec_env: str = "dummy"
@@ -159,9 +155,6 @@ class SACPreset:
     eval_every_steps: int = 50_000
     eval_subjects: int = 2
     eval_levels: tuple[int, ...] = VALID_LEVELS
-    reward_weights: tuple[tuple[str, float], ...] = ()
-    obs_preset: str = "full"
-    robustness: bool = False
     algorithm: str = "sac"
     n_steps: int = 256
     n_epochs: int = 10
@@ -187,14 +180,8 @@ class SACPreset:
     def __post_init__(self) -> None:
         for f in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             object.__setattr__(self, f, tuple(int(v) for v in getattr(self, f)))
-        pairs = tuple((str(k), float(w)) for k, w in self.reward_weights)
-        object.__setattr__(self, "reward_weights", pairs)
-        from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS
-
-        unknown = sorted({k for k, _ in pairs} - set(DEFAULT_REWARD_WEIGHTS))
-        if unknown:
-            accepted = sorted(DEFAULT_REWARD_WEIGHTS)
-            raise ValueError(f"reward_weights has unknown keys {unknown}; accepted: {accepted}")
+        if not isinstance(self.twin, TwinOptions):
+            raise ValueError(f"twin = {self.twin!r}: expected TwinOptions")
         for f in self._POSITIVE_INTS:
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
@@ -217,15 +204,11 @@ class SACPreset:
         _check_float("gae_lambda", self.gae_lambda, 0.0, 1.0)
         _check_float("clip_range", self.clip_range, 0.0, 1.0, low_open=True)
         _check_float("max_wall_time_s", self.max_wall_time_s, 0.0, 1e7)
-        if self.episode_duration_s is not None:
-            _check_float("episode_duration_s", self.episode_duration_s, 0.0, 3600.0, True)
         algorithm = get_algorithm(self.algorithm, trainable=True)  # names the accepted ones
         if self.batch_size > self.buffer_size and not algorithm.on_policy:
             raise ValueError(
                 f"batch_size = {self.batch_size} exceeds buffer_size = {self.buffer_size}"
             )
-        if self.obs_preset not in OBS_PRESETS:
-            raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {sorted(OBS_PRESETS)}")
         if algorithm.on_policy:
             if isinstance(self.ent_coef, str):
                 raise ValueError(
@@ -267,8 +250,9 @@ class SACPreset:
         return self.gradient_steps / (self.train_freq * self.n_envs)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready field -> value."""
-        d = dataclasses.asdict(self)
+        """JSON-ready field -> value (the twin as :meth:`TwinOptions.to_dict`)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["twin"] = self.twin.to_dict()
         for k, v in d.items():
             if isinstance(v, tuple):
                 d[k] = [list(x) if isinstance(x, tuple) else x for x in v]
@@ -372,19 +356,38 @@ class PPOPreset(CpuPreset):
 PRESETS: dict[str, type[SACPreset]] = {"paper": PaperPreset, "cpu": CpuPreset, "ppo": PPOPreset}
 
 
+def _with_twin_options(overrides: dict[str, Any]) -> dict[str, Any]:
+    """*overrides* with the twin options given by their own names (``reflex="persistent"``,
+    ``episode_duration_s=4.0``, ...) folded into ``twin``."""
+    names = [k for k in overrides if TwinOptions.is_option(k)]
+    if not names:
+        return overrides
+    rest = {k: v for k, v in overrides.items() if k not in names}
+    twin = rest.get("twin", TwinOptions())
+    twin = twin if isinstance(twin, TwinOptions) else TwinOptions.from_dict(twin)
+    rest["twin"] = twin.replace(**{k: overrides[k] for k in names})
+    return rest
+
+
 def get_preset(name: str, **overrides: Any) -> SACPreset:
-    """The preset ``name`` (``"paper"``, ``"cpu"`` or ``"ppo"``) with some fields replaced.
+    """The preset ``name`` (``"paper"``, ``"cpu"`` or ``"ppo"``) with some fields replaced;
+    a twin option given by its own name replaces that option of ``twin``
+    (``get_preset("cpu", reflex="persistent", episode_duration_s=4.0)``).
 
     Raises:
-        ValueError: Unknown preset or field, or a value out of range.
+        ValueError: Unknown preset, field or option, or a value out of range.
     """
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; accepted: {sorted(PRESETS)}")
     cls = PRESETS[name]
+    overrides = _with_twin_options(dict(overrides))
     fields = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(overrides) - fields)
     if unknown:
-        raise ValueError(f"unknown preset field(s) {unknown}; accepted: {sorted(fields)}")
+        raise ValueError(
+            f"unknown preset field(s) {unknown}; accepted: {sorted(fields)} and the twin's "
+            f"options {[*TASK_FIELDS, *OPTION_FIELDS]}"
+        )
     return cls(**overrides)
 
 
@@ -394,29 +397,48 @@ def preset_from_dict(data: dict[str, Any]) -> SACPreset:
     name = data.get("name", "custom")
     cls = PRESETS.get(name, SACPreset)
     fields = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in data.items() if k in fields})
+    kwargs = {k: v for k, v in data.items() if k in fields}
+    if isinstance(kwargs.get("twin"), dict):
+        kwargs["twin"] = TwinOptions.from_dict(kwargs["twin"])
+    return cls(**kwargs)
+
+
+def apply_overrides(preset: SACPreset, texts: Sequence[str]) -> SACPreset:
+    """*preset* with each ``FIELD=VALUE`` of the command line (``--set``) applied: a preset
+    field (:func:`parse_override`) or a twin option by its own name
+    (:meth:`TwinOptions.with_override`: ``reflex=persistent``, ``episode_duration_s=4``,
+    ``robustness=true``, ``reward_weights=inter:-0.5``, ``obs_preset=exo``).
+
+    Raises:
+        ValueError: A malformed override, an unknown name or a bad value.
+    """
+    twin = preset.twin
+    fields: dict[str, Any] = {}
+    for text in texts:
+        key = text.partition("=")[0].strip()
+        if TwinOptions.is_option(key):
+            twin = twin.with_override(text)
+        else:
+            name, value = parse_override(text)
+            fields[name] = value
+    return dataclasses.replace(preset, twin=twin, **fields)
 
 
 def parse_override(text: str) -> tuple[str, Any]:
     """``"field=value"`` -> ``(field, typed value)``, typed after the field's default."""
     key, eq, raw = text.partition("=")
     key = key.strip()
-    fields = {f.name: f for f in dataclasses.fields(SACPreset)}
+    fields = {f.name: f for f in dataclasses.fields(SACPreset) if f.name != "twin"}
     if not eq or key not in fields:
         raise ValueError(
-            f"bad override {text!r}: expected FIELD=VALUE with FIELD in {sorted(fields)}"
+            f"bad override {text!r}: expected FIELD=VALUE with FIELD in {sorted(fields)} or a "
+            f"twin option in {[*TASK_FIELDS, *OPTION_FIELDS]}"
         )
     default = getattr(SACPreset(), key)
     raw = raw.strip()
     try:
         if key == "ent_coef":
             value: Any = raw if raw.startswith("auto") else float(raw)
-        elif key == "reward_weights":  # "inter:-0.5,act:-0.5"
-            value = tuple(
-                (k.strip(), float(w)) for k, w in (p.split(":") for p in raw.split(",") if p)
-            )
-        elif key == "episode_duration_s":
-            value = None if raw.lower() == "none" else float(raw)
         elif isinstance(default, bool):
             if raw.lower() not in ("true", "false", "1", "0"):
                 raise ValueError(raw)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import algorithm_class, get_algorithm
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
@@ -83,60 +84,38 @@ def is_myoexo_env(env_id: str) -> bool:
     return env_id.split(":")[-1].startswith("MyoExoKnee")
 
 
-def make_env_fn(
-    env_id: str,
-    rank: int,
-    episode_duration_s: float | None = None,
-    reward_weights: tuple[tuple[str, float], ...] = (),
-) -> Callable[[], Any]:
-    """Factory of env ``rank`` of a vector env: ``gymnasium.make`` + ``Monitor``
+def make_env_fn(env_id: str, rank: int, twin: TwinOptions | None = None) -> Callable[[], Any]:
+    """Factory of env ``rank`` of a vector env: *env_id* built with the options of *twin*
+    (:meth:`TwinOptions.env_kwargs`, via :func:`~myoexo.envs.make_env`) + ``Monitor``
     (picklable, so it also works with ``SubprocVecEnv``)."""
-    return _EnvFactory(env_id, rank, episode_duration_s, tuple(reward_weights))
+    return _EnvFactory(env_id, rank, twin or TwinOptions())
 
 
 @dataclass(frozen=True)
 class _EnvFactory:
     env_id: str
     rank: int
-    episode_duration_s: float | None
-    reward_weights: tuple[tuple[str, float], ...] = ()
+    twin: TwinOptions
     in_worker: bool = False  # called in a SubprocVecEnv worker
-    obs_preset: str = "full"
-    robustness: bool = False  # a perturbed twin per episode
 
     def __call__(self) -> Any:
-        import gymnasium as gym
         from stable_baselines3.common.monitor import Monitor
+
+        from myoexo.envs import make_env
 
         if self.in_worker:
             # the trainer stops its env workers itself; they end when it closes (or loses)
             # the pipe to them, so a terminal's Ctrl-C or a group's SIGTERM must not kill
             # them under a trainer that is writing its final checkpoint
             ignore_signals((signal.SIGINT, signal.SIGTERM))
-
-        if is_myoexo_env(self.env_id):
-            from myoexo.envs import make_env
-
-            extra: dict[str, Any] = {"robustness": True} if self.robustness else {}
-            env = make_env(
-                self.env_id,
-                episode_duration_s=self.episode_duration_s,
-                reward_weights=dict(self.reward_weights),
-                obs_preset=self.obs_preset,
-                **extra,
-            )
-        elif (
-            self.episode_duration_s is not None
-            or self.reward_weights
-            or self.obs_preset != "full"
-            or self.robustness
-        ):
+        kwargs = self.twin.env_kwargs()
+        try:
+            env = make_env(self.env_id, **kwargs)
+        except TypeError as exc:  # the id's constructor does not take an option
             raise ValueError(
-                "episode_duration_s, reward_weights, obs_preset and robustness apply to the "
-                f"MyoExoKnee envs only, not {self.env_id!r}"
-            )
-        else:
-            env = gym.make(self.env_id)
+                f"env {self.env_id!r} does not take the twin options "
+                f"[{self.twin.describe()}] ({exc})"
+            ) from exc
         return Monitor(env)
 
 
@@ -147,16 +126,7 @@ def make_vec_env(preset: SACPreset, seed: int) -> Any:
 
     subproc = preset.vec_env == "subproc"
     fns: list[Callable[[], Any]] = [
-        _EnvFactory(
-            preset.env_id,
-            i,
-            preset.episode_duration_s,
-            preset.reward_weights,
-            subproc,
-            preset.obs_preset,
-            preset.robustness,
-        )
-        for i in range(preset.n_envs)
+        _EnvFactory(preset.env_id, i, preset.twin, in_worker=subproc) for i in range(preset.n_envs)
     ]
     venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(seed)
@@ -319,8 +289,7 @@ def _run_callbacks(
         spec = SmallEvalSpec(
             levels=preset.eval_levels,
             subjects=preset.eval_subjects,
-            episode_duration_s=preset.episode_duration_s,
-            obs_preset=preset.obs_preset,
+            twin=preset.twin.replace(robustness=False),  # on the nominal twin
         )
         evaluator = PaperMetricsEvalCallback(
             run_dir, preset.eval_every_steps, spec, verbose, stop=stop
@@ -336,6 +305,11 @@ def _run_callbacks(
         first_after_steps=preset.first_checkpoint_steps,
         first_after_s=preset.first_checkpoint_s,
         max_wall_time_s=preset.max_wall_time_s,
+        provenance={
+            "twin": preset.twin.to_dict(),
+            "env_id": preset.env_id,
+            "algorithm": preset.algorithm,
+        },
     )
     return evaluator, checkpointer
 

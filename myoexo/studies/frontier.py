@@ -39,6 +39,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.paper import PAPER_RESULTS
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -252,9 +253,11 @@ def build_frontier(
     levels: Sequence[int] = VALID_LEVELS,
     progress: bool = True,
     oracle: bool = False,
+    twin: TwinOptions | None = None,
 ) -> Any:
-    """Evaluate the controllers on the same subjects and write the frontier files (with
-    ``oracle``, also the torque-aware oracle at :data:`ORACLE_SWEEP`)."""
+    """Evaluate the controllers on the same subjects of one twin (*twin*, default: the
+    default twin) and write the frontier files (with ``oracle``, also the torque-aware
+    oracle at :data:`ORACLE_SWEEP`)."""
     import pandas as pd
 
     from myoexo.evaluation.config import EvaluationConfig
@@ -263,7 +266,12 @@ def build_frontier(
     specs = [*shaped_pid_specs(), *controllers, *(oracle_specs() if oracle else [])]
     for seeds_dir in seeds_dirs:
         specs += seed_controllers(seeds_dir)
-    config = EvaluationConfig(controllers=tuple(specs), levels=tuple(levels), subjects=subjects)
+    config = EvaluationConfig(
+        controllers=tuple(specs),
+        levels=tuple(levels),
+        subjects=subjects,
+        twin=twin or TwinOptions(),
+    )
     run = evaluate(config, Path(out) / "evaluation", workers=workers, progress=progress)
     if run.table is None:
         raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
@@ -305,6 +313,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=ACCURACY_DEG,
         help="accuracy band above the level's best mean |final error| (deg)",
     )
+    add_twin_arguments(parser)
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -321,6 +330,7 @@ def run(args: argparse.Namespace) -> int:
         args.accuracy_deg,
         progress=not args.no_progress,
         oracle=args.oracle,
+        twin=twin_from_args(args),
     )
     print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
     print(f"wrote {args.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")

@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, subject_seed
 from myoexo.policies.actor import MLPActor
 from myoexo.policies.student import (
@@ -65,8 +66,10 @@ from myoexo.policies.student import (
 )
 from myoexo.runtime.files import package_versions, savez_atomic, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock
+from myoexo.training.checkpoints import CONFIG_FILE
 
-CONFIG_FILE = "config.json"
+#: Files of a distillation run folder besides the settings (``CONFIG_FILE``, named as in a
+#: training run folder, :mod:`myoexo.training.checkpoints`).
 DATASET_FILE = "dataset.npz"
 HISTORY_FILE = "history.json"
 BEST_STEM = "student"
@@ -102,7 +105,10 @@ class DistillConfig:
             ``0..selection_subjects-1``).
         selection_subjects: Selection subjects per level and twin (0: no selection, the
             last round is the student).
-        episode_duration_s: Episode length (``None``: the env's 8 s).
+        twin: The twin distilled on (:class:`~myoexo.envs.options.TwinOptions`: task, e.g.
+            ``episode_duration_s``, and reflex model; the teacher reads the full observation,
+            the student the exo sensors; robustness is drawn per episode with
+            ``robust_fraction``).
         seed: Seed of the mixture draws, noise and torch.
     """
 
@@ -127,7 +133,7 @@ class DistillConfig:
     root_seed: int = SELECTION_ROOT_SEED
     subject_offset: int = 10_000
     selection_subjects: int = 8
-    episode_duration_s: float | None = None
+    twin: TwinOptions = field(default_factory=TwinOptions)
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -146,18 +152,39 @@ class DistillConfig:
             raise ValueError("subject_offset must exceed selection_subjects (disjoint subjects)")
         if not self.levels:
             raise ValueError("levels is empty")
+        if self.twin.robustness:
+            raise ValueError(
+                "twin robustness = true: distillation draws perturbed twins per episode with "
+                "robust_fraction (1.0: every episode perturbed)"
+            )
+        if self.twin.obs_keys or self.twin.obs_preset != "full":
+            raise ValueError(
+                f"twin observation [{self.twin.describe()}]: the teacher reads the full "
+                "observation and the student the exo sensors; give no observation option"
+            )
+
+    @property
+    def episode_duration_s(self) -> float | None:
+        """The twin's episode length if overridden (``None``: the env's 8 s)."""
+        return self.twin.episode_duration_s
 
     def beta(self, round_index: int) -> float:
         """Probability that the teacher's command is executed in a round."""
         return 1.0 if round_index == 0 else float(self.beta_decay**round_index)
 
     def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        return {**dataclasses.asdict(self), "twin": self.twin.to_dict()}
 
     @classmethod
     def from_json(cls, doc: dict[str, Any]) -> DistillConfig:
         names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in doc.items() if k in names})
+        kwargs = {k: v for k, v in doc.items() if k in names}
+        twin = kwargs.get("twin")
+        if isinstance(twin, dict):
+            kwargs["twin"] = TwinOptions.from_dict(twin)
+        elif doc.get("episode_duration_s") is not None:  # a run written before the record
+            kwargs["twin"] = TwinOptions().replace(episode_duration_s=doc["episode_duration_s"])
+        return cls(**kwargs)
 
 
 # ---------------------------------------------------------------------------- teacher
@@ -252,10 +279,10 @@ class Episodes:
 
 
 class EnvPool:
-    """One ``obs_preset="full"`` env per (level, perturbed), built on first use."""
+    """One ``obs_preset="full"`` env of the twin per (level, perturbed), built on first use."""
 
-    def __init__(self, episode_duration_s: float | None = None) -> None:
-        self.episode_duration_s = episode_duration_s
+    def __init__(self, twin: TwinOptions | None = None) -> None:
+        self.twin = twin or TwinOptions()
         self._envs: dict[tuple[int, bool], Any] = {}
 
     def get(self, level: int, perturbed: bool) -> Any:
@@ -263,10 +290,8 @@ class EnvPool:
 
         key = (int(level), bool(perturbed))
         if key not in self._envs:
-            kwargs: dict[str, Any] = {"robustness": True} if perturbed else {}
-            self._envs[key] = make_env(
-                int(level), episode_duration_s=self.episode_duration_s, **kwargs
-            )
+            options = self.twin.replace(robustness=bool(perturbed))
+            self._envs[key] = make_env(int(level), **options.env_kwargs())
         return self._envs[key]
 
     def close(self) -> None:
@@ -573,7 +598,7 @@ def _distill(
     actor = load_teacher(config.teacher)
     provenance = teacher_provenance(actor)
     teacher = Expert(actor, config.fine_gain, config.fine_width_rad)
-    envs = EnvPool(config.episode_duration_s)
+    envs = EnvPool(config.twin)
     try:
         for r in range(start, config.rounds):
             t0 = time.time()
@@ -666,6 +691,7 @@ def _provenance(
         "selection_scores": scores,
         "distill_config": config.to_json(),
         "env_id": f"MyoExoKnee-v{{level}} (levels {list(config.levels)})",
+        "twin": config.twin.replace(obs_preset=StudentController.obs_preset).to_dict(),
     }
 
 
@@ -702,7 +728,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--fine-width", type=float, default=d.fine_width_rad, help="rad")
     parser.add_argument("--selection-subjects", type=int, default=d.selection_subjects)
-    parser.add_argument("--episode-duration", type=float, default=None, help="s (default 8)")
+    add_twin_arguments(parser)
     parser.add_argument("--seed", type=int, default=d.seed)
     parser.add_argument("--export", metavar="STEM", help="write the selected student to STEM")
     parser.add_argument("--onnx", metavar="FILE", help="write the selected student as ONNX")
@@ -734,7 +760,7 @@ def run(args: argparse.Namespace) -> int:
             selection_subjects=args.selection_subjects,
             fine_gain=args.fine_gain,
             fine_width_rad=args.fine_width,
-            episode_duration_s=args.episode_duration,
+            twin=twin_from_args(args),
             seed=args.seed,
         )
         run_dir = Path(args.run_dir or f"runs/distill_{time.strftime('%Y%m%d-%H%M%S')}")

@@ -48,13 +48,14 @@ import numpy as np
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.spasticity.reflex import (
     PERSISTENT,
-    REFLEX_PRESETS,
     STRETCH_DELAY_S,
     LevelCalibration,
     PersistentParams,
-    ReflexConfig,
+    PersistentReflex,
     StretchCalibration,
+    StretchReflex,
 )
+from myoexo.spasticity.registry import ReflexModel
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,7 @@ class PIDOutcome:
 
 def pid_outcome(
     level: int,
-    reflex: ReflexConfig,
+    reflex: ReflexModel,
     subjects: int,
     root_seed: int = 0,
     ramp_s: float | None = None,
@@ -153,7 +154,7 @@ def _with_level(
 def fit_threshold_shift(
     level: int,
     target_final_error_deg: float,
-    base: ReflexConfig,
+    base: StretchReflex,
     subjects: int,
     root_seed: int = 0,
     bracket_deg: tuple[float, float] = (0.0, 100.0),
@@ -249,7 +250,7 @@ class CalibrationResult:
     """
 
     calibration: StretchCalibration
-    reflex: ReflexConfig
+    reflex: StretchReflex
     outcomes: Mapping[int, PIDOutcome]
     targets: CalibrationTargets
     wall_time_s: float
@@ -327,7 +328,7 @@ def calibrate(
             {lv: LevelCalibration(extensor_gain=extensor_gain) for lv in VALID_LEVELS if lv > 0}
         )
     )
-    reflex = ReflexConfig(model="stretch", delay_s=delay_s, calibration=cal)
+    reflex = StretchReflex(delay_s=delay_s, calibration=cal)
     for level, target in sorted(tg.pid_final_error_deg.items()):
         log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
         shift, _ = fit_threshold_shift(level, target, reflex, subjects, root_seed, log=log)
@@ -357,17 +358,21 @@ def calibrate(
 
 
 # ------------------------------------------------------------------ the persistent reflex
-def _with_gains(reflex: ReflexConfig, gains: Mapping[int, float], note: str = "") -> ReflexConfig:
+def _with_gains(
+    reflex: PersistentReflex, gains: Mapping[int, float], note: str = ""
+) -> PersistentReflex:
     params = dataclasses.replace(
-        reflex.persistent, gains=MappingProxyType(dict(gains)), note=note or reflex.persistent.note
+        reflex.after_discharge,
+        gains=MappingProxyType(dict(gains)),
+        note=note or reflex.after_discharge.note,
     )
-    return dataclasses.replace(reflex, persistent=params)
+    return dataclasses.replace(reflex, after_discharge=params)
 
 
 def fit_persistent_gain(
     level: int,
     target_final_error_deg: float,
-    base: ReflexConfig,
+    base: PersistentReflex,
     subjects: int,
     root_seed: int = 0,
     bracket: tuple[float, float] = (0.1, 0.5),
@@ -386,7 +391,7 @@ def fit_persistent_gain(
     """
 
     def outcome(gain: float) -> PIDOutcome:
-        gains = dict(base.persistent.gains)
+        gains = dict(base.after_discharge.gains)
         gains[level] = gain
         out = pid_outcome(level, _with_gains(base, gains), subjects, root_seed)
         if log:
@@ -415,7 +420,7 @@ class PersistentCalibrationResult:
     """
 
     params: PersistentParams
-    reflex: ReflexConfig
+    reflex: PersistentReflex
     outcomes: Mapping[int, PIDOutcome]
     ramped: Mapping[int, PIDOutcome]
     ramp_s: float
@@ -488,7 +493,7 @@ def calibrate_persistent(
     t0 = time.perf_counter()
     tg = targets or CalibrationTargets()
     gains = {lv: 0.0 for lv in VALID_LEVELS}
-    reflex = dataclasses.replace(REFLEX_PRESETS["persistent"], persistent=base)
+    reflex = PersistentReflex(after_discharge=base)
     reflex = _with_gains(reflex, gains)
     for level, target in sorted(tg.pid_final_error_deg.items()):
         log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
@@ -520,10 +525,10 @@ def calibrate_persistent(
             for lv, o in ramped.items()
         )
     )
-    params = dataclasses.replace(reflex.persistent, note=note)
+    params = dataclasses.replace(reflex.after_discharge, note=note)
     return PersistentCalibrationResult(
         params=params,
-        reflex=dataclasses.replace(reflex, persistent=params),
+        reflex=dataclasses.replace(reflex, after_discharge=params),
         outcomes=outcomes,
         ramped=ramped,
         ramp_s=ramp_s,

@@ -18,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 
+from myoexo.envs.options import add_twin_arguments, twin_from_args
+
 #: Defaults of the demo.
 DEMO_SUBJECTS = 20
 DEMO_CONTROLLERS = ("pid", "pid:feedback=exo", "sac", "student_exo")
@@ -50,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--workers", type=int, default=None, help="default: all cores")
     parser.add_argument("--out", type=Path, default=DEMO_OUT, help=f"default: {DEMO_OUT}")
+    add_twin_arguments(parser)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -66,12 +69,15 @@ def run(args: argparse.Namespace) -> int:
     )
     bound_dir = args.out / "bound" if args.bound_subjects > 0 else None
     try:
-        config = EvaluationConfig(controllers=tuple(args.controllers), subjects=args.subjects)
+        twin = twin_from_args(args)
+        config = EvaluationConfig(
+            controllers=tuple(args.controllers), subjects=args.subjects, twin=twin
+        )
         result = evaluate(config, args.out, workers=workers, progress=not args.no_progress)
         if bound_dir is not None:
             print(f"achievable bound: oracle MPC on {args.bound_subjects} subjects per level")
             bound_config = EvaluationConfig(
-                controllers=("oracle",), subjects=args.bound_subjects, chunk_size=1
+                controllers=("oracle",), subjects=args.bound_subjects, chunk_size=1, twin=twin
             )
             evaluate(bound_config, bound_dir, workers=workers, progress=not args.no_progress)
         report = write_report(result.out_dir, bound_dir=bound_dir)

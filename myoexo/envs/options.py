@@ -1,0 +1,316 @@
+"""One record of the twin's options: :class:`TwinOptions`.
+
+Everything that makes one MyoExoKnee twin differ from another, beyond its level and its
+subject, is one frozen, JSON-able value: the task (any :class:`~myoexo.envs.config.TaskParams`
+field), the reward weights, the observation (a preset or explicit keys), the reflex model
+(a registered name, :mod:`myoexo.spasticity.registry`) and robustness (a perturbed twin
+per episode). It is built once, from the command line (``--set reflex=persistent``) or from
+a preset, and carried unchanged by training, evaluation, distillation, sweeps and the
+frontier; every run folder and every shipped policy records it (:meth:`TwinOptions.to_dict`),
+and a policy's env is rebuilt from it (:meth:`TwinOptions.env_kwargs`)::
+
+    options = TwinOptions.from_overrides(["reflex=persistent", "episode_duration_s=4"])
+    env = make_env(2, **options.env_kwargs())
+
+Each option has one name everywhere: the field names below, and the task's own field names
+(``episode_duration_s``, ``target_angle_deg``, ...). The options apply to any env id whose
+constructor takes them (no check on the id's name).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
+from myoexo.envs.observation import OBS_PRESETS
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
+from myoexo.spasticity.registry import get_reflex, reflex_parameters
+
+#: Names of the :class:`TaskParams` fields, each a twin option of its own name.
+TASK_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(TaskParams))
+
+#: Names of the options that are not task fields.
+OPTION_FIELDS: tuple[str, ...] = (
+    "reward_weights",
+    "obs_preset",
+    "obs_keys",
+    "reflex",
+    "robustness",
+)
+
+#: The options that change the twin's dynamics or task (what a policy is evaluated on);
+#: the reward and the observation only change what a learner sees.
+DYNAMICS_FIELDS: tuple[str, ...] = ("task", "reflex", "robustness")
+
+
+def _pairs(value: Any, name: str) -> tuple[tuple[str, float], ...]:
+    items = value.items() if isinstance(value, Mapping) else value
+    try:
+        pairs = tuple((str(k), float(v)) for k, v in items)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {value!r}: expected (name, number) pairs") from None
+    return tuple(sorted(dict(pairs).items()))
+
+
+@dataclass(frozen=True)
+class TwinOptions:
+    """The options of one twin variant (all default: the envs' defaults).
+
+    Attributes:
+        task: Overrides of :class:`~myoexo.envs.config.TaskParams` fields as sorted
+            ``(field, value)`` pairs (seconds, degrees: the fields' own units), e.g.
+            ``(("episode_duration_s", 4.0),)``.
+        reward_weights: Overrides of the ``weighted_reward_keys``
+            (:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`) as sorted pairs.
+        obs_preset: Observation preset (:data:`~myoexo.envs.observation.OBS_PRESETS`).
+        obs_keys: Explicit observation entries (``()``: those of *obs_preset*).
+        reflex: Registered reflex model (:func:`~myoexo.spasticity.reflex_names`).
+        robustness: A perturbed twin per episode (:mod:`myoexo.envs.robustness`: straps,
+            masses, friction, motor constant, sensor noise and latency).
+
+    Raises:
+        ValueError: An unknown task field, reward key, observation preset or reflex name
+            (each message lists the accepted ones), or a task value out of its range.
+    """
+
+    task: tuple[tuple[str, float], ...] = ()
+    reward_weights: tuple[tuple[str, float], ...] = ()
+    obs_preset: str = "full"
+    obs_keys: tuple[str, ...] = ()
+    reflex: str = DEFAULT_REFLEX
+    robustness: bool = False
+
+    def __post_init__(self) -> None:
+        task = _pairs(self.task, "task")
+        unknown = sorted({k for k, _ in task} - set(TASK_FIELDS))
+        if unknown:
+            raise ValueError(f"task has unknown field(s) {unknown}; accepted: {list(TASK_FIELDS)}")
+        TaskParams(**dict(task))  # each value in its range
+        object.__setattr__(self, "task", task)
+        weights = _pairs(self.reward_weights, "reward_weights")
+        unknown = sorted({k for k, _ in weights} - set(DEFAULT_REWARD_WEIGHTS))
+        if unknown:
+            raise ValueError(
+                f"reward_weights has unknown keys {unknown}; accepted: "
+                f"{sorted(DEFAULT_REWARD_WEIGHTS)}"
+            )
+        object.__setattr__(self, "reward_weights", weights)
+        if self.obs_preset not in OBS_PRESETS:
+            raise ValueError(f"obs_preset = {self.obs_preset!r}; accepted: {sorted(OBS_PRESETS)}")
+        object.__setattr__(self, "obs_keys", tuple(str(k) for k in self.obs_keys))
+        if not isinstance(self.reflex, str):
+            raise ValueError(
+                f"reflex = {self.reflex!r}: the record takes a registered name (register a "
+                "model with myoexo.spasticity.register_reflex)"
+            )
+        get_reflex(self.reflex)  # registered (the error lists the names)
+        if not isinstance(self.robustness, bool):
+            raise ValueError(f"robustness = {self.robustness!r}: expected True or False")
+
+    # -- views ----------------------------------------------------------------------------
+    @property
+    def task_params(self) -> TaskParams:
+        """The task these options give."""
+        return TaskParams(**dict(self.task))
+
+    @property
+    def episode_duration_s(self) -> float | None:
+        """The task's episode length if it is overridden, else ``None`` (the env's 8 s)."""
+        return dict(self.task).get("episode_duration_s")
+
+    def replace(self, **changes: Any) -> TwinOptions:
+        """A copy with some options (or task fields, by their own names) replaced."""
+        task = dict(self.task)
+        for name in [n for n in changes if n in TASK_FIELDS]:
+            value = changes.pop(name)
+            if value is None:
+                task.pop(name, None)
+            else:
+                task[name] = value
+        return dataclasses.replace(self, task=tuple(task.items()), **changes)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`~myoexo.envs.make_env` (and ``gymnasium.make``) that
+        build this twin: only the options that differ from the defaults, so an env id that
+        takes none of them is built as it is."""
+        kwargs: dict[str, Any] = {}
+        if self.task:
+            kwargs["task"] = dict(self.task)
+        if self.reward_weights:
+            kwargs["reward_weights"] = dict(self.reward_weights)
+        if self.obs_keys:
+            kwargs["obs_keys"] = list(self.obs_keys)
+        elif self.obs_preset != "full":
+            kwargs["obs_preset"] = self.obs_preset
+        if self.reflex != DEFAULT_REFLEX:
+            kwargs["reflex"] = self.reflex
+        if self.robustness:
+            kwargs["robustness"] = True
+        return kwargs
+
+    def dynamics(self) -> TwinOptions:
+        """These options without the reward and the observation: what decides the twin's
+        behaviour, and so whether two evaluations are of the same twin."""
+        return TwinOptions(task=self.task, reflex=self.reflex, robustness=self.robustness)
+
+    def describe(self) -> str:
+        """A one-line description of the non-default options (``"default twin"`` if none)."""
+        parts = [f"{k}={v:g}" for k, v in self.task]
+        if self.reward_weights:
+            parts.append("reward_weights=" + ",".join(f"{k}:{v:g}" for k, v in self.reward_weights))
+        if self.obs_keys:
+            parts.append("obs_keys=" + ",".join(self.obs_keys))
+        elif self.obs_preset != "full":
+            parts.append(f"obs_preset={self.obs_preset}")
+        if self.reflex != DEFAULT_REFLEX:
+            parts.append(f"reflex={self.reflex}")
+        if self.robustness:
+            parts.append("robustness=true")
+        return " ".join(parts) or "default twin"
+
+    # -- records --------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record (task and weights as objects; the reflex model's parameters
+        under ``reflex_parameters``, for provenance)."""
+        return {
+            "task": dict(self.task),
+            "reward_weights": dict(self.reward_weights),
+            "obs_preset": self.obs_preset,
+            "obs_keys": list(self.obs_keys),
+            "reflex": self.reflex,
+            "reflex_parameters": reflex_parameters(self.reflex),
+            "robustness": self.robustness,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TwinOptions:
+        """Rebuild the record of :meth:`to_dict` (``reflex_parameters`` is provenance and
+        not read back; unknown keys raise)."""
+        data = {k: v for k, v in dict(data).items() if k != "reflex_parameters"}
+        unknown = sorted(set(data) - {"task", *OPTION_FIELDS})
+        if unknown:
+            raise ValueError(
+                f"twin options have unknown key(s) {unknown}; accepted: {['task', *OPTION_FIELDS]}"
+            )
+        return cls(
+            task=_pairs(data.get("task", ()), "task"),
+            reward_weights=_pairs(data.get("reward_weights", ()), "reward_weights"),
+            obs_preset=str(data.get("obs_preset", "full")),
+            obs_keys=tuple(data.get("obs_keys", ())),
+            reflex=str(data.get("reflex", DEFAULT_REFLEX)),
+            robustness=bool(data.get("robustness", False)),
+        )
+
+    # -- the command line -----------------------------------------------------------------
+    @staticmethod
+    def is_option(name: str) -> bool:
+        """Whether *name* is a twin option (a task field or an option field)."""
+        return name in TASK_FIELDS or name in OPTION_FIELDS
+
+    def with_override(self, text: str) -> TwinOptions:
+        """These options with one ``NAME=VALUE`` of the command line applied.
+
+        ``NAME`` is a task field (``episode_duration_s=4``; ``none`` resets it),
+        ``reward_weights=inter:-0.5,act:-0.2``, ``obs_preset=exo``,
+        ``obs_keys=knee_angle_rad,error_rad``, ``reflex=persistent`` or
+        ``robustness=true``.
+
+        Raises:
+            ValueError: A malformed override or a bad value (naming the accepted ones).
+        """
+        name, eq, raw = text.partition("=")
+        name, raw = name.strip(), raw.strip()
+        if not eq or not self.is_option(name):
+            raise ValueError(
+                f"bad twin option {text!r}: expected NAME=VALUE with NAME in "
+                f"{[*TASK_FIELDS, *OPTION_FIELDS]}"
+            )
+        try:
+            if name in TASK_FIELDS:
+                return self.replace(**{name: None if raw.lower() == "none" else float(raw)})
+            if name == "reward_weights":
+                pairs = [p.split(":") for p in raw.split(",") if p]
+                return self.replace(reward_weights=tuple((k, float(w)) for k, w in pairs))
+            if name == "obs_keys":
+                return self.replace(obs_keys=tuple(k for k in raw.split(",") if k))
+            if name == "robustness":
+                if raw.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(f"robustness = {raw!r}: expected true or false")
+                return self.replace(robustness=raw.lower() in ("true", "1"))
+        except ValueError as exc:
+            raise ValueError(f"bad value in twin option {text!r}: {exc}") from None
+        return self.replace(**{name: raw})
+
+    @classmethod
+    def from_overrides(
+        cls, overrides: Iterable[str], base: TwinOptions | None = None
+    ) -> TwinOptions:
+        """*base* (default: the defaults) with each ``NAME=VALUE`` applied in order."""
+        options = base or cls()
+        for text in overrides:
+            options = options.with_override(text)
+        return options
+
+
+def twin_mismatch(trained: TwinOptions, evaluated: TwinOptions) -> str | None:
+    """A warning if a policy trained on *trained* is evaluated on another twin (task, reflex
+    or robustness differ; reward and observation do not count), naming both; else ``None``."""
+    if trained.dynamics() == evaluated.dynamics():
+        return None
+    return (
+        f"trained on [{trained.dynamics().describe()}], evaluated on "
+        f"[{evaluated.dynamics().describe()}]"
+    )
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_twin_arguments(parser: Any, *, observation: bool = False) -> None:
+    """The twin options of a command: ``--set NAME=VALUE`` (repeatable, any option by its
+    own name) and the shortcuts ``--reflex NAME``, ``--robustness`` and
+    ``--episode-duration S`` (``episode_duration_s``); with *observation*, the help names the
+    observation options too (a command that evaluates policies takes each policy's own)."""
+    from myoexo.spasticity.registry import add_reflex_argument
+
+    names = [*TASK_FIELDS, *OPTION_FIELDS]
+    if not observation:
+        names = [n for n in names if n not in ("obs_preset", "obs_keys", "reward_weights")]
+    parser.add_argument(
+        "--set",
+        dest="twin_set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a twin option (repeatable): " + ", ".join(names),
+    )
+    add_reflex_argument(parser, default=DEFAULT_REFLEX)
+    parser.add_argument(
+        "--robustness",
+        action="store_true",
+        help="a perturbed twin per episode (strap stiffness/damping x0.5-2, masses +-10 %%, "
+        "slide friction +-50 %%, motor constant +-5 %%, sensor noise, 10 ms latency; "
+        "myoexo.envs.robustness), drawn from the subject's seed",
+    )
+    parser.add_argument(
+        "--episode-duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulated seconds per episode: the task's episode_duration_s (default: 8 s)",
+    )
+
+
+def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:
+    """The :class:`TwinOptions` of the options :func:`add_twin_arguments` added (``--set``
+    first, then the shortcuts that were given)."""
+    options = TwinOptions.from_overrides(getattr(args, "twin_set", []) or [], base)
+    changes: dict[str, Any] = {}
+    if getattr(args, "reflex", DEFAULT_REFLEX) != DEFAULT_REFLEX:
+        changes["reflex"] = args.reflex
+    if getattr(args, "robustness", False):
+        changes["robustness"] = True
+    if getattr(args, "episode_duration", None) is not None:
+        changes["episode_duration_s"] = float(args.episode_duration)
+    return options.replace(**changes) if changes else options
