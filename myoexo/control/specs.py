@@ -43,6 +43,7 @@ policy was trained on).
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -295,11 +296,10 @@ def policy_metadata(spec: ControllerSpec) -> dict[str, Any]:
     return {}
 
 
-def policy_twin(spec: ControllerSpec) -> TwinOptions | None:
-    """The twin a policy was trained on, from its own files (``None`` for the PID, the
-    oracle, and a model file that records none). A record written before the twin options
-    existed gives its observation preset and reward weights."""
-    meta = policy_metadata(spec)
+def twin_of_metadata(meta: Mapping[str, Any]) -> TwinOptions | None:
+    """The twin a policy was trained on, from its metadata (``None`` if it records none). A
+    record written before the twin options existed gives its observation preset and reward
+    weights."""
     if isinstance(meta.get("twin"), dict):
         return TwinOptions.from_dict(meta["twin"])
     if "obs_preset" in meta:
@@ -310,14 +310,36 @@ def policy_twin(spec: ControllerSpec) -> TwinOptions | None:
     return None
 
 
+def policy_twin(spec: ControllerSpec) -> TwinOptions | None:
+    """The twin a policy was trained on, from its own files (``None`` for the PID, the
+    oracle, and a model file that records none)."""
+    return twin_of_metadata(policy_metadata(spec))
+
+
+def _observation_kwargs(twin: TwinOptions | None) -> dict[str, Any]:
+    if twin is None:
+        return {}
+    return TwinOptions(obs_preset=twin.obs_preset, obs_keys=twin.obs_keys).env_kwargs()
+
+
 def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
     """Env keyword arguments a controller needs: the observation of the twin it was trained
     on (its ``obs_preset`` or ``obs_keys``; ``{}`` for the full observation)."""
-    twin = policy_twin(spec)
-    if twin is None:
-        return {}
-    observation = TwinOptions(obs_preset=twin.obs_preset, obs_keys=twin.obs_keys)
-    return observation.env_kwargs()
+    return _observation_kwargs(policy_twin(spec))
+
+
+def controller_env_kwargs(controller: Any) -> dict[str, Any]:
+    """:func:`spec_env_kwargs` of a controller object: the observation its metadata records
+    (a policy, or the policy behind a callable adapter's ``fn``), else its ``obs_preset``."""
+    for obj in (controller, getattr(controller, "fn", None)):
+        meta = getattr(obj, "metadata", None)
+        twin = twin_of_metadata(meta) if isinstance(meta, Mapping) else None
+        preset = getattr(obj, "obs_preset", None)
+        if twin is None and isinstance(preset, str):
+            twin = TwinOptions(obs_preset=preset)
+        if twin is not None:
+            return _observation_kwargs(twin)
+    return {}
 
 
 def check_no_selection_leak(spec: ControllerSpec, root_seed: int) -> None:

@@ -27,6 +27,7 @@ from myoexo.control.specs import (
     PolicyUnavailableError,
     build_controller,
     check_no_selection_leak,
+    controller_env_kwargs,
     load_actor_file,
     load_shipped_policy,
     parse_controller_spec,
@@ -143,12 +144,7 @@ def evaluate_controller(
     from myoexo.envs import make_env
 
     indices = list(range(subjects)) if isinstance(subjects, (int, np.integer)) else list(subjects)
-    kwargs = dict(env_kwargs or {})
-    preset = getattr(controller, "obs_preset", None) or getattr(
-        getattr(controller, "fn", None), "obs_preset", None
-    )
-    if isinstance(preset, str) and preset != "full":
-        kwargs.setdefault("obs_preset", preset)
+    kwargs = {**controller_env_kwargs(controller), **dict(env_kwargs or {})}
     env = make_env(level, episode_duration_s=episode_duration_s, **kwargs)
     try:
         results = [run_episode(env, controller, subject_seed(level, i, root_seed)) for i in indices]
