@@ -191,6 +191,11 @@ def test_report_writes_figures_and_the_comparison(reference, tmp_path, capsys):
         assert png.stat().st_size > 10_000 and f"({png.relative_to(path.parent)})" in text
     summary = pd.read_csv(tmp_path / "report" / "summary.csv")
     assert len(summary) == 4
+    assert "## Tail risk" in text and "Mean over levels 1-2 (the study's aggregation)" in text
+    risk = pd.read_csv(tmp_path / "report" / "tail_risk.csv")
+    assert len(risk) == 4 and {"worst_subject", "catastrophic", "p99_abs_final_error_deg"} <= set(
+        risk.columns
+    )
     assert cli_main(["report", str(tmp_path / "nothing")]) == 2
     assert "not an evaluation folder" in capsys.readouterr().err
 

@@ -37,3 +37,68 @@ def test_an_evaluation_on_the_selection_root_is_refused(monkeypatch):
         resolve_controllers(["sac"], root_seed=5)
     chosen, skipped = resolve_controllers(["sac"], root_seed=0)
     assert [s.label for s in chosen] == ["sac"] and not skipped
+
+
+# ------------------------------------------------------------- fitting and choosing refused
+def test_the_three_subject_roots_are_distinct_and_their_streams_disjoint():
+    from myoexo.evaluation.config import SUBJECT_ROOTS, subject_seed
+
+    assert sorted(SUBJECT_ROOTS) == ["calibration", "evaluation", "selection"]
+    assert len(set(SUBJECT_ROOTS.values())) == 3
+    seeds = {
+        name: {subject_seed(level, i, root) for level in range(4) for i in range(300)}
+        for name, root in SUBJECT_ROOTS.items()
+    }
+    assert all(len(s) == 1200 for s in seeds.values())
+    assert not (seeds["evaluation"] & seeds["selection"])
+    assert not (seeds["evaluation"] & seeds["calibration"])
+    assert not (seeds["selection"] & seeds["calibration"])
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["calibrate", "--seed", "0", "--subjects", "2", "--verify-subjects", "2"],
+        ["calibrate", "--reflex", "persistent", "--seed", "0"],
+        ["select", "RUN", "--root-seed", "0"],
+    ],
+)
+def test_fitting_or_choosing_on_the_evaluation_root_is_refused_on_the_command_line(
+    argv, tmp_path, capsys
+):
+    from myoexo.cli import main
+
+    argv = [str(tmp_path / "run") if a == "RUN" else a for a in argv]
+    before = sorted(tmp_path.rglob("*"))
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "that is the evaluation root" in err and err.count("\n") == 1
+    assert sorted(tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_fitting_or_choosing_on_the_evaluation_root_is_refused_in_the_api(tmp_path):
+    from myoexo.spasticity import get_reflex
+    from myoexo.studies.calibrate import calibrate, fit_threshold_shift
+    from myoexo.studies.distill import DistillConfig
+    from myoexo.training.callbacks import SmallEvalSpec
+    from myoexo.training.seeds import per_seed_table
+    from myoexo.training.select import select_checkpoint
+
+    for call in (
+        lambda: calibrate(subjects=2, verify_subjects=2, root_seed=0),
+        lambda: fit_threshold_shift(2, 6.3, get_reflex("stretch"), 2, root_seed=0),
+        lambda: select_checkpoint(tmp_path, root_seed=0),
+        lambda: per_seed_table(tmp_path, 1, 1, 1, root_seed=0),
+        lambda: SmallEvalSpec(root_seed=0),
+        lambda: DistillConfig(root_seed=0),
+    ):
+        with pytest.raises(ValueError, match="that is the evaluation root"):
+            call()
+
+
+def test_the_fitted_reflex_values_record_their_root():
+    from myoexo.spasticity import CALIBRATION, PERSISTENT, UNCALIBRATED
+
+    # the shipped calibrations were fitted before the roots were separated: on root 0
+    assert CALIBRATION.root_seed == 0 and PERSISTENT.root_seed == 0
+    assert UNCALIBRATED.root_seed is None

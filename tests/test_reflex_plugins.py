@@ -201,3 +201,23 @@ def test_a_user_model_evaluates_through_the_cli_in_worker_processes(tmp_path):
     )  # fmt: skip
     assert again.returncode == 0, again.stderr
     assert "velocity_example" in again.stdout
+
+
+def test_a_user_model_reaches_the_training_and_distillation_envs(velocity_reflex):
+    from myoexo.envs.options import TwinOptions
+    from myoexo.studies.distill import DistillConfig, EnvPool
+    from myoexo.training.presets import apply_overrides, get_preset
+    from myoexo.training.train import make_vec_env
+
+    preset = apply_overrides(
+        get_preset("cpu", n_envs=1), ["reflex=velocity_example", "episode_duration_s=0.1"]
+    )
+    venv = make_vec_env(preset, seed=0)
+    assert [s.reflex_name for s in venv.get_attr("spasticity")] == ["velocity_example"]
+    venv.close()
+    config = DistillConfig(twin=TwinOptions(reflex="velocity_example"))
+    pool = EnvPool(config.twin)
+    for perturbed in (False, True):
+        stage = pool.get(2, perturbed).unwrapped.spasticity
+        assert stage.reflex is get_reflex("velocity_example")
+    pool.close()

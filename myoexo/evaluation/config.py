@@ -19,9 +19,10 @@ import functools
 import hashlib
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -36,10 +37,47 @@ CONFIG_FILE = "config.json"
 #: Root seed of the reported evaluations (``myoexo evaluate``'s default, the README's tables).
 EVALUATION_ROOT_SEED = 0
 #: Root seed of the subjects that *select* policies (training's periodic evaluation,
-#: ``myoexo select``). It differs from :data:`EVALUATION_ROOT_SEED`, so no subject of a
-#: reported evaluation chose the checkpoint being reported; :func:`check_no_selection_leak`
-#: enforces it for policies that record their selection seed.
+#: ``myoexo select``, the seed that is shipped, distillation). It differs from
+#: :data:`EVALUATION_ROOT_SEED`, so no subject of a reported evaluation chose the checkpoint
+#: being reported; :func:`check_no_selection_leak` enforces it for policies that record their
+#: selection seed.
 SELECTION_ROOT_SEED = 1
+#: Root seed of the subjects the twin is *fitted* on (``myoexo calibrate``).
+CALIBRATION_ROOT_SEED = 2
+
+#: The three subject streams, by purpose: each root seeds its own
+#: ``SeedSequence(root, spawn_key=(level, subject))`` stream, so the subjects of one purpose
+#: are never those of another.
+SUBJECT_ROOTS: Mapping[str, int] = MappingProxyType(
+    {
+        "evaluation": EVALUATION_ROOT_SEED,
+        "selection": SELECTION_ROOT_SEED,
+        "calibration": CALIBRATION_ROOT_SEED,
+    }
+)
+
+
+def check_fit_root(root_seed: int, purpose: str) -> int:
+    """Refuse to fit or choose anything on the evaluation subjects.
+
+    Args:
+        root_seed: The root seed of the subjects *purpose* would use.
+        purpose: What is fitted or chosen there (``"calibration"``, ``"checkpoint selection"``,
+            ...), for the message.
+
+    Returns:
+        *root_seed*, as an ``int``.
+
+    Raises:
+        ValueError: *root_seed* is :data:`EVALUATION_ROOT_SEED` (the message names the roots).
+    """
+    if int(root_seed) == EVALUATION_ROOT_SEED:
+        raise ValueError(
+            f"{purpose} on root seed {root_seed}: that is the evaluation root, whose subjects "
+            "report results and must not fit or choose what they report; use the selection "
+            f"root {SELECTION_ROOT_SEED} or the calibration root {CALIBRATION_ROOT_SEED}"
+        )
+    return int(root_seed)
 
 #: How a subject's seed is derived (recorded in ``config.json``).
 SEED_RULE = (

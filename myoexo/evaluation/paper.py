@@ -59,10 +59,12 @@ class PaperHeadlines:
     """The paper's summary numbers (abstract and conclusion).
 
     Attributes:
-        peak_reduction_pct: Mean peak-torque reduction of SAC vs PID over levels, %.
+        peak_reduction_pct: Mean peak-torque reduction of SAC vs PID over levels 1-2 (the
+            spastic levels where the study's SAC reaches the target: (12.5 + 8.8) / 2), %.
         peak_reduction_nm: Mean peak-torque reduction, Nm.
         peak_reduction_std_nm: Its standard deviation, Nm.
-        rms_reduction_pct: Mean RMS-to-settling reduction, %.
+        rms_reduction_pct: Mean RMS-to-settling reduction over levels 1-2 ((9.7 + 8.1) / 2),
+            %.
         pid_gains: The PID gains (Ziegler-Nichols tuned at level 1).
         pid_tuning_level: Level the PID was tuned at.
     """

@@ -32,6 +32,16 @@ from myoexo.control.specs import controller_slug
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.config import load_config
 from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
+from myoexo.evaluation.risk import (
+    FAILURE_DEG,
+    catastrophic_lines,
+    mean_ratio,
+    mean_reduction_pct,
+    paired_interval,
+    reduction_pct,
+    tail_risk,
+    verdict,
+)
 from myoexo.evaluation.storage import load_table, load_traces
 from myoexo.runtime.docs import docs_url
 
@@ -86,32 +96,90 @@ def reference_controller(labels: Sequence[str]) -> str | None:
     return next((c for c in labels if c.lower().startswith("pid")), None)
 
 
+def _pairs(table: Any, reference: str, other: str, level: int, col: str) -> tuple:
+    """``(reference values, other values)`` of *col* on the subjects both ran at *level*."""
+    ref = table[(table.controller == reference) & (table.level == level)].set_index("subject")
+    oth = table[(table.controller == other) & (table.level == level)].set_index("subject")
+    common = ref.index.intersection(oth.index).sort_values()
+    return (
+        ref.loc[common, col].to_numpy(dtype=float),
+        oth.loc[common, col].to_numpy(dtype=float),
+    )
+
+
 def reductions(table: Any, reference: str, other: str) -> Any:
-    """Per level: reduction of ``other`` vs ``reference`` for the RMS to settling and the
-    peak interaction torque, in % of the reference's mean, and the paired difference
-    (reference - other, same subjects) as mean and std in Nm."""
+    """Per level, ``other`` against ``reference`` on the same subjects:
+
+    * the reduction of the RMS to settling and of the peak interaction torque, in % of the
+      reference's mean, with a 95 % interval resampling subjects
+      (:func:`~myoexo.evaluation.risk.paired_interval`), and the paired difference
+      (reference - other) as mean and std in Nm;
+    * settling: the share of episodes that settle for each, and the ratio of the mean
+      settling times on the subjects where both settle (with its interval); unsettled
+      episodes are counted, not dropped."""
     import pandas as pd
 
     rows = []
     cols = {"rms": "rms_interaction_torque_nm", "peak": "peak_interaction_torque_nm"}
-    ref = table[table.controller == reference].set_index(["level", "subject"])
-    oth = table[table.controller == other].set_index(["level", "subject"])
-    for level in sorted(set(ref.index.get_level_values(0)) & set(oth.index.get_level_values(0))):
-        ref_level, other_level = ref.loc[level], oth.loc[level]
-        common = ref_level.index.intersection(other_level.index)
-        row: dict[str, Any] = {"level": int(level), "n_paired": len(common)}
+    levels = sorted(
+        set(table.level[table.controller == reference])
+        & set(table.level[table.controller == other])
+    )
+    for level in levels:
+        row: dict[str, Any] = {"level": int(level)}
         for key, col in cols.items():
-            mean_ref, mean_other = ref_level[col].mean(), other_level[col].mean()
-            diff = (ref_level.loc[common, col] - other_level.loc[common, col]).to_numpy(dtype=float)
+            ref, oth = _pairs(table, reference, other, level, col)
+            ok = np.isfinite(ref) & np.isfinite(oth)
+            ref, oth = ref[ok], oth[ok]
+            row["n_paired"] = int(ref.size)
+            diff = ref - oth
             row[f"{key}_reduction_pct"] = (
-                100.0 * (mean_ref - mean_other) / mean_ref if mean_ref else math.nan
+                float(reduction_pct(ref, oth)) if ref.size and ref.mean() else math.nan
             )
+            low, high = paired_interval((ref, oth), reduction_pct, seed=int(level))
+            row[f"{key}_reduction_pct_low"], row[f"{key}_reduction_pct_high"] = low, high
             row[f"{key}_paired_diff_nm_mean"] = float(diff.mean()) if diff.size else math.nan
             row[f"{key}_paired_diff_nm_std"] = (
                 float(diff.std(ddof=1)) if diff.size > 1 else math.nan
             )
+        ref_s, oth_s = _pairs(table, reference, other, level, "settling_time_s")
+        both = np.isfinite(ref_s) & np.isfinite(oth_s)
+        row["reference_settled_pct"] = 100.0 * float(np.isfinite(ref_s).mean())
+        row["other_settled_pct"] = 100.0 * float(np.isfinite(oth_s).mean())
+        row["n_both_settled"] = int(both.sum())
+        row["settling_ratio"] = (
+            float(mean_ratio(ref_s[both], oth_s[both])) if both.any() else math.nan
+        )
+        row["settling_ratio_low"], row["settling_ratio_high"] = paired_interval(
+            (ref_s[both], oth_s[both]), mean_ratio, seed=int(level)
+        )
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+#: The levels whose mean is the study's headline (its peak 10.6 % and RMS 8.9 % are the
+#: means over the spastic levels where its SAC reaches the target: (12.5 + 8.8) / 2 and
+#: (9.7 + 8.1) / 2).
+HEADLINE_LEVELS: tuple[int, ...] = (1, 2)
+
+
+def headline(table: Any, reference: str, other: str, levels: Sequence[int]) -> dict[str, Any]:
+    """The mean over *levels* of the per-level peak and RMS reductions of ``other`` against
+    ``reference``, each with a 95 % interval resampling subjects (the levels' subject ``i``
+    together; ``nan`` where a level is missing or the levels have different subjects)."""
+    out: dict[str, Any] = {"levels": tuple(levels)}
+    cols = {"rms": "rms_interaction_torque_nm", "peak": "peak_interaction_torque_nm"}
+    for key, col in cols.items():
+        arrays: list[np.ndarray] = []
+        for level in levels:
+            arrays += list(_pairs(table, reference, other, level, col))
+        sizes = {a.size for a in arrays}
+        if not arrays or len(sizes) != 1 or 0 in sizes:
+            out[key] = out[f"{key}_low"] = out[f"{key}_high"] = math.nan
+            continue
+        out[key] = float(mean_reduction_pct(*arrays))
+        out[f"{key}_low"], out[f"{key}_high"] = paired_interval(arrays, mean_reduction_pct)
+    return out
 
 
 # ----------------------------------------------------------------------------- markdown
@@ -128,6 +196,8 @@ def _fmt(x: Any, digits: int = 2) -> str:
 def _pm(mean: float, std: float, digits: int = 2) -> str:
     if not math.isfinite(mean):
         return "n/a"
+    if not math.isfinite(std):
+        return f"{mean:.{digits}f}"
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
 
@@ -237,26 +307,36 @@ def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> 
     return "\n\n".join(parts)
 
 
-def _reduction_section(red: dict[str, Any], reference: str) -> str:
+def _ci(value: float, low: float, high: float, digits: int = 1) -> str:
+    if not math.isfinite(value):
+        return "n/a"
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return _fmt(value, digits)
+    return f"{value:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _reduction_section(
+    red: dict[str, Any], reference: str, headlines: dict[str, dict[str, Any]]
+) -> str:
     parts = []
-    headlines = PAPER_HEADLINES
+    paper = PAPER_HEADLINES
     for other, rdf in red.items():
         rows = [
             [
-                int(red.level),
-                int(red.n_paired),
-                _fmt(red.rms_reduction_pct, 1),
-                _pm(red.rms_paired_diff_nm_mean, red.rms_paired_diff_nm_std),
-                _fmt(red.peak_reduction_pct, 1),
-                _pm(red.peak_paired_diff_nm_mean, red.peak_paired_diff_nm_std),
+                int(r.level),
+                int(r.n_paired),
+                _ci(r.rms_reduction_pct, r.rms_reduction_pct_low, r.rms_reduction_pct_high),
+                _pm(r.rms_paired_diff_nm_mean, r.rms_paired_diff_nm_std),
+                _ci(r.peak_reduction_pct, r.peak_reduction_pct_low, r.peak_reduction_pct_high),
+                _pm(r.peak_paired_diff_nm_mean, r.peak_paired_diff_nm_std),
+                _ci(r.settling_ratio, r.settling_ratio_low, r.settling_ratio_high, 2),
+                f"{r.reference_settled_pct:.0f} / {r.other_settled_pct:.0f}",
             ]
-            for red in rdf.itertuples()
+            for r in rdf.itertuples()
         ]
-        mean_peak = float(rdf.peak_reduction_pct.mean())
-        mean_rms = float(rdf.rms_reduction_pct.mean())
-        level_nm = rdf.peak_paired_diff_nm_mean.to_numpy(dtype=float)
-        parts.append(
-            f"**`{other}` vs `{reference}`** (paired: same subjects)\n\n"
+        lines = [
+            f"**`{other}` vs `{reference}`** (paired: same subjects; [95 % interval], "
+            f"percentile bootstrap over subjects)\n\n"
             + _md_table(
                 [
                     "level",
@@ -265,17 +345,54 @@ def _reduction_section(red: dict[str, Any], reference: str) -> str:
                     "RMS paired diff (Nm)",
                     "peak reduction %",
                     "peak paired diff (Nm)",
+                    "settling time ratio (both settled)",
+                    f"settled % ({reference} / {other})",
                 ],
                 rows,
             )
-            + f"\n\nMean over levels: peak torque {_fmt(mean_peak, 1)} % "
-            f"(paper {headlines.peak_reduction_pct} %), "
-            f"{_pm(level_nm.mean(), level_nm.std(ddof=1) if level_nm.size > 1 else 0.0, 1)} Nm "
-            f"across levels (paper {headlines.peak_reduction_nm} ± "
-            f"{headlines.peak_reduction_std_nm} Nm); "
-            f"RMS to settling {_fmt(mean_rms, 1)} % (paper {headlines.rms_reduction_pct} %)."
+        ]
+        study, every = headlines[other]["study"], headlines[other]["all"]
+        peak_v = verdict(study["peak_low"], study["peak_high"], paper.peak_reduction_pct)
+        rms_v = verdict(study["rms_low"], study["rms_high"], paper.rms_reduction_pct)
+        lines.append(
+            f"Mean over levels {'-'.join(map(str, study['levels']))} (the study's "
+            f"aggregation): peak torque {_ci(study['peak'], study['peak_low'], study['peak_high'])}"
+            f" % (paper {paper.peak_reduction_pct} %: {peak_v}), RMS to settling "
+            f"{_ci(study['rms'], study['rms_low'], study['rms_high'])} % (paper "
+            f"{paper.rms_reduction_pct} %: {rms_v}); over levels "
+            f"{'-'.join(map(str, (every['levels'][0], every['levels'][-1])))}: peak "
+            f"{_ci(every['peak'], every['peak_low'], every['peak_high'])} %, RMS "
+            f"{_ci(every['rms'], every['rms_low'], every['rms_high'])} %. A criterion is met "
+            "when its whole interval is on the good side of the paper's number, missed when "
+            "it is wholly on the other, a tie otherwise."
         )
+        parts.append("\n\n".join(lines))
     return "\n\n".join(parts)
+
+
+def _risk_section(risk: Any) -> str:
+    headers = [
+        "controller", "level", "n", "worst subject", "worst |final error| (deg)",
+        "p95 (deg)", "p99 (deg)", f"beyond {FAILURE_DEG:g} deg", "limit (deg)",
+        "catastrophic", "unstable",
+    ]  # fmt: skip
+    rows = [
+        [
+            r.controller,
+            r.level,
+            r.n,
+            r.worst_subject,
+            _fmt(r.worst_abs_final_error_deg),
+            _fmt(r.p95_abs_final_error_deg),
+            _fmt(r.p99_abs_final_error_deg),
+            r.failures,
+            _fmt(r.limit_deg, 1),
+            r.catastrophic,
+            r.unstable,
+        ]
+        for r in risk.itertuples()
+    ]
+    return _md_table(headers, rows)
 
 
 def write_figures(out_dir: Path, fig_dir: Path, table: Any) -> list[Path]:
@@ -335,8 +452,21 @@ def write_report(
     labels = list(dict.fromkeys(table["controller"]))
     reference = reference_controller(labels)
     red = {}
+    heads: dict[str, dict[str, Any]] = {}
     if reference is not None:
         red = {c: reductions(table, reference, c) for c in labels if c != reference}
+        levels_run = sorted(int(v) for v in set(table.level))
+        study_levels = [lv for lv in HEADLINE_LEVELS if lv in levels_run]
+        heads = {
+            c: {
+                "study": headline(table, reference, c, study_levels),
+                "all": headline(table, reference, c, levels_run),
+            }
+            for c in red
+        }
+    risk = tail_risk(table, reference)
+    risk.to_csv(dest / "tail_risk.csv", index=False)
+    flagged = catastrophic_lines(risk)
 
     cfg = config.get("config", {})
     n_per = table.groupby(["controller", "level"]).size()
@@ -353,9 +483,31 @@ def write_report(
         "of the step, RMS of the interaction torque up to the settling time, peak "
         "interaction torque over the episode). Values are mean ± std over subjects.",
         "",
+        *(
+            [
+                "**Catastrophic subjects** (an episode that ends beyond "
+                f"{FAILURE_DEG:g} deg from the target or beyond the reference PID's own worst "
+                "on the same subjects, whichever is larger):",
+                "",
+                *[f"- {line}" for line in flagged],
+                "",
+            ]
+            if flagged
+            else []
+        ),
         "## Summary",
         "",
         _summary_section(summary),
+        "",
+        "## Tail risk",
+        "",
+        "The tail of the absolute final error per controller and level: the worst subject, "
+        f"the 95th and 99th percentiles, the episodes that end beyond {FAILURE_DEG:g} deg, "
+        "the catastrophic bound (that or the reference PID's worst at the level, whichever "
+        "is larger) and the episodes beyond it, and the unstable episodes (counted as the "
+        "worst).",
+        "",
+        _risk_section(risk),
         "",
         "## Next to the paper",
         "",
@@ -369,7 +521,7 @@ def write_report(
         lines += [
             "## Reductions against the PID, per level",
             "",
-            _reduction_section(red, reference),
+            _reduction_section(red, reference, heads),
             "",
         ]
     lines += _bound_section(table, out, bound_dir)

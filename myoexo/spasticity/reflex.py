@@ -129,10 +129,13 @@ class StretchCalibration:
     Attributes:
         levels: Calibration of each level; a level not listed uses unit gains, no shift.
         note: Provenance: the command and the numbers the fit gave.
+        root_seed: Root seed of the subjects the values were fitted on (``None``: not
+            fitted).
     """
 
     levels: Mapping[int, LevelCalibration] = field(default_factory=_identity_levels)
     note: str = ""
+    root_seed: int | None = None
 
     def __getitem__(self, level: int) -> LevelCalibration:
         return self.levels.get(int(level), LevelCalibration())
@@ -167,6 +170,7 @@ CALIBRATION = StretchCalibration(
         " PID final error L0 0.00 +- 0.00, L1 -0.00 +- 0.05, L2 6.54 +- 3.04, "
         "L3 8.90 +- 2.24 deg"
     ),
+    root_seed=0,  # fitted on the evaluation subjects, before the roots were separated
 )
 
 
@@ -190,6 +194,7 @@ class PersistentParams:
             excitation range, -); level 0 must be 0 (no spasticity). Each subject's gain is
             ``G (1 + rel_std z)`` (clipped at 0) with the subject's 10 % noise.
         note: Provenance of the gains: the command and the numbers the fit gave.
+        root_seed: Root seed of the subjects the gains were fitted on (``None``: not fitted).
     """
 
     ignition_velocity_rad_s: float = 1.5
@@ -198,6 +203,7 @@ class PersistentParams:
     decay_time_s: float = 30.0
     gains: Mapping[int, float] = field(default_factory=_zero_level_gains)
     note: str = ""
+    root_seed: int | None = None
 
     def __post_init__(self) -> None:
         for name, low, high, unit in (
@@ -252,6 +258,7 @@ PERSISTENT = PersistentParams(
         "L2 7.16 +- 5.27 deg, L3 9.38 +- 5.47 deg; PID ramped over 3 s: L2 -0.00 +- 0.00 deg, "
         "L3 -0.00 +- 0.00 deg"
     ),
+    root_seed=0,  # fitted on the evaluation subjects, before the roots were separated
 )
 
 

@@ -45,6 +45,11 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.evaluation.config import (
+    CALIBRATION_ROOT_SEED,
+    EVALUATION_ROOT_SEED,
+    check_fit_root,
+)
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.spasticity.reflex import (
     PERSISTENT,
@@ -107,7 +112,7 @@ def pid_outcome(
     level: int,
     reflex: ReflexModel,
     subjects: int,
-    root_seed: int = 0,
+    root_seed: int = CALIBRATION_ROOT_SEED,
     ramp_s: float | None = None,
 ) -> PIDOutcome:
     """The paper's PID on ``subjects`` subjects of ``level`` with the reflex ``reflex``
@@ -156,7 +161,7 @@ def fit_threshold_shift(
     target_final_error_deg: float,
     base: StretchReflex,
     subjects: int,
-    root_seed: int = 0,
+    root_seed: int = CALIBRATION_ROOT_SEED,
     bracket_deg: tuple[float, float] = (0.0, 100.0),
     tol_deg: float = 0.1,
     log: Callable[[str], None] | None = None,
@@ -170,6 +175,7 @@ def fit_threshold_shift(
     Raises:
         ValueError: The target is not bracketed by ``bracket_deg``.
     """
+    root_seed = check_fit_root(root_seed, "calibration")
 
     def outcome(shift: float) -> PIDOutcome:
         current = base.calibration[level]
@@ -305,9 +311,10 @@ def calibrate(
     delay_s: float = STRETCH_DELAY_S,
     extensor_gain: float = 1.0,
     targets: CalibrationTargets | None = None,
-    root_seed: int = 0,
+    root_seed: int = CALIBRATION_ROOT_SEED,
     levels: Sequence[int] = VALID_LEVELS,
     log: Callable[[str], None] = print,
+    check_root_seed: int = EVALUATION_ROOT_SEED,
 ) -> CalibrationResult:
     """Fit the threshold shifts of the target levels, then verify every level.
 
@@ -317,10 +324,14 @@ def calibrate(
         delay_s: Reflex delay of the fitted model, s.
         extensor_gain: Gain of the extensors' reflex at levels 1-3 (fixed, not fitted).
         targets: What to fit (default :class:`CalibrationTargets`).
-        root_seed: Root seed of the subjects.
+        root_seed: Root seed of the subjects the fit uses (the calibration root; the
+            evaluation root is refused).
         levels: Levels to verify.
         log: Progress lines.
+        check_root_seed: Root seed of the verification's subjects (default: the evaluation
+            root, where the fitted twin is then checked, not fitted).
     """
+    root_seed = check_fit_root(root_seed, "calibration")
     t0 = time.perf_counter()
     tg = targets or CalibrationTargets()
     cal = StretchCalibration(
@@ -337,17 +348,18 @@ def calibrate(
         )
         reflex = dataclasses.replace(reflex, calibration=cal)
     log(f"verifying on {verify_subjects} subjects per level")
-    outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, root_seed) for lv in levels}
+    outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, check_root_seed) for lv in levels}
     elapsed = time.perf_counter() - t0
     note = (
         f"myoexo calibrate --subjects {subjects} --verify-subjects {verify_subjects} "
-        f"--delay {delay_s} --extensor-gain {extensor_gain}: PID final error "
+        f"--delay {delay_s} --extensor-gain {extensor_gain} --seed {root_seed}: fitted on "
+        f"root {root_seed}; check on root {check_root_seed}, PID final error "
         + ", ".join(
             f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
             for lv, o in outcomes.items()
         )
     )
-    cal = StretchCalibration(levels=cal.levels, note=note)
+    cal = StretchCalibration(levels=cal.levels, note=note, root_seed=root_seed)
     return CalibrationResult(
         calibration=cal,
         reflex=dataclasses.replace(reflex, calibration=cal),
@@ -374,7 +386,7 @@ def fit_persistent_gain(
     target_final_error_deg: float,
     base: PersistentReflex,
     subjects: int,
-    root_seed: int = 0,
+    root_seed: int = CALIBRATION_ROOT_SEED,
     bracket: tuple[float, float] = (0.1, 0.5),
     tol: float = 0.004,
     log: Callable[[str], None] | None = None,
@@ -389,6 +401,7 @@ def fit_persistent_gain(
     Raises:
         ValueError: The target is not bracketed by ``bracket``.
     """
+    root_seed = check_fit_root(root_seed, "calibration")
 
     def outcome(gain: float) -> PIDOutcome:
         gains = dict(base.after_discharge.gains)
@@ -469,10 +482,11 @@ def calibrate_persistent(
     level1_fraction: float = 0.5,
     ramp_s: float = 3.0,
     targets: CalibrationTargets | None = None,
-    root_seed: int = 0,
+    root_seed: int = CALIBRATION_ROOT_SEED,
     levels: Sequence[int] = VALID_LEVELS,
     base: PersistentParams = PERSISTENT,
     log: Callable[[str], None] = print,
+    check_root_seed: int = EVALUATION_ROOT_SEED,
 ) -> PersistentCalibrationResult:
     """Fit the after-discharge gains of the target levels (2, 3) of the ``"persistent"``
     model, set level 1's to ``level1_fraction`` x level 2's (chosen, not fitted; checked:
@@ -485,11 +499,15 @@ def calibrate_persistent(
         level1_fraction: Level 1's gain as a fraction of level 2's.
         ramp_s: Ramp duration of the gentle controller, s.
         targets: What to fit (default :class:`CalibrationTargets`).
-        root_seed: Root seed of the subjects.
+        root_seed: Root seed of the subjects the fit uses (the calibration root; the
+            evaluation root is refused).
         levels: Levels to verify.
         base: The after-discharge's other parameters (threshold, time constants).
         log: Progress lines.
+        check_root_seed: Root seed of the verification's subjects (default: the evaluation
+            root).
     """
+    root_seed = check_fit_root(root_seed, "calibration")
     t0 = time.perf_counter()
     tg = targets or CalibrationTargets()
     gains = {lv: 0.0 for lv in VALID_LEVELS}
@@ -504,17 +522,18 @@ def calibrate_persistent(
         gains[1] = round(level1_fraction * gains[2], 4)
         reflex = _with_gains(reflex, gains)
     log(f"verifying on {verify_subjects} subjects per level")
-    outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, root_seed) for lv in levels}
+    outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, check_root_seed) for lv in levels}
     log(f"ramped PID ({ramp_s:g} s) on {verify_subjects} subjects per fitted level")
     ramped = {
-        lv: pid_outcome(lv, reflex, verify_subjects, root_seed, ramp_s=ramp_s)
+        lv: pid_outcome(lv, reflex, verify_subjects, check_root_seed, ramp_s=ramp_s)
         for lv in sorted(tg.pid_final_error_deg)
         if lv in levels
     }
     elapsed = time.perf_counter() - t0
     note = (
         f"myoexo calibrate --reflex persistent --subjects {subjects} --verify-subjects "
-        f"{verify_subjects} --level1-fraction {level1_fraction}: PID final error "
+        f"{verify_subjects} --level1-fraction {level1_fraction} --seed {root_seed}: fitted on "
+        f"root {root_seed}; check on root {check_root_seed}, PID final error "
         + ", ".join(
             f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
             for lv, o in outcomes.items()
@@ -525,7 +544,7 @@ def calibrate_persistent(
             for lv, o in ramped.items()
         )
     )
-    params = dataclasses.replace(reflex.after_discharge, note=note)
+    params = dataclasses.replace(reflex.after_discharge, note=note, root_seed=root_seed)
     return PersistentCalibrationResult(
         params=params,
         reflex=dataclasses.replace(reflex, after_discharge=params),
@@ -572,7 +591,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=3.0,
         help="persistent: ramp of the gentle PID checked after the fit, s (default: 3)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="root seed of the subjects")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=CALIBRATION_ROOT_SEED,
+        help=f"root seed of the fit's subjects (default: the calibration root "
+        f"{CALIBRATION_ROOT_SEED}; the evaluation root {EVALUATION_ROOT_SEED} is refused); the "
+        "verification runs on the evaluation root",
+    )
     parser.add_argument(
         "--out", type=Path, default=None, help="folder for calibration.md and .csv (optional)"
     )

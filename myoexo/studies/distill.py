@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
-from myoexo.evaluation.config import SELECTION_ROOT_SEED, subject_seed
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root, subject_seed
 from myoexo.policies.actor import MLPActor
 from myoexo.policies.student import (
     FRAME_DIM,
@@ -139,8 +139,7 @@ class DistillConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
         object.__setattr__(self, "hidden", tuple(int(v) for v in self.hidden))
-        if self.root_seed == 0:
-            raise ValueError("root_seed = 0 is the evaluation root: train on another (1)")
+        check_fit_root(self.root_seed, "distillation (it trains and selects the student)")
         for name in ("rounds", "episodes_per_round", "n_frames", "stride", "batch_size"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} = {getattr(self, name)!r} must be >= 1")

@@ -31,7 +31,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import criteria
-from myoexo.evaluation.config import SELECTION_ROOT_SEED
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.criteria import CRITERIA_METRICS
 from myoexo.runtime.files import write_json_atomic
 from myoexo.runtime.lifecycle import StopSignals
@@ -123,6 +123,9 @@ class SmallEvalSpec:
     subjects: int = 2
     root_seed: int = SELECTION_ROOT_SEED
     twin: TwinOptions = field(default_factory=TwinOptions)
+
+    def __post_init__(self) -> None:
+        check_fit_root(self.root_seed, "the periodic evaluation (it scores checkpoints)")
 
 
 class EvaluationAborted(Exception):

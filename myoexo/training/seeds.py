@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.evaluation.config import SELECTION_ROOT_SEED
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.runtime.files import write_json_atomic, write_text_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, signal_exit_status
 from myoexo.training import checkpoints as ck
@@ -237,8 +237,11 @@ def per_seed_table(
     out: Path, subjects: int, last: int, top: int, root_seed: int = SELECTION_ROOT_SEED
 ) -> tuple[Any, dict[int, str]]:
     """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`) and
-    its comparison with the PID, one row per seed and level."""
+    its comparison with the PID, one row per seed and level (the evaluation root is refused:
+    the seed shipped from this table is chosen on these subjects)."""
     import pandas as pd
+
+    root_seed = check_fit_root(root_seed, "seed selection")
 
     from myoexo.training.select import select_checkpoint
 

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from myoexo.evaluation.config import SELECTION_ROOT_SEED
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.criteria import compare, level_means, shortfall
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
@@ -65,9 +65,14 @@ def select_checkpoint(
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
     score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
     with the smallest :func:`shortfall` (ties: the largest mean peak torque reduction) with
-    its comparison table."""
+    its comparison table.
+
+    Raises:
+        ValueError: *run_dir* holds no checkpoint, or *root_seed* is the evaluation root.
+    """
     import csv
 
+    root_seed = check_fit_root(root_seed, "checkpoint selection")
     ckpts = ck.list_checkpoints(run_dir)
     if not ckpts:
         raise ValueError(f"{str(run_dir)!r} holds no checkpoint")

@@ -1,0 +1,150 @@
+"""Tail risk and uncertainty of an evaluation: what the means hide.
+
+A controller that is good on average can still fail a few people badly. Per controller and
+level, :func:`tail_risk` gives the worst subject, the 95th and 99th percentiles of the
+absolute final error, the count of *failures* (an episode that ends farther than
+:data:`FAILURE_DEG` from the target) and of *catastrophic* subjects (beyond the failure
+bound or beyond the reference PID's own worst on the same subjects, whichever is larger),
+and the unstable episodes. :func:`paired_interval` gives a 95 % interval of a paired
+statistic by resampling subjects (``scipy.stats.bootstrap``), and :func:`verdict` calls a
+criterion met, missed or a tie by its interval.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+#: An episode that ends farther than this from the target has failed, deg.
+FAILURE_DEG = 20.0
+#: Bootstrap resamples of :func:`paired_interval`.
+N_RESAMPLES = 2000
+#: Confidence level of the intervals.
+CONFIDENCE = 0.95
+
+
+def tail_risk(table: Any, reference: str | None = "pid", failure_deg: float = FAILURE_DEG) -> Any:
+    """Per (controller, level): the tail of the absolute final error.
+
+    Args:
+        table: Episode table (one row per episode: ``controller``, ``level``, ``subject``,
+            ``abs_final_error_deg``, ``unstable``).
+        reference: The controller whose worst subject at a level raises that level's
+            catastrophic bound (``None``: the failure bound alone).
+        failure_deg: The failure bound, deg.
+
+    Returns:
+        A DataFrame with ``controller``, ``level``, ``n``, ``worst_subject``,
+        ``worst_abs_final_error_deg`` (``inf`` for an unstable episode),
+        ``p95_abs_final_error_deg``, ``p99_abs_final_error_deg`` (of the episodes that
+        ended stably), ``failures`` (episodes beyond *failure_deg*),
+        ``limit_deg`` (``max(failure_deg, reference's worst)``), ``catastrophic`` (episodes
+        beyond ``limit_deg``) and ``unstable``.
+    """
+    import pandas as pd
+
+    worst_ref: dict[int, float] = {}
+    if reference is not None:
+        ref = table[table.controller == reference]
+        worst_ref = {
+            int(lv): float(g["abs_final_error_deg"].max()) for lv, g in ref.groupby("level")
+        }
+    rows = []
+    for (label, level), g in table.groupby(["controller", "level"], sort=False):
+        err = g["abs_final_error_deg"].to_numpy(dtype=float)
+        finite = np.where(np.isfinite(err), err, np.inf)  # an unstable episode is the worst
+        i = int(np.argmax(finite))
+        limit = max(failure_deg, worst_ref.get(int(level), failure_deg))
+        stable = err[np.isfinite(err)]  # percentiles of the episodes that ended
+        p95, p99 = np.percentile(stable, [95, 99]) if stable.size else (math.nan, math.nan)
+        rows.append(
+            {
+                "controller": label,
+                "level": int(level),
+                "n": len(g),
+                "worst_subject": int(g["subject"].iloc[i]),
+                "worst_abs_final_error_deg": float(finite[i]),
+                "p95_abs_final_error_deg": float(p95),
+                "p99_abs_final_error_deg": float(p99),
+                "failures": int((finite > failure_deg).sum()),
+                "limit_deg": float(limit),
+                "catastrophic": int((finite > limit).sum()),
+                "unstable": int(g["unstable"].astype(bool).sum()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def catastrophic_lines(risk: Any) -> list[str]:
+    """One line per (controller, level) with catastrophic subjects (empty if none)."""
+    lines = []
+    for r in risk.itertuples():
+        if r.catastrophic:
+            lines.append(
+                f"`{r.controller}` at level {r.level}: {r.catastrophic} of {r.n} subjects end "
+                f"beyond {r.limit_deg:.1f} deg (worst: subject {r.worst_subject}, "
+                f"{r.worst_abs_final_error_deg:.1f} deg)"
+            )
+    return lines
+
+
+def paired_interval(
+    arrays: Sequence[np.ndarray], statistic: Callable[..., Any], seed: int = 0
+) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of ``statistic(*arrays, axis=-1)`` resampling the
+    subjects: every array has one entry per subject index and an index keeps its entries
+    together (``scipy.stats.bootstrap(paired=True)``), so paired differences stay paired.
+    ``(nan, nan)`` with fewer than 3 subjects or arrays of unequal length."""
+    from scipy.stats import bootstrap
+
+    data = tuple(np.asarray(a, dtype=float) for a in arrays)
+    if len({a.size for a in data}) != 1 or data[0].size < 3:
+        return math.nan, math.nan
+    res = bootstrap(
+        data,
+        statistic,
+        paired=True,
+        vectorized=True,
+        n_resamples=N_RESAMPLES,
+        confidence_level=CONFIDENCE,
+        method="percentile",
+        random_state=np.random.default_rng(seed),
+    )
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def reduction_pct(reference: np.ndarray, other: np.ndarray, axis: int = -1) -> Any:
+    """``100 (mean(reference) - mean(other)) / mean(reference)``: the reduction in % of the
+    reference's mean (vectorized over *axis*)."""
+    ref = np.mean(reference, axis=axis)
+    return 100.0 * (ref - np.mean(other, axis=axis)) / ref
+
+
+def verdict(low: float, high: float, target: float, higher_is_better: bool = True) -> str:
+    """``"met"`` if the whole interval ``[low, high]`` is on the good side of *target*,
+    ``"missed"`` if it is wholly on the other side, else ``"tie"`` (``"n/a"`` without an
+    interval)."""
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return "n/a"
+    if not higher_is_better:
+        low, high, target = -high, -low, -target
+    if low > target:
+        return "met"
+    if high < target:
+        return "missed"
+    return "tie"
+
+
+def mean_reduction_pct(*pairs: np.ndarray, axis: int = -1) -> Any:
+    """The mean over levels of :func:`reduction_pct`: *pairs* is ``reference_1, other_1,
+    reference_2, other_2, ...``, one reference and one other array per level."""
+    levels = [reduction_pct(pairs[i], pairs[i + 1], axis=axis) for i in range(0, len(pairs), 2)]
+    return np.mean(levels, axis=0)
+
+
+def mean_ratio(reference: np.ndarray, other: np.ndarray, axis: int = -1) -> Any:
+    """``mean(other) / mean(reference)`` (e.g. settling time relative to the PID's)."""
+    return np.mean(other, axis=axis) / np.mean(reference, axis=axis)

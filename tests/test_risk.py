@@ -1,0 +1,123 @@
+"""Tail risk and intervals of an evaluation (myoexo.evaluation.risk), with expectations
+worked out by hand on small tables, not by the code under test."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from myoexo.evaluation.report import headline, reductions
+from myoexo.evaluation.risk import (
+    catastrophic_lines,
+    paired_interval,
+    reduction_pct,
+    tail_risk,
+    verdict,
+)
+
+
+def _table(rows):
+    cols = ["controller", "level", "subject", "abs_final_error_deg", "unstable"]
+    return pd.DataFrame(rows, columns=cols)
+
+
+def test_the_tail_names_the_worst_subject_and_counts_against_the_pids_worst():
+    table = _table(
+        [
+            ("pid", 2, 0, 1.0, False),
+            ("pid", 2, 1, 25.0, False),  # the PID's worst: 25 deg, beyond 20
+            ("pid", 2, 2, 3.0, False),
+            ("rl", 2, 0, 2.0, False),
+            ("rl", 2, 1, 30.0, False),
+            ("rl", 2, 2, 19.0, False),
+            ("rl", 3, 0, math.nan, True),  # unstable: counted as the worst
+            ("rl", 3, 1, 5.0, False),
+        ]
+    )
+    risk = tail_risk(table).set_index(["controller", "level"])
+    rl = risk.loc[("rl", 2)]
+    assert rl.worst_subject == 1 and rl.worst_abs_final_error_deg == 30.0
+    # sorted 2, 19, 30: p95 at position 1.9 = 19 + 0.9 * 11, p99 at 1.98 = 19 + 0.98 * 11
+    assert rl.p95_abs_final_error_deg == pytest.approx(28.9)
+    assert rl.p99_abs_final_error_deg == pytest.approx(29.78)
+    assert rl.failures == 1 and rl.limit_deg == 25.0 and rl.catastrophic == 1
+    assert risk.loc[("pid", 2)].catastrophic == 0 and risk.loc[("pid", 2)].failures == 1
+    unstable = risk.loc[("rl", 3)]
+    assert unstable.unstable == 1 and unstable.worst_subject == 0
+    assert unstable.failures == 1 and unstable.limit_deg == 20.0  # no PID at level 3
+    lines = catastrophic_lines(tail_risk(table))
+    assert lines == [
+        "`rl` at level 2: 1 of 3 subjects end beyond 25.0 deg (worst: subject 1, 30.0 deg)",
+        "`rl` at level 3: 1 of 2 subjects end beyond 20.0 deg (worst: subject 0, inf deg)",
+    ]
+
+
+def test_verdicts_follow_the_whole_interval():
+    assert verdict(11.0, 14.0, 10.6) == "met"
+    assert verdict(5.0, 9.0, 10.6) == "missed"
+    assert verdict(9.0, 12.0, 10.6) == "tie"
+    assert verdict(0.5, 0.9, 1.0, higher_is_better=False) == "met"  # an error below 1 deg
+    assert verdict(1.1, 2.0, 1.0, higher_is_better=False) == "missed"
+    assert verdict(math.nan, 1.0, 1.0) == "n/a"
+
+
+def test_a_paired_interval_keeps_the_pairs_together():
+    ref = np.array([100.0, 120.0, 80.0, 110.0, 90.0])
+    # the same 10 % lower on every subject: every resample gives exactly 10 %
+    low, high = paired_interval((ref, 0.9 * ref), reduction_pct)
+    assert low == pytest.approx(10.0) and high == pytest.approx(10.0)
+    assert reduction_pct(ref, 0.9 * ref) == pytest.approx(10.0)
+    # independent noise: the interval brackets the sample value and has a width
+    rng = np.random.default_rng(0)
+    other = ref * (0.9 + 0.05 * rng.standard_normal(ref.size))
+    low, high = paired_interval((ref, other), reduction_pct)
+    assert low < reduction_pct(ref, other) < high
+    assert paired_interval((ref[:2], other[:2]), reduction_pct) != paired_interval(
+        (ref, other), reduction_pct
+    )
+    assert all(math.isnan(v) for v in paired_interval((ref[:2], other[:2]), reduction_pct))
+
+
+def test_the_study_aggregation_is_the_mean_of_levels_1_and_2_and_settling_is_a_ratio():
+    rows = []
+    for subject in range(4):
+        for level, ref_peak, oth_peak in ((1, 100.0, 90.0), (2, 100.0, 80.0), (3, 100.0, 50.0)):
+            for label, peak, settle in (("pid", ref_peak, 1.0), ("rl", oth_peak, 2.0)):
+                rows.append(
+                    {
+                        "controller": label,
+                        "level": level,
+                        "subject": subject,
+                        "peak_interaction_torque_nm": peak,
+                        "rms_interaction_torque_nm": peak / 2,
+                        # rl never settles at level 3: counted, not dropped
+                        "settling_time_s": math.nan if (label, level) == ("rl", 3) else settle,
+                    }
+                )
+    table = pd.DataFrame(rows)
+    study = headline(table, "pid", "rl", (1, 2))
+    assert study["peak"] == pytest.approx(15.0) and study["rms"] == pytest.approx(15.0)
+    assert study["peak_low"] == pytest.approx(15.0) == study["peak_high"]
+    every = headline(table, "pid", "rl", (1, 2, 3))
+    assert every["peak"] == pytest.approx((10 + 20 + 50) / 3)
+    red = reductions(table, "pid", "rl").set_index("level")
+    assert red.loc[1, "settling_ratio"] == pytest.approx(2.0)
+    assert red.loc[3, "other_settled_pct"] == 0.0 and red.loc[3, "reference_settled_pct"] == 100
+    assert red.loc[3, "n_both_settled"] == 0 and math.isnan(red.loc[3, "settling_ratio"])
+    assert red.loc[2, "peak_reduction_pct"] == pytest.approx(20.0)
+
+
+def test_the_studys_headline_is_its_levels_1_2_mean():
+    from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
+    from myoexo.evaluation.report import HEADLINE_LEVELS
+
+    assert HEADLINE_LEVELS == (1, 2)
+    peak = np.mean([PAPER_RESULTS[lv].peak_reduction_pct for lv in HEADLINE_LEVELS])
+    rms = np.mean([PAPER_RESULTS[lv].rms_reduction_pct for lv in HEADLINE_LEVELS])
+    assert abs(peak - PAPER_HEADLINES.peak_reduction_pct) < 0.051  # (12.5 + 8.8) / 2 = 10.65
+    assert abs(rms - PAPER_HEADLINES.rms_reduction_pct) <= 0.05  # (9.7 + 8.1) / 2 = 8.9
+    four = np.mean([PAPER_RESULTS[lv].peak_reduction_pct for lv in range(4)])
+    assert abs(four - PAPER_HEADLINES.peak_reduction_pct) > 3  # not the four-level mean
