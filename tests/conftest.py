@@ -13,7 +13,8 @@ import pytest
 def walk_env_factory():
     """MyoSuite's own leg env (both legs, 80 muscles) with the spasticity wrapper: the stage
     is not tied to our twin."""
-    gym = pytest.importorskip("myosuite.utils").gym
+    from myosuite.utils import gym  # a core dependency: its absence is a failure, not a skip
+
     from myoexo.spasticity.wrapper import SpasticityWrapper
 
     def make(**kwargs):

@@ -143,7 +143,8 @@ def test_pendulum_traces_release_the_exo() -> None:
 
 
 def test_reclined_posture_keeps_the_thigh_horizontal() -> None:
-    mujoco = pytest.importorskip("mujoco")
+    import mujoco
+
     from myoexo.clinical.common import twin_model
     from myoexo.model import TwinParams, pose_twin
 

@@ -246,7 +246,9 @@ def test_kill9_evaluation_at_random_points_then_resume_gives_the_same_table(
 
     final = spawn(cmd, "eval")
     assert final.wait(timeout=START_TIMEOUT_S) == 0, final.err_path.read_text()
-    pd.testing.assert_frame_equal(pd.read_parquet(out / "episodes.parquet"), eval_reference)
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(out / "episodes.parquet"), eval_reference, check_exact=True
+    )
     assert not _temporaries(out)
 
 
@@ -312,7 +314,7 @@ def test_a_damaged_chunk_is_recomputed(eval_reference, tmp_path):
     run = evaluate(config, out, workers=1, progress=False)
     assert run.computed == 2
     expected = eval_reference[eval_reference.level == 0].head(2).reset_index(drop=True)
-    pd.testing.assert_frame_equal(run.table, expected)
+    pd.testing.assert_frame_equal(run.table, expected, check_exact=True)
 
 
 def test_a_full_disk_leaves_the_previous_files_and_no_temporary(tmp_path, monkeypatch, capsys):

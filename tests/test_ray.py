@@ -27,8 +27,6 @@ from myoexo.cli import main as cli_main
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate
 
-ray = pytest.importorskip("ray")
-
 CPUS = 2
 #: A tiny protocol: 2 levels x 3 subjects of the PID, one subject per chunk.
 TINY = EvaluationConfig(

@@ -55,10 +55,6 @@ def reflex(request) -> str:
 @pytest.fixture(scope="module")
 def result(reflex):
     """The default stretch test (levels 0-3, 0.2 and 3 rad/s) on the twin."""
-    try:
-        from myoexo.model import build_model  # noqa: F401
-    except ImportError:  # pragma: no cover - the twin is built by another module
-        pytest.skip("myoexo.model.build_model is not available")
     return run_stretch_test(StretchTestParams(velocities_rad_s=(SLOW, FAST)), reflex=reflex)
 
 
@@ -128,11 +124,9 @@ def test_muscle_knee_torque_follows_the_coupled_knee() -> None:
     The quadriceps pull on the patella, whose coordinates are tied to the knee angle by
     joint equalities, so ``qfrc_actuator`` of ``knee_angle_r`` alone misstates their torque.
     """
-    mujoco = pytest.importorskip("mujoco")
-    try:
-        from myoexo.model import TwinParams, build_model, pose_twin
-    except ImportError:  # pragma: no cover
-        pytest.skip("myoexo.model.build_model is not available")
+    import mujoco
+
+    from myoexo.model import TwinParams, build_model, pose_twin
     from myoexo.model.joint_torque import CoupledJointTorque
     from myoexo.spasticity.levels import SPASTIC_EXTENSORS
 

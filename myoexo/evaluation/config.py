@@ -79,6 +79,7 @@ def check_fit_root(root_seed: int, purpose: str) -> int:
         )
     return int(root_seed)
 
+
 #: How a subject's seed is derived (recorded in ``config.json``).
 SEED_RULE = (
     "numpy.random.SeedSequence(root_seed, spawn_key=(level, subject)).generate_state(1, uint64)[0]"

@@ -354,13 +354,18 @@ def _reduction_section(
         study, every = headlines[other]["study"], headlines[other]["all"]
         peak_v = verdict(study["peak_low"], study["peak_high"], paper.peak_reduction_pct)
         rms_v = verdict(study["rms_low"], study["rms_high"], paper.rms_reduction_pct)
-        lines.append(
+        study_text = (
             f"Mean over levels {'-'.join(map(str, study['levels']))} (the study's "
             f"aggregation): peak torque {_ci(study['peak'], study['peak_low'], study['peak_high'])}"
             f" % (paper {paper.peak_reduction_pct} %: {peak_v}), RMS to settling "
             f"{_ci(study['rms'], study['rms_low'], study['rms_high'])} % (paper "
-            f"{paper.rms_reduction_pct} %: {rms_v}); over levels "
-            f"{'-'.join(map(str, (every['levels'][0], every['levels'][-1])))}: peak "
+            f"{paper.rms_reduction_pct} %: {rms_v})"
+            if tuple(study["levels"]) == HEADLINE_LEVELS
+            else f"Levels {'-'.join(map(str, HEADLINE_LEVELS))} (the study's aggregation) "
+            "were not all run"
+        )
+        lines.append(
+            f"{study_text}; over every level run ({', '.join(map(str, every['levels']))}): peak "
             f"{_ci(every['peak'], every['peak_low'], every['peak_high'])} %, RMS "
             f"{_ci(every['rms'], every['rms_low'], every['rms_high'])} %. A criterion is met "
             "when its whole interval is on the good side of the paper's number, missed when "
