@@ -162,3 +162,33 @@ def test_the_evaluation_warns_in_the_api_too(tmp_path):
     mismatches = [w for w in caught if issubclass(w.category, TwinMismatchWarning)]
     assert len(mismatches) == 1  # the policy, not the PID
     assert "'student_exo' was trained on [default twin]" in str(mismatches[0].message)
+
+
+@pytest.mark.slow
+def test_a_checkpoint_chosen_by_select_is_refused_on_its_selection_root(tmp_path):
+    """The real path: train, `myoexo select` on the selection root, then `myoexo evaluate`
+    of the chosen model.zip there (exit 2, nothing written) and on the evaluation root."""
+    run_dir = tmp_path / "run"
+    settings = [
+        "env_id=MyoExoKneeRandom-v0", "total_timesteps=300", "n_envs=2", "buffer_size=2000",
+        "batch_size=32", "learning_starts=100", "checkpoint_every_s=0",
+        "checkpoint_every_steps=200", "eval_every_steps=0", "episode_duration_s=0.3",
+    ]  # fmt: skip
+    args = ["train", "--run-dir", str(run_dir), "--no-progress", "-v", "0"]
+    for s in settings:
+        args += ["--set", s]
+    assert _myoexo(*args, cwd=tmp_path).returncode == 0
+    picked = _myoexo(
+        "select", str(run_dir), "--subjects", "1", "--levels", "1", "--last", "1", cwd=tmp_path
+    )
+    assert picked.returncode == 0, picked.stderr
+    chosen = next(line for line in picked.stdout.splitlines() if line.startswith("chosen:"))
+    model = chosen.split(":", 1)[1].strip() + "/model.zip"
+    evaluation = ["evaluate", "--controllers", model, "--levels", "1", "--subjects", "1"]
+    evaluation += ["--workers", "1", "--no-progress", "--episode-duration", "0.3"]
+    refused = _myoexo(*evaluation, "--seed", "1", "--out", str(tmp_path / "on1"), cwd=tmp_path)
+    assert refused.returncode == 2
+    assert "was selected on the subjects of root seed 1" in refused.stderr
+    assert not (tmp_path / "on1").exists()
+    allowed = _myoexo(*evaluation, "--out", str(tmp_path / "on0"), cwd=tmp_path)
+    assert allowed.returncode == 0, allowed.stderr

@@ -294,6 +294,14 @@ def read_state(checkpoint: Path) -> dict[str, Any]:
     return json.loads((Path(checkpoint) / STATE_FILE).read_text())
 
 
+def record_selection(checkpoint: Path, root_seed: int) -> None:
+    """Record in a checkpoint's ``state.json`` that it was selected on the subjects of
+    *root_seed* (``selection_root_seed``; atomic rewrite)."""
+    state = read_state(checkpoint)
+    state["selection_root_seed"] = int(root_seed)
+    write_json_atomic(Path(checkpoint) / STATE_FILE, state)
+
+
 def read_config(run_dir: Path) -> dict[str, Any]:
     """The ``config.json`` of a run; ``ValueError`` if the folder holds no run."""
     path = Path(run_dir) / CONFIG_FILE

@@ -188,7 +188,11 @@ def _checkpoint_parts(
         "obs_preset": twin.obs_preset,
         "reward_weights": [list(p) for p in twin.reward_weights],
         "twin": twin.to_dict(),
-        "selection_root_seed": selection_root_seed,
+        "selection_root_seed": (
+            selection_root_seed
+            if selection_root_seed is not None
+            else state.get("selection_root_seed")  # recorded by myoexo select
+        ),
         "preset": preset.get("name"),
         "algorithm": algorithm,
         "seed": config.get("seed"),

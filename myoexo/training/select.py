@@ -99,6 +99,9 @@ def select_checkpoint(
                 flush=True,
             )
     _, chosen, table = min(results, key=lambda r: r[0])
+    # the chosen checkpoint records its selection root, so that an evaluation of its
+    # model.zip on these subjects is refused (control.specs.check_no_selection_leak)
+    ck.record_selection(chosen, root_seed)
     return chosen, table
 
 
