@@ -51,6 +51,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
+    "results": (
+        "myoexo.evaluation.results",
+        "collect an evaluation into a committed result set; render the docs' results tables",
+    ),
     "frontier": (
         "myoexo.studies.frontier",
         "torque vs settling per level: shaped PIDs, policies, the study's point, the frontier",

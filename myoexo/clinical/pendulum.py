@@ -21,8 +21,10 @@ Outcome measures per level (knee flexion positive, deg):
     final resting angle (here ``rest_deg - release_deg``, flexion positive). A healthy,
     relaxed leg overshoots its rest on the first swing: ``R`` about 1.6 and above; spastic
     extensors brake the swing: ``R`` below (an overdamped leg that creeps to rest gives
-    1). ``relaxation_index_norm`` is their normalised ``R / 1.6`` (>= 1: normal). The same
-    index appears as ``RI = F1amp / Plat`` in Whelan et al. 2018.
+    1). ``relaxation_index_norm`` is their normalised ``R / 1.6`` (>= 1: normal). Kim, Chon,
+    Park and Choi 1996 measured it in 50 healthy adults lying supine
+    (:data:`HEALTHY_RELAXATION_INDEX_SUPINE`): the twin's reclined, device-free posture is the
+    one to compare with.
 ``peak_velocity_deg_s``
     The largest flexion velocity of the knee during the first swing. White et al. (2007)
     measured about 293 deg/s in typically developing children and 202 deg/s in children with
@@ -91,8 +93,9 @@ if TYPE_CHECKING:
 __all__ = [
     "DEVICES",
     "FREED_EXO_RANGE_DEG",
+    "HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S",
     "HEALTHY_RELAXATION_INDEX",
-    "HEALTHY_RELAXATION_INDEX_WHELAN",
+    "HEALTHY_RELAXATION_INDEX_SUPINE",
     "PEAK_VELOCITY_CP_DEG_S",
     "PEAK_VELOCITY_TD_DEG_S",
     "POSTURES",
@@ -112,9 +115,13 @@ __all__ = [
 #: Relaxation index ``A1 / A0`` of a healthy, relaxed knee: about 1.6 and above (Bajd and
 #: Vodovnik 1984); below it, spastic.
 HEALTHY_RELAXATION_INDEX = 1.6
-#: Relaxation index of healthy adults in a clinic's pendulum test, mean and SD (Whelan et al.
-#: 2018, n = 50, semi-reclined, no device).
-HEALTHY_RELAXATION_INDEX_WHELAN = (1.68, 0.09)
+#: Relaxation index of healthy adults in the pendulum test, mean and SD (Kim, Chon, Park and
+#: Choi 1996, J Korean Acad Rehabil Med 20(3); n = 50, supine, no device): compare with the
+#: reclined posture without the device.
+HEALTHY_RELAXATION_INDEX_SUPINE = (1.678, 0.090)
+#: Angular velocity of the first swing of the same healthy adults, mean and SD, rad/s (Kim
+#: et al. 1996: 3.873 +- 0.622 rad/s, 222 +- 36 deg/s).
+HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S = (3.873, 0.622)
 #: Peak knee velocity of the first swing in typically developing children, deg/s
 #: (White et al. 2007).
 PEAK_VELOCITY_TD_DEG_S = 293.0
@@ -247,9 +254,10 @@ def published_values() -> pd.DataFrame:
             },
             {
                 "measure": "relaxation_index",
-                "value": HEALTHY_RELAXATION_INDEX_WHELAN[0],
-                "group": f"healthy adults (n = 50), SD {HEALTHY_RELAXATION_INDEX_WHELAN[1]}",
-                "source": "Whelan et al. 2018",
+                "value": HEALTHY_RELAXATION_INDEX_SUPINE[0],
+                "group": "healthy adults (n = 50, supine), SD "
+                f"{HEALTHY_RELAXATION_INDEX_SUPINE[1]}",
+                "source": "Kim, Chon, Park and Choi 1996",
             },
             {
                 "measure": "peak_velocity_deg_s",

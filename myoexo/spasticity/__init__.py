@@ -6,7 +6,7 @@ The reflex adds a spasticity coefficient ``SC_total`` (a fraction of maximum iso
 to the excitation of the 11 spastic knee muscles. It is the sum of an angle term and a
 velocity term, each a "soft window" built from two sigmoids::
 
-    phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))                                  (eq. 1)
+    phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))                                  (eq. 2)
     sc_a(theta)   = s_theta [1 - (phi(k, theta, theta_flex) - phi(k, theta, theta_ext))]
     sc_v(v)       = s_v     [1 - (phi(k, v, v_upper) - phi(k, v, v_lower))]
     SC_total      = sc_a(theta) + sc_v(v)

@@ -1,7 +1,7 @@
 """The spasticity coefficient of Table I (eqs. 1-4) in numpy and, differentiable, in torch.
 
 ``SC_total(theta, v) = sc_a(theta) + sc_v(v)``: an angle and a velocity term, each a soft
-window built from two sigmoids ``phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))`` (eq. 1; written
+window built from two sigmoids ``phi(k, b, b0) = 1 / (1 + exp(k (b - b0)))`` (eq. 2; written
 with tanh, no overflow). The torch twins take tensors for the inputs and for every parameter,
 so gradients flow to all of them. :func:`below` and :func:`above` are the one-sided sigmoids
 the reflex models (:mod:`myoexo.spasticity.reflex`) build on.
@@ -22,7 +22,7 @@ if TYPE_CHECKING:  # torch is imported lazily: ``import myoexo`` must stay fast
 
 def below(x: Any, limit: float, k: float) -> Any:
     """``1 / (1 + exp(k (x - limit)))``: -> 1 below ``limit``, 1/2 at it, -> 0 above
-    (eq. 1's ``phi``, evaluated with tanh: no overflow)."""
+    (eq. 2's ``phi``, evaluated with tanh: no overflow)."""
     return 0.5 * (1.0 - np.tanh(0.5 * k * (np.asarray(x, dtype=np.float64) - limit)))
 
 
@@ -39,7 +39,7 @@ def _finite_array(name: str, value: Any) -> np.ndarray:
 
 
 def phi(k: float, b: Any, b0: float) -> np.ndarray:
-    """Sigmoid of eq. 1, ``1 / (1 + exp(k (b - b0)))``, vectorized over *b*.
+    """Sigmoid of eq. 2, ``1 / (1 + exp(k (b - b0)))``, vectorized over *b*.
 
     Evaluated as ``(1 - tanh(k (b - b0) / 2)) / 2``, which is the same function without
     overflow for large ``k |b - b0|`` (:func:`below`: -> 1 below ``b0``).
@@ -51,7 +51,7 @@ def angle_term(
     theta_deg: Any, half_k: Any, theta_ext_deg: Any, theta_flex_deg: Any, s_theta: Any, tanh: Any
 ) -> Any:
     """``sc_a`` from its constants, in any array library: ``s_theta / 2 * (2 - tanh(k/2
-    (theta - theta_ext)) + tanh(k/2 (theta - theta_flex)))``, the same as eq. 2.
+    (theta - theta_ext)) + tanh(k/2 (theta - theta_flex)))``, the same as eq. 3.
 
     The one copy of the angle term: :func:`sc_angle` (``tanh=np.tanh``), its torch twin
     (``torch.tanh``) and the reflex models' per-step scalar path (``math.tanh``) all call it,
@@ -70,7 +70,7 @@ def angle_term(
 def velocity_term(
     vel_rad_s: Any, half_k: Any, v_lower_rad_s: Any, v_upper_rad_s: Any, s_v: Any, tanh: Any
 ) -> Any:
-    """``sc_v`` from its constants, in any array library (see :func:`angle_term`; eq. 3)."""
+    """``sc_v`` from its constants, in any array library (see :func:`angle_term`; eq. 4)."""
     return (
         0.5
         * s_v

@@ -3,8 +3,8 @@
 The study reports what its Ziegler-Nichols PID (Kp = 7, Ki = 40, Kd = 0.05 on the error in
 rad) does on its twin: it overshoots the 7 deg target at levels 0 and 1 and stops short of it
 by 6.3 deg at level 2 and 9.3 deg at level 3 (docs/reference.md section 5). Those four facts
-are the calibration targets; the paper's SAC results are *not* used, so on the calibrated twin
-they are predictions.
+are the calibration targets; the paper's SAC results are *not* used here (checkpoint selection
+aims at them, so they are targets of the policies, not independent predictions).
 
 What is fitted (:class:`~myoexo.spasticity.reflex.LevelCalibration`): per level 2 and 3, the
 shift of the flexors' extension-side angle threshold (Table I's ``theta_ext`` lies outside

@@ -1,0 +1,345 @@
+"""Result sets: the small files every results table of the docs is generated from.
+
+A *result set* is a folder of small CSV files computed from one evaluation folder
+(``myoexo results collect EVAL_DIR NAME``): ``summary.csv`` (mean, std, quantiles per
+controller and level, :func:`~myoexo.evaluation.report.summarize`), ``tail_risk.csv``
+(:func:`~myoexo.evaluation.risk.tail_risk`), ``reductions.csv`` (each controller against the
+PID on the same subjects, with intervals, :func:`~myoexo.evaluation.report.reductions`),
+``headline.csv`` (the study's levels 1-2 aggregation and the mean over every level run) and
+``meta.json`` (the command that produced the evaluation, its twin, subjects and root seed,
+and the package versions). Result sets are committed under ``docs/results/``.
+
+``myoexo results tables`` renders each set's Markdown tables into ``tables.md`` beside its
+files (the docs include it) and the README's short table between its markers; ``--check``
+fails where a committed table differs from what the files give, so no results table is
+typed by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from myoexo.envs.options import TwinOptions
+from myoexo.evaluation.config import load_config
+from myoexo.evaluation.paper import PAPER_HEADLINES
+from myoexo.evaluation.report import (
+    HEADLINE_LEVELS,
+    headline,
+    reductions,
+    reference_controller,
+    summarize,
+)
+from myoexo.evaluation.risk import FAILURE_DEG, tail_risk, verdict
+from myoexo.evaluation.storage import load_table
+from myoexo.runtime.files import write_json_atomic
+
+#: Where the committed result sets live, relative to the repository root.
+RESULTS_DIR = Path("docs") / "results"
+#: The rendered tables of a set.
+TABLES_FILE = "tables.md"
+#: The result set whose headline table stands in the README.
+README_SET = "eval_1000"
+#: The README's generated block lies between these two lines.
+README_START = f"<!-- myoexo-results:{README_SET}:start -->"
+README_END = f"<!-- myoexo-results:{README_SET}:end -->"
+
+_FILES = ("summary.csv", "tail_risk.csv", "reductions.csv", "headline.csv", "meta.json")
+
+
+def command_of(config: dict[str, Any]) -> str:
+    """The ``myoexo evaluate`` command line of an evaluation's ``config.json``."""
+    cfg = config.get("config", {})
+    parts = ["myoexo evaluate", "--controllers", *map(str, cfg.get("controllers", []))]
+    parts += ["--levels", *map(str, cfg.get("levels", [])), "--subjects", str(cfg.get("subjects"))]
+    if cfg.get("root_seed", 0) != 0:
+        parts += ["--seed", str(cfg["root_seed"])]
+    twin = TwinOptions.from_dict(cfg.get("twin") or {})
+    for key, value in twin.task:
+        parts += ["--set", f"{key}={value:g}"]
+    if twin.reflex != TwinOptions().reflex:
+        parts += ["--reflex", twin.reflex]
+    if twin.robustness:
+        parts.append("--robustness")
+    return " ".join(parts)
+
+
+def collect(eval_dir: str | Path, dest: str | Path) -> Path:
+    """Write the result set of the evaluation folder *eval_dir* into *dest* (created).
+
+    Raises:
+        ValueError: *eval_dir* is no evaluation folder, holds no episodes, or no PID.
+    """
+    import pandas as pd
+
+    config = load_config(eval_dir)
+    table = load_table(eval_dir)
+    if table.empty:
+        raise ValueError(f"{str(eval_dir)!r} holds no episodes yet")
+    labels = list(dict.fromkeys(table["controller"]))
+    reference = reference_controller(labels)
+    if reference is None:
+        raise ValueError(f"{str(eval_dir)!r} has no PID to compare with")
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    summarize(table).to_csv(dest / "summary.csv", index=False)
+    tail_risk(table, reference).to_csv(dest / "tail_risk.csv", index=False)
+    others = [c for c in labels if c != reference]
+    red = [reductions(table, reference, c).assign(controller=c) for c in others]
+    pd.concat(red, ignore_index=True).to_csv(dest / "reductions.csv", index=False)
+    levels = sorted(int(v) for v in set(table.level))
+    heads = []
+    for c in others:
+        for scope, scope_levels in (
+            ("study", [lv for lv in HEADLINE_LEVELS if lv in levels]),
+            ("all", levels),
+        ):
+            h = headline(table, reference, c, scope_levels)
+            h["levels"] = ", ".join(map(str, scope_levels))
+            heads.append({"controller": c, "scope": scope, **h})
+    pd.DataFrame(heads).to_csv(dest / "headline.csv", index=False)
+    cfg = config.get("config", {})
+    meta = {
+        "command": command_of(config),
+        "reference": reference,
+        "subjects_per_level": int(cfg.get("subjects", 0)),
+        "root_seed": int(cfg.get("root_seed", 0)),
+        "twin": cfg.get("twin"),
+        "episodes": len(table),
+        "versions": config.get("versions", {}),
+    }
+    write_json_atomic(dest / "meta.json", meta, indent=2)
+    return dest
+
+
+# ----------------------------------------------------------------------------- rendering
+def _num(x: Any, digits: int = 2) -> str:
+    x = float(x)
+    return "n/a" if not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _ci(value: Any, low: Any, high: Any, digits: int = 1) -> str:
+    if not math.isfinite(float(value)):
+        return "n/a"
+    if not (math.isfinite(float(low)) and math.isfinite(float(high))):
+        return _num(value, digits)
+    return f"{float(value):.{digits}f} [{float(low):.{digits}f}, {float(high):.{digits}f}]"
+
+
+def _ci_of(row: Any, name: str, digits: int = 1) -> str:
+    """:func:`_ci` of the columns ``name``, ``name_low`` and ``name_high`` of *row*."""
+    return _ci(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
+
+
+def _md(headers: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _read(folder: Path) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+    import pandas as pd
+
+    missing = [f for f in _FILES if not (folder / f).is_file()]
+    if missing:
+        raise ValueError(f"{str(folder)!r} is no result set: it lacks {missing}")
+    return (
+        pd.read_csv(folder / "summary.csv"),
+        pd.read_csv(folder / "tail_risk.csv"),
+        pd.read_csv(folder / "reductions.csv"),
+        pd.read_csv(folder / "headline.csv", dtype={"levels": str}),
+        json.loads((folder / "meta.json").read_text()),
+    )
+
+
+def headline_table(folder: str | Path, controller: str) -> str:
+    """The short table of one controller against the PID (the README's)."""
+    summary, risk, red, _, meta = _read(Path(folder))
+    ref = meta["reference"]
+    s = summary.set_index(["controller", "level"])
+    k = risk.set_index(["controller", "level"])
+    r = red[red.controller == controller].set_index("level")
+    rows = []
+    for level in sorted(r.index):
+        rows.append(
+            [
+                str(level),
+                f"{_num(s.loc[(ref, level), 'final_error_deg_mean'])} / "
+                f"{_num(s.loc[(controller, level), 'final_error_deg_mean'])}",
+                f"{_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
+                f"{_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
+                str(int(k.loc[(controller, level), "catastrophic"])),
+                _ci_of(r.loc[level], "peak_reduction_pct"),
+                _ci_of(r.loc[level], "rms_reduction_pct"),
+                _ci_of(r.loc[level], "settling_ratio", digits=2),
+                f"{r.loc[level, 'reference_settled_pct']:.0f} / "
+                f"{r.loc[level, 'other_settled_pct']:.0f}",
+            ]
+        )
+    return _md(
+        [
+            "level",
+            f"final error (deg): {ref} / {controller}",
+            "worst subject (deg)",
+            "catastrophic subjects",
+            "peak reduction % [95 % CI]",
+            "RMS reduction % [95 % CI]",
+            "settling time ratio [95 % CI]",
+            "settled %",
+        ],
+        rows,
+    )
+
+
+def aggregation_lines(folder: str | Path) -> list[str]:
+    """One line per controller: the study's levels 1-2 aggregation with its verdicts, and
+    the mean over every level run."""
+    _, _, _, heads, meta = _read(Path(folder))
+    paper = PAPER_HEADLINES
+    lines = []
+    for controller, h in heads.groupby("controller", sort=False):
+        study = h[h.scope == "study"].iloc[0]
+        every = h[h.scope == "all"].iloc[0]
+        peak_v = verdict(study.peak_low, study.peak_high, paper.peak_reduction_pct)
+        rms_v = verdict(study.rms_low, study.rms_high, paper.rms_reduction_pct)
+        lines.append(
+            f"`{controller}` vs `{meta['reference']}`, mean over levels {study.levels} (the "
+            f"study's aggregation): peak {_ci(study.peak, study.peak_low, study.peak_high)} % "
+            f"(paper {paper.peak_reduction_pct} %: {peak_v}), RMS "
+            f"{_ci(study.rms, study.rms_low, study.rms_high)} % (paper "
+            f"{paper.rms_reduction_pct} %: {rms_v}); over levels {every.levels}: peak "
+            f"{_ci(every.peak, every.peak_low, every.peak_high)} %, RMS "
+            f"{_ci(every.rms, every.rms_low, every.rms_high)} %."
+        )
+    return lines
+
+
+def render(folder: str | Path, label: str | None = None) -> str:
+    """The Markdown of a result set: provenance (*label*: how the set's folder is named in
+    it, default its path), one table per controller, the study's aggregation, the tail."""
+    folder = Path(folder)
+    _, risk, red, _, meta = _read(folder)
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(meta.get("versions", {}).items()))
+    parts = [
+        f"<!-- generated by `myoexo results tables` from {label or folder.as_posix()}: do not "
+        "edit -->",
+        f"Command: `{meta['command']}` ({meta['subjects_per_level']} subjects per level, root "
+        f"seed {meta['root_seed']}, {meta['episodes']} episodes; {versions}). Intervals: 95 %, "
+        "percentile bootstrap over subjects with the pairs kept together. A criterion is met "
+        "when its whole interval is on the good side of the paper's number, missed when "
+        "wholly on the other, a tie otherwise.",
+    ]
+    for controller in dict.fromkeys(red.controller):
+        parts.append(f"**`{controller}`** against `{meta['reference']}` on the same subjects:")
+        parts.append(headline_table(folder, controller))
+    parts.append("\n".join(f"- {line}" for line in aggregation_lines(folder)))
+    rows = [
+        [
+            str(r.controller),
+            str(r.level),
+            _num(r.worst_abs_final_error_deg, 1),
+            str(r.worst_subject),
+            _num(r.p95_abs_final_error_deg),
+            _num(r.p99_abs_final_error_deg),
+            str(r.failures),
+            _num(r.limit_deg, 1),
+            str(r.catastrophic),
+            str(r.unstable),
+        ]
+        for r in risk.itertuples()
+    ]
+    parts.append(
+        f"Tail of the absolute final error (beyond {FAILURE_DEG:g} deg: failures; catastrophic: "
+        "beyond that or the PID's own worst, whichever is larger):"
+    )
+    parts.append(
+        _md(
+            [
+                "controller",
+                "level",
+                "worst (deg)",
+                "worst subject",
+                "p95 (deg)",
+                "p99 (deg)",
+                f"beyond {FAILURE_DEG:g} deg",
+                "limit (deg)",
+                "catastrophic",
+                "unstable",
+            ],
+            rows,
+        )
+    )
+    return "\n\n".join(parts) + "\n"
+
+
+def readme_block(root: Path) -> str:
+    """The README's generated block (between :data:`README_START` and :data:`README_END`)."""
+    folder = root / RESULTS_DIR / README_SET
+    _, _, _, _, meta = _read(folder)
+    lines = [
+        README_START,
+        headline_table(folder, "sac"),
+        "",
+        *(f"- {line}" for line in aggregation_lines(folder) if line.startswith("`sac`")),
+        "",
+        f"({meta['subjects_per_level']} evaluation subjects per level, root seed "
+        f"{meta['root_seed']}; generated by `myoexo results tables` from "
+        f"`{RESULTS_DIR.as_posix()}/{README_SET}`.)",
+        README_END,
+    ]
+    return "\n".join(lines)
+
+
+def write_tables(root: Path, check: bool = False) -> list[str]:
+    """Render every result set under ``root/docs/results`` and the README block; with
+    *check*, write nothing and return the files that differ from what they should hold."""
+    stale = []
+    for folder in sorted(p for p in (root / RESULTS_DIR).iterdir() if p.is_dir()):
+        text = render(folder, (RESULTS_DIR / folder.name).as_posix())
+        path = folder / TABLES_FILE
+        if not path.is_file() or path.read_text() != text:
+            stale.append(str(path.relative_to(root)))
+            if not check:
+                path.write_text(text)
+    readme = root / "README.md"
+    if (root / RESULTS_DIR / README_SET).is_dir() and readme.is_file():
+        text = readme.read_text()
+        if README_START not in text or README_END not in text:
+            raise ValueError(f"README.md lacks the markers {README_START} ... {README_END}")
+        head, rest = text.split(README_START, 1)
+        _, tail = rest.split(README_END, 1)
+        new = head + readme_block(root) + tail
+        if new != text:
+            stale.append("README.md")
+            if not check:
+                readme.write_text(new)
+    return stale
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo results``."""
+    sub = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    c = sub.add_parser("collect", help="write the result set of an evaluation folder")
+    c.add_argument("eval_dir", type=Path, help="a myoexo evaluate output folder")
+    c.add_argument("name", help=f"the set's name: its folder under {RESULTS_DIR}")
+    c.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
+    t = sub.add_parser("tables", help="render every result set's tables and the README's")
+    t.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
+    t.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table is stale")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo results``."""
+    if args.action == "collect":
+        dest = collect(args.eval_dir, args.root / RESULTS_DIR / args.name)
+        print(f"result set: {dest}")
+        return 0
+    stale = write_tables(args.root, check=args.check)
+    verb = "stale" if args.check else "written"
+    for path in stale:
+        print(f"{verb}: {path}")
+    return 1 if (args.check and stale) else 0
