@@ -46,7 +46,8 @@ def test_summary_has_mean_iqm_and_a_ci_that_contains_the_mean():
     assert row["settling_time_s_mean"] == pytest.approx(np.mean([0.7, 0.8, 0.9, 5.5]))
     assert row["p_pass"] == pytest.approx(0.6)
     assert 0.0 <= row["p_pass_ci_low"] < 0.6 < row["p_pass_ci_high"] <= 1.0
-    assert "P(pass criteria)" in S.markdown_summary(summary)
+    text = S.markdown_summary(summary)
+    assert "P(pass criteria)" in text and text.startswith("**In-sample**")
 
 
 def test_bootstrap_is_reproducible_and_degenerate_inputs_are_handled():

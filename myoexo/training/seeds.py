@@ -269,9 +269,20 @@ def per_seed_table(
     return pd.concat(frames, ignore_index=True), chosen
 
 
+#: The label of every table computed on the selection subjects.
+IN_SAMPLE_NOTE = (
+    "**In-sample** (the selection subjects that chose each seed's checkpoint; the intervals "
+    "resample seeds only): for choosing and shipping a seed, not a result. Results: an "
+    "evaluation of the shipped seed on the evaluation root."
+)
+
+
 def markdown_summary(summary: Any) -> str:
-    """The summary as a Markdown table: mean [95 % CI] (IQM) per metric and level."""
+    """The summary as a Markdown table: mean [95 % CI] (IQM) per metric and level, labelled
+    in-sample (:data:`IN_SAMPLE_NOTE`)."""
     lines = [
+        IN_SAMPLE_NOTE,
+        "",
         "| level | seeds | " + " | ".join(AGGREGATED.values()) + " | P(pass criteria) |",
         "|---|---|" + "---|" * (len(AGGREGATED) + 1),
     ]
