@@ -37,7 +37,7 @@ def test_the_readmes_myoexo_commands_parse(line, monkeypatch):
 
     # the plug-in example is the docs' own module; --plugin's environment variable is undone
     monkeypatch.syspath_prepend(str(README.parent / "docs" / "examples"))
-    monkeypatch.delenv("MYOEXO_PLUGINS", raising=False)
+    monkeypatch.setenv("MYOEXO_PLUGINS", "")  # recorded, so --plugin's change is undone
     words = shlex.split(line.split("#")[0])[1:]
     words = [w.replace("<run>", "run").replace("<step>", "step") for w in words]
     build_parser().parse_args(words)

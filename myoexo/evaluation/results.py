@@ -327,7 +327,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("eval_dir", type=Path, help="a myoexo evaluate output folder")
     c.add_argument("name", help=f"the set's name: its folder under {RESULTS_DIR}")
     c.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
-    t = sub.add_parser("tables", help="render every result set's tables and the README's")
+    t = sub.add_parser("tables", help="render every result set's tables and the front page's")
     t.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
     t.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table is stale")
 
