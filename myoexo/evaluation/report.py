@@ -183,7 +183,8 @@ def headline(table: Any, reference: str, other: str, levels: Sequence[int]) -> d
 
 
 # ----------------------------------------------------------------------------- markdown
-def _fmt(x: Any, digits: int = 2) -> str:
+def fmt_num(x: Any, digits: int = 2) -> str:
+    """*x* with *digits* decimals; ``"n/a"`` if not finite, ``"-"`` for ``None``."""
     if x is None:
         return "-"
     if isinstance(x, str):
@@ -277,13 +278,13 @@ def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> 
                 [
                     lv,
                     _pm(ours.settling_time_s_mean, ours.settling_time_s_std),
-                    _fmt(paper.sac_settling_time_s),
+                    fmt_num(paper.sac_settling_time_s),
                     _pm(ours.final_error_deg_mean, ours.final_error_deg_std),
                     paper.sac_final_error_text,
-                    _fmt(rms, 1),
-                    _fmt(paper.rms_reduction_pct, 1),
-                    _fmt(peak, 1),
-                    _fmt(paper.peak_reduction_pct, 1),
+                    fmt_num(rms, 1),
+                    fmt_num(paper.rms_reduction_pct, 1),
+                    fmt_num(peak, 1),
+                    fmt_num(paper.peak_reduction_pct, 1),
                 ]
             )
         parts.append(
@@ -307,11 +308,12 @@ def _paper_section(summary: Any, red: dict[str, Any], reference: str | None) -> 
     return "\n\n".join(parts)
 
 
-def _ci(value: float, low: float, high: float, digits: int = 1) -> str:
+def fmt_ci(value: float, low: float, high: float, digits: int = 1) -> str:
+    """``value [low, high]`` (*value* alone without a finite interval; ``"n/a"``)."""
     if not math.isfinite(value):
         return "n/a"
     if not (math.isfinite(low) and math.isfinite(high)):
-        return _fmt(value, digits)
+        return fmt_num(value, digits)
     return f"{value:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
@@ -325,11 +327,11 @@ def _reduction_section(
             [
                 int(r.level),
                 int(r.n_paired),
-                _ci(r.rms_reduction_pct, r.rms_reduction_pct_low, r.rms_reduction_pct_high),
+                fmt_ci(r.rms_reduction_pct, r.rms_reduction_pct_low, r.rms_reduction_pct_high),
                 _pm(r.rms_paired_diff_nm_mean, r.rms_paired_diff_nm_std),
-                _ci(r.peak_reduction_pct, r.peak_reduction_pct_low, r.peak_reduction_pct_high),
+                fmt_ci(r.peak_reduction_pct, r.peak_reduction_pct_low, r.peak_reduction_pct_high),
                 _pm(r.peak_paired_diff_nm_mean, r.peak_paired_diff_nm_std),
-                _ci(r.settling_ratio, r.settling_ratio_low, r.settling_ratio_high, 2),
+                fmt_ci(r.settling_ratio, r.settling_ratio_low, r.settling_ratio_high, 2),
                 f"{r.reference_settled_pct:.0f} / {r.other_settled_pct:.0f}",
             ]
             for r in rdf.itertuples()
@@ -356,9 +358,10 @@ def _reduction_section(
         rms_v = verdict(study["rms_low"], study["rms_high"], paper.rms_reduction_pct)
         study_text = (
             f"Mean over levels {'-'.join(map(str, study['levels']))} (the study's "
-            f"aggregation): peak torque {_ci(study['peak'], study['peak_low'], study['peak_high'])}"
+            "aggregation): peak torque "
+            f"{fmt_ci(study['peak'], study['peak_low'], study['peak_high'])}"
             f" % (paper {paper.peak_reduction_pct} %: {peak_v}), RMS to settling "
-            f"{_ci(study['rms'], study['rms_low'], study['rms_high'])} % (paper "
+            f"{fmt_ci(study['rms'], study['rms_low'], study['rms_high'])} % (paper "
             f"{paper.rms_reduction_pct} %: {rms_v})"
             if tuple(study["levels"]) == HEADLINE_LEVELS
             else f"Levels {'-'.join(map(str, HEADLINE_LEVELS))} (the study's aggregation) "
@@ -366,8 +369,8 @@ def _reduction_section(
         )
         lines.append(
             f"{study_text}; over every level run ({', '.join(map(str, every['levels']))}): peak "
-            f"{_ci(every['peak'], every['peak_low'], every['peak_high'])} %, RMS "
-            f"{_ci(every['rms'], every['rms_low'], every['rms_high'])} %. A criterion is met "
+            f"{fmt_ci(every['peak'], every['peak_low'], every['peak_high'])} %, RMS "
+            f"{fmt_ci(every['rms'], every['rms_low'], every['rms_high'])} %. A criterion is met "
             "when its whole interval is on the good side of the paper's number, missed when "
             "it is wholly on the other, a tie otherwise."
         )
@@ -387,11 +390,11 @@ def _risk_section(risk: Any) -> str:
             r.level,
             r.n,
             r.worst_subject,
-            _fmt(r.worst_abs_final_error_deg),
-            _fmt(r.p95_abs_final_error_deg),
-            _fmt(r.p99_abs_final_error_deg),
+            fmt_num(r.worst_abs_final_error_deg),
+            fmt_num(r.p95_abs_final_error_deg),
+            fmt_num(r.p99_abs_final_error_deg),
             r.failures,
-            _fmt(r.limit_deg, 1),
+            fmt_num(r.limit_deg, 1),
             r.catastrophic,
             r.unstable,
         ]

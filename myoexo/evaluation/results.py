@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,8 @@ from myoexo.evaluation.config import load_config
 from myoexo.evaluation.paper import PAPER_HEADLINES
 from myoexo.evaluation.report import (
     HEADLINE_LEVELS,
+    fmt_ci,
+    fmt_num,
     headline,
     reductions,
     reference_controller,
@@ -116,22 +117,9 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
 
 
 # ----------------------------------------------------------------------------- rendering
-def _num(x: Any, digits: int = 2) -> str:
-    x = float(x)
-    return "n/a" if not math.isfinite(x) else f"{x:.{digits}f}"
-
-
-def _ci(value: Any, low: Any, high: Any, digits: int = 1) -> str:
-    if not math.isfinite(float(value)):
-        return "n/a"
-    if not (math.isfinite(float(low)) and math.isfinite(float(high))):
-        return _num(value, digits)
-    return f"{float(value):.{digits}f} [{float(low):.{digits}f}, {float(high):.{digits}f}]"
-
-
 def _ci_of(row: Any, name: str, digits: int = 1) -> str:
     """:func:`_ci` of the columns ``name``, ``name_low`` and ``name_high`` of *row*."""
-    return _ci(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
+    return fmt_ci(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
 
 
 def _md(headers: list[str], rows: list[list[str]]) -> str:
@@ -167,10 +155,10 @@ def headline_table(folder: str | Path, controller: str) -> str:
         rows.append(
             [
                 str(level),
-                f"{_num(s.loc[(ref, level), 'final_error_deg_mean'])} / "
-                f"{_num(s.loc[(controller, level), 'final_error_deg_mean'])}",
-                f"{_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
-                f"{_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
+                f"{fmt_num(s.loc[(ref, level), 'final_error_deg_mean'])} / "
+                f"{fmt_num(s.loc[(controller, level), 'final_error_deg_mean'])}",
+                f"{fmt_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
+                f"{fmt_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
                 str(int(k.loc[(controller, level), "catastrophic"])),
                 _ci_of(r.loc[level], "peak_reduction_pct"),
                 _ci_of(r.loc[level], "rms_reduction_pct"),
@@ -207,12 +195,12 @@ def aggregation_lines(folder: str | Path) -> list[str]:
         rms_v = verdict(study.rms_low, study.rms_high, paper.rms_reduction_pct)
         lines.append(
             f"`{controller}` vs `{meta['reference']}`, mean over levels {study.levels} (the "
-            f"study's aggregation): peak {_ci(study.peak, study.peak_low, study.peak_high)} % "
+            f"study's aggregation): peak {fmt_ci(study.peak, study.peak_low, study.peak_high)} % "
             f"(paper {paper.peak_reduction_pct} %: {peak_v}), RMS "
-            f"{_ci(study.rms, study.rms_low, study.rms_high)} % (paper "
+            f"{fmt_ci(study.rms, study.rms_low, study.rms_high)} % (paper "
             f"{paper.rms_reduction_pct} %: {rms_v}); over levels {every.levels}: peak "
-            f"{_ci(every.peak, every.peak_low, every.peak_high)} %, RMS "
-            f"{_ci(every.rms, every.rms_low, every.rms_high)} %."
+            f"{fmt_ci(every.peak, every.peak_low, every.peak_high)} %, RMS "
+            f"{fmt_ci(every.rms, every.rms_low, every.rms_high)} %."
         )
     return lines
 
@@ -240,12 +228,12 @@ def render(folder: str | Path, label: str | None = None) -> str:
         [
             str(r.controller),
             str(r.level),
-            _num(r.worst_abs_final_error_deg, 1),
+            fmt_num(r.worst_abs_final_error_deg, 1),
             str(r.worst_subject),
-            _num(r.p95_abs_final_error_deg),
-            _num(r.p99_abs_final_error_deg),
+            fmt_num(r.p95_abs_final_error_deg),
+            fmt_num(r.p99_abs_final_error_deg),
             str(r.failures),
-            _num(r.limit_deg, 1),
+            fmt_num(r.limit_deg, 1),
             str(r.catastrophic),
             str(r.unstable),
         ]
