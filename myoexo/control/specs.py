@@ -53,7 +53,7 @@ from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
 from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
-from myoexo.policies.run_files import CHECKPOINTS_DIR, MODEL_FILE, STATE_FILE, VECNORM_FILE
+from myoexo.policies.run_files import CHECKPOINTS_DIR, MODEL_FILE, VECNORM_FILE, read_state
 
 _PID_KEYS = (
     "kp",
@@ -275,10 +275,8 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
 def _checkpoint_state(model_path: str) -> dict[str, Any]:
     """The state file beside a model file (``<checkpoint>/state.json``: what the checkpoint
     was trained on; ``{}`` for a model file outside a checkpoint)."""
-    import json
-
     try:
-        return dict(json.loads((Path(model_path).parent / STATE_FILE).read_text()))
+        return read_state(Path(model_path).parent)
     except (OSError, ValueError):
         return {}
 

@@ -14,7 +14,18 @@ model file without importing training.
 
 from __future__ import annotations
 
-__all__ = ["CHECKPOINTS_DIR", "CONFIG_FILE", "MODEL_FILE", "STATE_FILE", "VECNORM_FILE"]
+import json
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "CHECKPOINTS_DIR",
+    "CONFIG_FILE",
+    "MODEL_FILE",
+    "STATE_FILE",
+    "VECNORM_FILE",
+    "read_state",
+]
 
 #: The run's settings (preset, seed, env, observation keys, package versions).
 CONFIG_FILE = "config.json"
@@ -28,3 +39,9 @@ VECNORM_FILE = "vecnormalize.pkl"
 #: from the checkpoint alone (``twin``: :meth:`~myoexo.envs.options.TwinOptions.to_dict`;
 #: ``env_id``; ``algorithm``).
 STATE_FILE = "state.json"
+
+
+def read_state(checkpoint: Path | str) -> dict[str, Any]:
+    """The ``state.json`` of a checkpoint folder (``OSError`` / ``ValueError`` if it has
+    none or it is unreadable)."""
+    return dict(json.loads((Path(checkpoint) / STATE_FILE).read_text()))

@@ -45,6 +45,7 @@ from myoexo.policies.run_files import (
     MODEL_FILE,
     STATE_FILE,
     VECNORM_FILE,
+    read_state,
 )
 from myoexo.runtime.files import remove_stale_temporaries, write_json_atomic
 
@@ -287,11 +288,6 @@ def trim_partial_line(path: Path) -> int:
     with open(path, "r+b") as f:
         f.truncate(data.rfind(b"\n") + 1)
     return 1
-
-
-def read_state(checkpoint: Path) -> dict[str, Any]:
-    """The ``state.json`` of a checkpoint."""
-    return json.loads((Path(checkpoint) / STATE_FILE).read_text())
 
 
 def record_selection(checkpoint: Path, root_seed: int) -> None:
