@@ -102,3 +102,61 @@ def test_seeds_of_one_folder_share_a_legend_entry():
     assert point_group("inter0p3-seed_2-step_0000100000") == "inter0p3 (seeds)"
     assert point_group("sac") == "sac"
     assert point_group("run-step_0000100000") == "run-step_0000100000"
+
+
+def test_a_point_on_the_bound_is_not_accurate():
+    """Accuracy is strict: a level-0 mean of exactly 1.00 deg does not meet "< 1 deg"."""
+    pts = _pts([("pid", 0, 0.0, 1.0, 140.0, 100.0), ("edge", 0, 1.0, 0.5, 90.0, 60.0)])
+    marked = F.mark_frontier(pts).set_index("controller")
+    assert marked.loc["edge", "accuracy_deg"] == 1.0
+    assert not marked.loc["edge", "accurate"] and marked.loc["pid", "on_frontier"]
+
+
+def test_a_picked_point_is_reachable_only_if_the_evaluation_subjects_confirm_it():
+    picked = F.mark_frontier(
+        _pts(
+            [
+                ("pid", 0, 0.0, 0.3, 140.0, 100.0),  # faster, harder: on the frontier too
+                ("lucky", 0, 0.9, 0.5, 90.0, 60.0),  # accurate on the selection subjects
+            ]
+        )
+    )
+    confirmed = _pts(
+        [("pid", 0, 0.0, 1.1, 141.0, 101.0), ("lucky", 0, 1.2, 0.6, 92.0, 61.0)]
+    ).assign(settled_share=1.0, episodes=10)
+    out = F.confirm(picked, confirmed).set_index("controller")
+    assert out.loc["lucky", "on_frontier"] and not out.loc["lucky", "reachable"]
+    assert out.loc["lucky", "confirmed_abs_final_error_deg"] == 1.2
+    assert out.loc["pid", "reachable"]
+
+
+def test_the_frontier_picks_on_the_selection_root_and_confirms_on_the_evaluation_root(tmp_path):
+    import json
+
+    from myoexo.envs.options import TwinOptions
+
+    twin = TwinOptions(task=(("episode_duration_s", 1.5),))  # the PID settles in ~1 s
+    with pytest.raises(ValueError, match="evaluation root"):
+        F.build_frontier(tmp_path, 1, levels=(0,), twin=twin, selection_root_seed=0)
+    pts = F.build_frontier(
+        tmp_path, 2, levels=(0,), twin=twin, progress=False, workers=1, confirm_subjects=1
+    )
+    picking = json.loads((tmp_path / "selection" / "config.json").read_text())["config"]
+    checking = json.loads((tmp_path / "evaluation" / "config.json").read_text())["config"]
+    assert (picking["root_seed"], picking["selection"], picking["subjects"]) == (1, True, 2)
+    assert (checking["root_seed"], checking["selection"], checking["subjects"]) == (0, False, 1)
+    front = set(pts.controller[pts.on_frontier])
+    assert front and set(checking["controllers"]) >= {"pid"}
+    assert set(checking["controllers"]) - {"pid"} <= front
+    assert "reachable" in pts and (tmp_path / "frontier.md").read_text().count("confirmed")
+
+
+def test_the_committed_frontier_table_is_what_its_file_gives():
+    """docs/studies/frontier: `myoexo frontier` writes frontier.md from frontier.csv."""
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "docs" / "studies" / "frontier"
+    committed = (folder / "frontier.md").read_text()
+    assert committed == F.markdown(pd.read_csv(folder / "frontier.csv")) + "\n"
+    pts = pd.read_csv(folder / "frontier.csv")
+    assert pts.reachable.dtype == bool and (pts.reachable <= pts.on_frontier).all()

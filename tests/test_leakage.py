@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from myoexo.control import specs
 from myoexo.evaluation.config import EVALUATION_ROOT_SEED, SELECTION_ROOT_SEED, EvaluationConfig
 from myoexo.evaluation.engine import resolve_controllers
 from myoexo.policies import SHIPPED_POLICIES, load_policy
@@ -24,19 +23,54 @@ def test_shipped_policies_record_a_selection_root_other_than_the_evaluation(name
     assert policy.selection_root_seed != EVALUATION_ROOT_SEED
 
 
-def test_an_evaluation_on_the_selection_root_is_refused(monkeypatch):
-    class Chosen:
-        def __init__(self) -> None:
-            self.metadata = {"selection_root_seed": 5, "obs_preset": "full"}
+def _policy_files() -> list[str]:
+    """Every shipped policy by name and by its own file (the exported actor's ``.npz``)."""
+    from myoexo.policies import shipped_path
 
-    monkeypatch.setattr(specs, "load_shipped_policy", lambda name="sac": Chosen())
-    import myoexo.evaluation.engine as engine
+    names = sorted(SHIPPED_POLICIES)
+    return names + [str(shipped_path(n).with_suffix(".npz")) for n in names]
 
-    monkeypatch.setattr(engine, "load_shipped_policy", lambda name="sac": Chosen())
-    with pytest.raises(ValueError, match="selected on the subjects of root seed 5"):
-        resolve_controllers(["sac"], root_seed=5)
-    chosen, skipped = resolve_controllers(["sac"], root_seed=0)
-    assert [s.label for s in chosen] == ["sac"] and not skipped
+
+@pytest.mark.parametrize("policy", _policy_files())
+def test_an_evaluation_on_the_selection_root_is_refused_through_the_real_files(
+    policy, tmp_path, capsys
+):
+    """`myoexo evaluate` of a shipped policy (by name, or its own .npz file) on the root that
+    selected it exits 2 naming the root, and writes nothing; on the evaluation root it
+    resolves. (A `model.zip` chosen by `myoexo select` is refused the same way:
+    tests/test_twin_options.py runs it through the console script.)"""
+    from myoexo.cli import main
+
+    out = tmp_path / "out"
+    argv = ["evaluate", "--controllers", policy, "--levels", "0", "--subjects", "1"]
+    assert main([*argv, "--seed", str(SELECTION_ROOT_SEED), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"selected on the subjects of root seed {SELECTION_ROOT_SEED}" in err
+    assert not out.exists()
+    chosen, skipped = resolve_controllers([policy], root_seed=EVALUATION_ROOT_SEED)
+    assert len(chosen) == 1 and not skipped
+
+
+def test_a_selection_run_may_not_use_the_evaluation_root_and_makes_no_result_set(tmp_path):
+    from myoexo.evaluation.results import collect
+    from myoexo.evaluation.runner import evaluate
+
+    with pytest.raises(ValueError, match="that is the evaluation root"):
+        EvaluationConfig(selection=True, root_seed=EVALUATION_ROOT_SEED)
+    from myoexo.envs.options import TwinOptions
+
+    config = EvaluationConfig(
+        controllers=("pid", "sac"),
+        levels=(0,),
+        subjects=1,
+        root_seed=SELECTION_ROOT_SEED,
+        selection=True,  # may run `sac` on the root that selected it: a picking step
+        twin=TwinOptions(task=(("episode_duration_s", 0.2),)),
+    )
+    evaluate(config, tmp_path / "picking", workers=1, progress=False)
+    with pytest.raises(ValueError, match="evaluation root 0 only"):
+        collect(tmp_path / "picking", tmp_path / "set")
+    assert not (tmp_path / "set").exists()
 
 
 # ------------------------------------------------------------- fitting and choosing refused
@@ -97,8 +131,9 @@ def test_fitting_or_choosing_on_the_evaluation_root_is_refused_in_the_api(tmp_pa
 
 
 def test_the_fitted_reflex_values_record_their_root():
+    from myoexo.evaluation.config import CALIBRATION_ROOT_SEED
     from myoexo.spasticity import CALIBRATION, PERSISTENT, UNCALIBRATED
 
-    # the shipped calibrations were fitted before the roots were separated: on root 0
-    assert CALIBRATION.root_seed == 0 and PERSISTENT.root_seed == 0
+    # the shipped calibrations are fitted on the calibration root
+    assert CALIBRATION.root_seed == CALIBRATION_ROOT_SEED == PERSISTENT.root_seed
     assert UNCALIBRATED.root_seed is None

@@ -195,14 +195,21 @@ def test_the_shipped_sac_records_its_seeds_and_the_ship_rule():
     assert policy.selection_root_seed == 1
 
 
+#: What each shipped policy's model card claims on every evaluation subject it was tested on:
+#: the levels where its mean final error is below 1 deg (the study's bound). `sac` (seed 2
+#: of the five-seed set) misses it at level 1 on the evaluation root (its card's table);
+#: `student_exo` meets it at levels 0-1.
+ACCURATE_LEVELS = {"sac": (0,), "student_exo": (0, 1)}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["sac", "student_exo"])
+@pytest.mark.parametrize("name", sorted(ACCURATE_LEVELS))
 def test_the_shipped_policies_headline_criteria_against_the_pid_on_a_few_subjects(name):
     """Three evaluation subjects per level, full 8-s episodes, the paper's PID on the same
     subjects: the documented headline of each policy, not a tolerance fitted to one run.
-    Both reach the target (< 1 deg) at levels 0-1 where the PID overshoots, neither ends
-    beyond the failure bound of 20 deg on any of these subjects, and both hold a lower peak
-    interaction torque than the PID at every level."""
+    Each reaches the target (< 1 deg) where its card says it does, neither ends beyond the
+    failure bound of 20 deg on any of these subjects, and both hold a lower peak interaction
+    torque than the PID at every level."""
     from myoexo.control import PID
     from myoexo.envs import TaskParams
     from myoexo.evaluation import evaluate_controller
@@ -213,7 +220,7 @@ def test_the_shipped_policies_headline_criteria_against_the_pid_on_a_few_subject
         mine, _ = evaluate_controller(policy, level, 3, 0, label=name)
         base, _ = evaluate_controller(pid, level, 3, 0, label="pid")
         assert (mine["abs_final_error_deg"] < 20.0).all(), (level, mine["abs_final_error_deg"])
-        if level <= 1:
+        if level in ACCURATE_LEVELS[name]:
             assert mine["abs_final_error_deg"].mean() < 1.0, level
         assert (
             mine["peak_interaction_torque_nm"].mean() < base["peak_interaction_torque_nm"].mean()

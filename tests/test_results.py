@@ -14,14 +14,15 @@ from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate
 from myoexo.evaluation.config import load_config
 from myoexo.evaluation.results import (
-    README_END,
-    README_SET,
-    README_START,
     RESULTS_DIR,
+    Block,
     collect,
     command_of,
     write_tables,
 )
+
+README_SET = "eval_1000"
+BLOCK = Block("README.md", README_SET, ("sac",))
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -54,22 +55,30 @@ def test_a_result_set_holds_the_tables_inputs_and_its_provenance(evaluation, tmp
 def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):
     root = tmp_path / "repo"
     collect(evaluation, root / RESULTS_DIR / README_SET)
-    (root / "README.md").write_text(f"intro\n{README_START}\nold\n{README_END}\nrest\n")
-    assert write_tables(root, check=True) == [f"{RESULTS_DIR}/{README_SET}/tables.md", "README.md"]
-    assert write_tables(root) and write_tables(root, check=True) == []
+    (root / "README.md").write_text(f"intro\n{BLOCK.start}\nold\n{BLOCK.end}\nrest\n")
+    blocks = (BLOCK,)
+    assert write_tables(root, check=True, blocks=blocks) == [
+        f"{RESULTS_DIR}/{README_SET}/tables.md",
+        "README.md",
+    ]
+    assert write_tables(root, blocks=blocks) and write_tables(root, True, blocks) == []
     readme = (root / "README.md").read_text()
     assert readme.startswith("intro\n") and readme.endswith("rest\n") and "old" not in readme
     assert "| 2 |" in readme and "(the study's aggregation)" in readme
     tables = root / RESULTS_DIR / README_SET / "tables.md"
     tables.write_text(tables.read_text().replace("| 1 |", "| 1 (edited) |", 1))
-    assert write_tables(root, check=True) == [f"{RESULTS_DIR}/{README_SET}/tables.md"]
+    assert write_tables(root, True, blocks) == [f"{RESULTS_DIR}/{README_SET}/tables.md"]
+    absent = Block("NOTES.md", README_SET, ("student_exo",))
+    (root / "NOTES.md").write_text(f"{absent.start}\n{absent.end}\n")
+    with pytest.raises(ValueError, match="has no \\['student_exo'\\]"):
+        write_tables(root, True, (absent,))
     (root / "README.md").write_text("no markers\n")
     with pytest.raises(ValueError, match="lacks the markers"):
-        write_tables(root, check=True)
+        write_tables(root, True, blocks)
     shutil.rmtree(root / RESULTS_DIR / README_SET)
     (root / RESULTS_DIR / "broken").mkdir()
     with pytest.raises(ValueError, match="is no result set"):
-        write_tables(root, check=True)
+        write_tables(root, True, ())
 
 
 def test_every_committed_results_table_is_what_its_files_give():
@@ -77,3 +86,35 @@ def test_every_committed_results_table_is_what_its_files_give():
     after `myoexo results collect` to refresh them)."""
     assert (REPO / RESULTS_DIR).is_dir(), "no committed result set"
     assert write_tables(REPO, check=True) == []
+
+
+def test_the_committed_calibrations_are_the_constants_the_twin_uses():
+    """docs/studies/calibration_*: the output of `myoexo calibrate` on the calibration root,
+    whose fitted values and provenance are the package's constants."""
+    from myoexo.spasticity import CALIBRATION, PERSISTENT
+
+    studies = REPO / "docs" / "studies"
+    stretch = (studies / "calibration_stretch" / "calibration.md").read_text()
+    assert CALIBRATION.note in stretch and "**The fit** (in-sample" in stretch
+    for level, c in CALIBRATION.levels.items():
+        line = (
+            f"{level}: LevelCalibration(flexor_gain={c.flexor_gain:g}, "
+            f"extensor_gain={c.extensor_gain:g}, "
+            f"flexor_threshold_shift_deg={c.flexor_threshold_shift_deg:.2f})"
+        )
+        assert line in stretch
+    persistent = (studies / "calibration_persistent" / "calibration.md").read_text()
+    gains = ", ".join(f"{lv}: {g:.4f}" for lv, g in sorted(PERSISTENT.gains.items()))
+    assert PERSISTENT.note in persistent and f"gains=MappingProxyType({{{gains}}})" in persistent
+
+
+def test_the_command_names_a_seeds_folder_once():
+    specs = [
+        "pid",
+        "sbx_sac:runs/s5/seed_0/checkpoints/step_0000000100/model.zip",
+        "sbx_sac:runs/s5/seed_1/checkpoints/step_0000000200/model.zip",
+    ]
+    config = {"config": {"controllers": specs, "levels": [0], "subjects": 5}}
+    assert command_of(config) == (
+        "myoexo evaluate --controllers pid --seeds-dir runs/s5 --levels 0 --subjects 5"
+    )

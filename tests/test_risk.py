@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from myoexo.evaluation.report import headline, reductions
+from myoexo.evaluation.report import MEMBER, headline, reductions, seed_groups
 from myoexo.evaluation.risk import (
     catastrophic_lines,
-    paired_interval,
+    crossed_interval,
     reduction_pct,
     tail_risk,
     verdict,
@@ -67,18 +67,75 @@ def test_verdicts_follow_the_whole_interval():
 def test_a_paired_interval_keeps_the_pairs_together():
     ref = np.array([100.0, 120.0, 80.0, 110.0, 90.0])
     # the same 10 % lower on every subject: every resample gives exactly 10 %
-    low, high = paired_interval((ref, 0.9 * ref), reduction_pct)
+    low, high = crossed_interval((ref, 0.9 * ref), reduction_pct)
     assert low == pytest.approx(10.0) and high == pytest.approx(10.0)
     assert reduction_pct(ref, 0.9 * ref) == pytest.approx(10.0)
     # independent noise: the interval brackets the sample value and has a width
     rng = np.random.default_rng(0)
     other = ref * (0.9 + 0.05 * rng.standard_normal(ref.size))
-    low, high = paired_interval((ref, other), reduction_pct)
+    low, high = crossed_interval((ref, other), reduction_pct)
     assert low < reduction_pct(ref, other) < high
-    assert paired_interval((ref[:2], other[:2]), reduction_pct) != paired_interval(
-        (ref, other), reduction_pct
-    )
-    assert all(math.isnan(v) for v in paired_interval((ref[:2], other[:2]), reduction_pct))
+    assert all(math.isnan(v) for v in crossed_interval((ref[:2], other[:2]), reduction_pct))
+    # shapes that do not pair: no interval
+    assert math.isnan(crossed_interval((ref, other[:4]), reduction_pct)[0])
+
+
+def _mean(x, axis=-1):
+    return np.mean(x, axis=axis)
+
+
+def test_the_interval_over_seeds_and_subjects_covers_95_percent():
+    """Crossed data: value = seed effect + subject effect + noise, true mean 0. A 95 %
+    interval must contain 0 in about 95 % of repetitions (a binomial 95 % band for 200
+    repetitions is about 92-98 %); resampling the seeds alone with 5 of them covers less."""
+    hits = seeds_only_hits = 0
+    repetitions = 200
+    for r in range(repetitions):
+        rng = np.random.default_rng(1000 + r)
+        x = rng.normal(0, 1, (5, 1)) + rng.normal(0, 1, (1, 100)) + rng.normal(0, 1, (5, 100))
+        low, high = crossed_interval((x,), _mean, seed=r)
+        hits += low <= 0.0 <= high
+        seed_means = np.sort(x.mean(axis=1))
+        seeds_only_hits += seed_means[0] <= 0.0 <= seed_means[-1]  # the seeds' full range
+    assert 0.90 <= hits / repetitions <= 0.99
+    assert seeds_only_hits / repetitions < hits / repetitions
+
+
+def test_a_seed_spread_widens_the_interval():
+    rng = np.random.default_rng(3)
+    ref = rng.normal(100, 5, 200)
+    same = ref * 0.9 + rng.normal(0, 1, (5, 200))  # five seeds that agree
+    spread = same + np.array([[-4.0], [-2.0], [0.0], [2.0], [4.0]])  # five that do not
+    lo1, hi1 = crossed_interval((ref, same), reduction_pct)
+    lo2, hi2 = crossed_interval((ref, spread), reduction_pct)
+    assert hi2 - lo2 > 3 * (hi1 - lo1)
+    assert lo2 < reduction_pct(ref, spread.ravel()) < hi2
+
+
+def test_a_seeds_folder_is_one_controller_over_its_seeds_and_subjects():
+    rows = []
+    for subject in range(6):
+        rows.append(("pid", 2, subject, 100.0))
+        rows.append(("s5-seed_0-step_100", 2, subject, 80.0))
+        rows.append(("s5-seed_1-step_250", 2, subject, 90.0))
+    table = pd.DataFrame(rows, columns=["controller", "level", "subject", "peak"])
+    table["peak_interaction_torque_nm"] = table["peak"]
+    table["rms_interaction_torque_nm"] = table["peak"] / 2
+    table["settling_time_s"] = 1.0
+    table["abs_final_error_deg"] = table["peak"] / 10
+    table["unstable"] = False
+    grouped = seed_groups(table)
+    assert list(dict.fromkeys(grouped.controller)) == ["pid", "s5"]
+    assert set(grouped.loc[grouped.controller == "s5", MEMBER]) == {
+        "s5-seed_0-step_100",
+        "s5-seed_1-step_250",
+    }
+    red = reductions(grouped, "pid", "s5").set_index("level")
+    # (20 % + 10 %) / 2 over 2 seeds x 6 subjects
+    assert red.loc[2, "peak_reduction_pct"] == pytest.approx(15.0)
+    assert red.loc[2, "seeds"] == 2 and red.loc[2, "n_paired"] == 12
+    risk = tail_risk(grouped).set_index(["controller", "level"])
+    assert risk.loc[("s5", 2), "n"] == 12 and risk.loc[("s5", 2), "worst_abs_final_error_deg"] == 9
 
 
 def test_the_study_aggregation_is_the_mean_of_levels_1_and_2_and_settling_is_a_ratio():
@@ -93,6 +150,7 @@ def test_the_study_aggregation_is_the_mean_of_levels_1_and_2_and_settling_is_a_r
                         "subject": subject,
                         "peak_interaction_torque_nm": peak,
                         "rms_interaction_torque_nm": peak / 2,
+                        "abs_final_error_deg": 0.5 if label == "rl" else 0.2,
                         # rl never settles at level 3: counted, not dropped
                         "settling_time_s": math.nan if (label, level) == ("rl", 3) else settle,
                     }
@@ -108,6 +166,11 @@ def test_the_study_aggregation_is_the_mean_of_levels_1_and_2_and_settling_is_a_r
     assert red.loc[3, "other_settled_pct"] == 0.0 and red.loc[3, "reference_settled_pct"] == 100
     assert red.loc[3, "n_both_settled"] == 0 and math.isnan(red.loc[3, "settling_ratio"])
     assert red.loc[2, "peak_reduction_pct"] == pytest.approx(20.0)
+    # the final error and its paired difference from the PID's (0.5 - 0.2 on every subject)
+    assert red.loc[1, "abs_final_error_deg"] == pytest.approx(0.5)
+    assert red.loc[1, "abs_final_error_diff_deg"] == pytest.approx(0.3)
+    assert red.loc[1, "abs_final_error_diff_deg_low"] == pytest.approx(0.3)
+    assert red.loc[1, "abs_final_error_diff_deg_high"] == pytest.approx(0.3)
 
 
 def test_the_studys_headline_is_its_levels_1_2_mean():

@@ -42,6 +42,7 @@ policy was trained on).
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -53,7 +54,14 @@ from myoexo.control.policy import SB3Controller
 from myoexo.control.protocol import Controller
 from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
-from myoexo.policies.run_files import CHECKPOINTS_DIR, MODEL_FILE, VECNORM_FILE, read_state
+from myoexo.policies.run_files import (
+    AGGREGATE_FILE,
+    CHECKPOINTS_DIR,
+    CONFIG_FILE,
+    MODEL_FILE,
+    VECNORM_FILE,
+    read_state,
+)
 
 _PID_KEYS = (
     "kp",
@@ -167,6 +175,39 @@ def seeds_folder_of(label: str) -> str | None:
     (``<seeds>-seed_<N>-<step>``), or ``None`` for any other label."""
     m = _SEED_CHECKPOINT_LABEL.fullmatch(label)
     return m.group("seeds") if m else None
+
+
+def seeds_controllers(seeds_dir: str | Path) -> list[str]:
+    """The checkpoints ``myoexo seeds aggregate`` selected in *seeds_dir*, as controller
+    specs (``<algorithm>:<checkpoint>/model.zip``, the algorithm from each checkpoint's
+    state), one per seed in seed order: evaluated together they are one controller of the
+    tables, over seeds and subjects (their labels share the folder's name).
+
+    Raises:
+        ValueError: *seeds_dir* has no aggregate (run ``myoexo seeds aggregate``).
+    """
+    path = Path(seeds_dir) / AGGREGATE_FILE
+    if not path.is_file():
+        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
+    chosen = json.loads(path.read_text())["selected_checkpoints"]
+    specs = []
+    for seed in sorted(chosen, key=int):
+        checkpoint = Path(chosen[seed])
+        specs.append(f"{_checkpoint_algorithm(checkpoint)}:{checkpoint / MODEL_FILE}")
+    return specs
+
+
+def _checkpoint_algorithm(checkpoint: Path) -> str:
+    """The algorithm of a checkpoint: its state's, else its run's preset's (``"sac"``)."""
+    try:
+        algorithm = read_state(checkpoint).get("algorithm")
+    except (OSError, ValueError):
+        algorithm = None
+    if algorithm is None:
+        config = checkpoint.parent.parent / CONFIG_FILE
+        preset = json.loads(config.read_text()).get("preset", {}) if config.is_file() else {}
+        algorithm = preset.get("algorithm", "sac")
+    return str(algorithm)
 
 
 def _pid_options(tail: str) -> dict[str, Any]:

@@ -98,6 +98,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=d.env_id,
         help="gymnasium id of a level's env, with '{level}' (default: %(default)s)",
     )
+    parser.add_argument(
+        "--seeds-dir",
+        type=Path,
+        nargs="+",
+        default=[],
+        metavar="DIR",
+        help="aggregated `myoexo seeds` folders: each seed's selected checkpoint is added to "
+        "the controllers, and the report and result sets treat a folder's seeds as one "
+        "controller (intervals over seeds and subjects)",
+    )
     add_twin_arguments(parser)
     parser.add_argument("--report", action="store_true", help="write the report when done")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -106,11 +116,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo evaluate``; 0 on success, 2 on bad arguments or a folder in use,
     128 + the signal number when stopped by SIGINT / SIGTERM."""
+    from myoexo.control.specs import seeds_controllers
     from myoexo.evaluation.runner import evaluate
 
     try:
+        seeds = [spec for folder in args.seeds_dir for spec in seeds_controllers(folder)]
         config = EvaluationConfig(
-            controllers=tuple(args.controllers),
+            controllers=(*args.controllers, *seeds),
             levels=tuple(args.levels),
             subjects=args.subjects,
             root_seed=args.seed,

@@ -105,6 +105,9 @@ class EvaluationConfig:
             task, e.g. ``episode_duration_s``; reflex model; ``robustness``, a perturbed twin
             per episode drawn from its subject seed, the same for every controller; the
             reward weights and observation are each policy's own, from its files).
+        selection: A selection run (e.g. the frontier's picking), not a result: it must run
+            on a root other than the evaluation root (:func:`check_fit_root`) and may run
+            policies on the root that selected them; its numbers are in-sample.
     """
 
     controllers: tuple[str, ...] = ("pid",)
@@ -115,10 +118,13 @@ class EvaluationConfig:
     chunk_size: int = 10
     env_id: str = "MyoExoKnee-v{level}"
     twin: TwinOptions = field(default_factory=TwinOptions)
+    selection: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.twin, TwinOptions):
             raise ValueError(f"twin = {self.twin!r}: expected TwinOptions")
+        if self.selection:
+            check_fit_root(self.root_seed, "a selection run")
         object.__setattr__(self, "controllers", tuple(self.controllers))
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
         if not self.controllers:

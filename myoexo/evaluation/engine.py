@@ -31,6 +31,7 @@ from myoexo.control.specs import (
     load_actor_file,
     load_shipped_policy,
     parse_controller_spec,
+    policy_metadata,
     policy_twin,
     spec_env_kwargs,
 )
@@ -44,6 +45,7 @@ from myoexo.evaluation.storage import (
 )
 from myoexo.policies.algorithms import load_sb3_model
 from myoexo.runtime.lifecycle import die_with_parent, ignore_signals
+from myoexo.spasticity.registry import reflex_parameter_changes
 
 #: Signals recorded at full rate for the metrics (traces keep a subset, downsampled).
 RECORDED_CHANNELS: tuple[str, ...] = (*TRACE_CHANNELS, "time_s", "target_angle_deg")
@@ -247,6 +249,21 @@ class TwinMismatchWarning(UserWarning):
     """A policy is evaluated on another twin than the one it was trained on."""
 
 
+def _parameter_mismatch(spec: ControllerSpec, twin: TwinOptions) -> str | None:
+    """A warning if the policy's twin recorded its reflex model's parameters and they differ
+    from that model's now (e.g. a re-fitted calibration), else ``None``."""
+    recorded = (policy_metadata(spec).get("twin") or {}).get("reflex_parameters")
+    if not recorded:
+        return None
+    changes = reflex_parameter_changes(recorded, twin.reflex)
+    if not changes:
+        return None
+    return (
+        f"trained on the reflex model {twin.reflex!r} with other parameters than it has now "
+        f"({'; '.join(changes)})"
+    )
+
+
 def resolve_controllers(
     specs_text: Iterable[str],
     log: Callable[[str], None] = print,
@@ -282,6 +299,8 @@ def resolve_controllers(
             check_no_selection_leak(spec, root_seed)
         trained = policy_twin(spec) if twin is not None else None
         mismatch = twin_mismatch(trained, twin) if trained is not None and twin else None
+        if trained is not None and twin is not None and not mismatch:
+            mismatch = _parameter_mismatch(spec, twin)
         if mismatch:
             message = f"controller {text!r} was {mismatch}"
             log(f"myoexo evaluate: warning: {message}")

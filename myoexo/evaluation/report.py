@@ -28,16 +28,17 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.control.specs import controller_slug
+from myoexo.control.specs import controller_slug, seeds_folder_of
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.config import load_config
 from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
 from myoexo.evaluation.risk import (
     FAILURE_DEG,
+    INTERVAL_METHOD,
     catastrophic_lines,
+    crossed_interval,
     mean_ratio,
     mean_reduction_pct,
-    paired_interval,
     reduction_pct,
     tail_risk,
     verdict,
@@ -96,24 +97,61 @@ def reference_controller(labels: Sequence[str]) -> str | None:
     return next((c for c in labels if c.lower().startswith("pid")), None)
 
 
+#: Column of a grouped episode table (:func:`seed_groups`) naming the controller an episode
+#: was run with; ``controller`` then names its group.
+MEMBER = "member"
+
+
+def seed_groups(table: Any) -> Any:
+    """The episode table with every ``myoexo seeds`` folder's checkpoints as one controller.
+
+    A checkpoint of a seeds folder is labelled ``<seeds>-seed_<N>-step_<k>``
+    (:func:`~myoexo.control.specs.seeds_folder_of`); its episodes get the controller
+    ``<seeds>`` and keep their own label in the column :data:`MEMBER`, so means, tails and
+    intervals are over the seeds *and* the subjects. Every other controller is its own group
+    of one.
+    """
+    out = table.copy()
+    out[MEMBER] = out["controller"]
+    out["controller"] = [seeds_folder_of(c) or c for c in out[MEMBER]]
+    return out
+
+
 def _pairs(table: Any, reference: str, other: str, level: int, col: str) -> tuple:
-    """``(reference values, other values)`` of *col* on the subjects both ran at *level*."""
-    ref = table[(table.controller == reference) & (table.level == level)].set_index("subject")
-    oth = table[(table.controller == other) & (table.level == level)].set_index("subject")
-    common = ref.index.intersection(oth.index).sort_values()
-    return (
-        ref.loc[common, col].to_numpy(dtype=float),
-        oth.loc[common, col].to_numpy(dtype=float),
-    )
+    """``(reference, other)`` values of *col* on the subjects both ran at *level*: the
+    reference's as ``(subjects,)``, the other's as ``(members, subjects)`` (one row per seed
+    of a group, :func:`seed_groups`), subject ``i`` the same person in both; only subjects
+    that every member ran and whose values are all finite."""
+    member = MEMBER if MEMBER in table else "controller"
+    ref = table[(table.controller == reference) & (table.level == level)]
+    ref = ref.drop_duplicates("subject").set_index("subject")[col]
+    oth = table[(table.controller == other) & (table.level == level)]
+    wide = oth.pivot_table(index=member, columns="subject", values=col, dropna=False)
+    common = ref.index.intersection(wide.columns).sort_values()
+    ref_v = ref.loc[common].to_numpy(dtype=float)
+    oth_v = wide.loc[:, common].to_numpy(dtype=float)
+    ok = np.isfinite(ref_v) & np.isfinite(oth_v).all(axis=0)
+    return ref_v[ok], oth_v[:, ok]
+
+
+def _mean(values: np.ndarray, axis: int = -1) -> Any:
+    return np.mean(values, axis=axis)
+
+
+def _mean_difference(reference: np.ndarray, other: np.ndarray, axis: int = -1) -> Any:
+    return np.mean(other, axis=axis) - np.mean(reference, axis=axis)
 
 
 def reductions(table: Any, reference: str, other: str) -> Any:
-    """Per level, ``other`` against ``reference`` on the same subjects:
+    """Per level, ``other`` (a controller, or a group of seeds: :func:`seed_groups`) against
+    ``reference`` on the same subjects:
 
     * the reduction of the RMS to settling and of the peak interaction torque, in % of the
-      reference's mean, with a 95 % interval resampling subjects
-      (:func:`~myoexo.evaluation.risk.paired_interval`), and the paired difference
+      reference's mean, with a 95 % interval over seeds and subjects
+      (:func:`~myoexo.evaluation.risk.crossed_interval`), and the paired difference
       (reference - other) as mean and std in Nm;
+    * the mean absolute final error and its paired difference from the reference's (other -
+      reference, deg), each with its interval (unstable episodes are left to the tail);
     * settling: the share of episodes that settle for each, and the ratio of the mean
       settling times on the subjects where both settle (with its interval); unsettled
       episodes are counted, not dropped."""
@@ -129,29 +167,39 @@ def reductions(table: Any, reference: str, other: str) -> Any:
         row: dict[str, Any] = {"level": int(level)}
         for key, col in cols.items():
             ref, oth = _pairs(table, reference, other, level, col)
-            ok = np.isfinite(ref) & np.isfinite(oth)
-            ref, oth = ref[ok], oth[ok]
-            row["n_paired"] = int(ref.size)
+            row["n_paired"] = int(oth.size)
+            row["seeds"] = int(oth.shape[0])
             diff = ref - oth
             row[f"{key}_reduction_pct"] = (
-                float(reduction_pct(ref, oth)) if ref.size and ref.mean() else math.nan
+                float(reduction_pct(ref, oth.ravel())) if ref.size and ref.mean() else math.nan
             )
-            low, high = paired_interval((ref, oth), reduction_pct, seed=int(level))
+            low, high = crossed_interval((ref, oth), reduction_pct, seed=int(level))
             row[f"{key}_reduction_pct_low"], row[f"{key}_reduction_pct_high"] = low, high
             row[f"{key}_paired_diff_nm_mean"] = float(diff.mean()) if diff.size else math.nan
             row[f"{key}_paired_diff_nm_std"] = (
                 float(diff.std(ddof=1)) if diff.size > 1 else math.nan
             )
-        ref_s, oth_s = _pairs(table, reference, other, level, "settling_time_s")
-        both = np.isfinite(ref_s) & np.isfinite(oth_s)
-        row["reference_settled_pct"] = 100.0 * float(np.isfinite(ref_s).mean())
-        row["other_settled_pct"] = 100.0 * float(np.isfinite(oth_s).mean())
-        row["n_both_settled"] = int(both.sum())
-        row["settling_ratio"] = (
-            float(mean_ratio(ref_s[both], oth_s[both])) if both.any() else math.nan
+        ref_e, oth_e = _pairs(table, reference, other, level, "abs_final_error_deg")
+        row["abs_final_error_deg"] = float(oth_e.mean()) if oth_e.size else math.nan
+        row["abs_final_error_deg_low"], row["abs_final_error_deg_high"] = crossed_interval(
+            (oth_e,), _mean, seed=int(level)
         )
-        row["settling_ratio_low"], row["settling_ratio_high"] = paired_interval(
-            (ref_s[both], oth_s[both]), mean_ratio, seed=int(level)
+        row["abs_final_error_diff_deg"] = (
+            float(oth_e.mean() - ref_e.mean()) if oth_e.size else math.nan
+        )
+        row["abs_final_error_diff_deg_low"], row["abs_final_error_diff_deg_high"] = (
+            crossed_interval((ref_e, oth_e), _mean_difference, seed=int(level))
+        )
+        level_rows = table[table.level == level]
+        settled = np.isfinite(level_rows["settling_time_s"].to_numpy(dtype=float))
+        for who, name in (("reference", reference), ("other", other)):
+            mine = (level_rows.controller == name).to_numpy()
+            row[f"{who}_settled_pct"] = 100.0 * float(settled[mine].mean())
+        ref_s, oth_s = _pairs(table, reference, other, level, "settling_time_s")
+        row["n_both_settled"] = int(oth_s.size)
+        row["settling_ratio"] = float(mean_ratio(ref_s, oth_s.ravel())) if ref_s.size else math.nan
+        row["settling_ratio_low"], row["settling_ratio_high"] = crossed_interval(
+            (ref_s, oth_s), mean_ratio, seed=int(level)
         )
         rows.append(row)
     return pd.DataFrame(rows)
@@ -165,20 +213,20 @@ HEADLINE_LEVELS: tuple[int, ...] = (1, 2)
 
 def headline(table: Any, reference: str, other: str, levels: Sequence[int]) -> dict[str, Any]:
     """The mean over *levels* of the per-level peak and RMS reductions of ``other`` against
-    ``reference``, each with a 95 % interval resampling subjects (the levels' subject ``i``
-    together; ``nan`` where a level is missing or the levels have different subjects)."""
+    ``reference``, each with a 95 % interval over seeds and subjects (the levels' subject
+    ``i`` together; ``nan`` where a level is missing or the levels have other subjects)."""
     out: dict[str, Any] = {"levels": tuple(levels)}
     cols = {"rms": "rms_interaction_torque_nm", "peak": "peak_interaction_torque_nm"}
     for key, col in cols.items():
         arrays: list[np.ndarray] = []
         for level in levels:
             arrays += list(_pairs(table, reference, other, level, col))
-        sizes = {a.size for a in arrays}
-        if not arrays or len(sizes) != 1 or 0 in sizes:
+        subjects = {a.shape[-1] for a in arrays}
+        if not arrays or len(subjects) != 1 or 0 in subjects:
             out[key] = out[f"{key}_low"] = out[f"{key}_high"] = math.nan
             continue
-        out[key] = float(mean_reduction_pct(*arrays))
-        out[f"{key}_low"], out[f"{key}_high"] = paired_interval(arrays, mean_reduction_pct)
+        out[key] = float(mean_reduction_pct(*(a.ravel() for a in arrays)))
+        out[f"{key}_low"], out[f"{key}_high"] = crossed_interval(arrays, mean_reduction_pct)
     return out
 
 
@@ -337,8 +385,8 @@ def _reduction_section(
             for r in rdf.itertuples()
         ]
         lines = [
-            f"**`{other}` vs `{reference}`** (paired: same subjects; [95 % interval], "
-            f"percentile bootstrap over subjects)\n\n"
+            f"**`{other}` vs `{reference}`** (paired: same subjects; [95 % interval] over "
+            f"{int(rdf.seeds.max())} seed(s) and the subjects: {INTERVAL_METHOD})\n\n"
             + _md_table(
                 [
                     "level",
@@ -455,6 +503,7 @@ def write_report(
     fig_dir = dest / "figures"
     pngs = write_figures(out, fig_dir, table)
 
+    table = seed_groups(table)  # a seeds folder's checkpoints: one controller
     summary = summarize(table)
     summary.to_csv(dest / "summary.csv", index=False)
     labels = list(dict.fromkeys(table["controller"]))

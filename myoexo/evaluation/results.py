@@ -10,21 +10,28 @@ PID on the same subjects, with intervals, :func:`~myoexo.evaluation.report.reduc
 and the package versions). Result sets are committed under ``docs/results/``.
 
 ``myoexo results tables`` renders each set's Markdown tables into ``tables.md`` beside its
-files (the docs include it) and the README's short table between its markers; ``--check``
-fails where a committed table differs from what the files give, so no results table is
-typed by hand.
+files (the docs include it) and the short tables of the README and the model cards between
+their markers (:data:`BLOCKS`); ``--check`` fails where a committed table differs from what
+the files give, so no results table is typed by hand.
+
+A ``myoexo seeds`` folder's checkpoints are one controller of a set, named after the folder
+(:func:`~myoexo.evaluation.report.seed_groups`): its means, tails and intervals are over the
+seeds and the subjects.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import TwinOptions
-from myoexo.evaluation.config import load_config
-from myoexo.evaluation.paper import PAPER_HEADLINES
+from myoexo.evaluation.config import EVALUATION_ROOT_SEED, load_config
+from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
 from myoexo.evaluation.report import (
     HEADLINE_LEVELS,
     fmt_ci,
@@ -32,9 +39,10 @@ from myoexo.evaluation.report import (
     headline,
     reductions,
     reference_controller,
+    seed_groups,
     summarize,
 )
-from myoexo.evaluation.risk import FAILURE_DEG, tail_risk, verdict
+from myoexo.evaluation.risk import FAILURE_DEG, INTERVAL_METHOD, tail_risk, verdict
 from myoexo.evaluation.storage import load_table
 from myoexo.runtime.files import write_json_atomic
 
@@ -42,19 +50,62 @@ from myoexo.runtime.files import write_json_atomic
 RESULTS_DIR = Path("docs") / "results"
 #: The rendered tables of a set.
 TABLES_FILE = "tables.md"
-#: The result set whose headline table stands in the README.
-README_SET = "eval_1000"
-#: The README's generated block lies between these two lines.
-README_START = f"<!-- myoexo-results:{README_SET}:start -->"
-README_END = f"<!-- myoexo-results:{README_SET}:end -->"
+
+
+@dataclass(frozen=True)
+class Block:
+    """A generated results block in a file outside the result sets (the README, a model
+    card): the headline table of each of *controllers* from the set *result_set*, between
+    the lines :attr:`start` and :attr:`end`.
+
+    Attributes:
+        path: The file, relative to the repository root.
+        result_set: The set's folder name under :data:`RESULTS_DIR`.
+        controllers: Controllers (or seed groups) of the set, in order.
+    """
+
+    path: str
+    result_set: str
+    controllers: tuple[str, ...]
+
+    @property
+    def start(self) -> str:
+        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:start -->"
+
+    @property
+    def end(self) -> str:
+        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:end -->"
+
+
+#: Every generated block outside the result sets' own ``tables.md``.
+BLOCKS: tuple[Block, ...] = (
+    Block("README.md", "eval_1000", ("sac_5seeds",)),
+    Block("myoexo/policies/MODEL_CARD.md", "eval_1000", ("sac", "sac_5seeds")),
+    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000", ("student_exo",)),
+    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_100_perturbed", ("student_exo",)),
+    Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
+)
 
 _FILES = ("summary.csv", "tail_risk.csv", "reductions.csv", "headline.csv", "meta.json")
+
+
+#: A controller spec of a ``myoexo seeds`` folder's checkpoint (what ``--seeds-dir`` adds).
+_SEED_CHECKPOINT = re.compile(r"(?:\w+:)?(?P<dir>.+)/seed_\d+/checkpoints/step_\d+/model\.zip")
 
 
 def command_of(config: dict[str, Any]) -> str:
     """The ``myoexo evaluate`` command line of an evaluation's ``config.json``."""
     cfg = config.get("config", {})
-    parts = ["myoexo evaluate", "--controllers", *map(str, cfg.get("controllers", []))]
+    controllers, seeds_dirs = [], []
+    for spec in map(str, cfg.get("controllers", [])):
+        m = _SEED_CHECKPOINT.fullmatch(spec)
+        if m is None:
+            controllers.append(spec)
+        elif m.group("dir") not in seeds_dirs:
+            seeds_dirs.append(m.group("dir"))  # --seeds-dir added the folder's checkpoints
+    parts = ["myoexo evaluate", "--controllers", *controllers]
+    if seeds_dirs:
+        parts += ["--seeds-dir", *seeds_dirs]
     parts += ["--levels", *map(str, cfg.get("levels", [])), "--subjects", str(cfg.get("subjects"))]
     if cfg.get("root_seed", 0) != 0:
         parts += ["--seed", str(cfg["root_seed"])]
@@ -77,9 +128,17 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
     import pandas as pd
 
     config = load_config(eval_dir)
-    table = load_table(eval_dir)
+    table = seed_groups(load_table(eval_dir))
     if table.empty:
         raise ValueError(f"{str(eval_dir)!r} holds no episodes yet")
+    cfg = config.get("config", {})
+    if cfg.get("selection") or int(cfg.get("root_seed", 0)) != EVALUATION_ROOT_SEED:
+        raise ValueError(
+            f"{str(eval_dir)!r} ran on root seed {cfg.get('root_seed')}"
+            f"{' as a selection run' if cfg.get('selection') else ''}: a result set holds "
+            f"evaluations on the evaluation root {EVALUATION_ROOT_SEED} only (numbers on other "
+            "roots are in-sample)"
+        )
     labels = list(dict.fromkeys(table["controller"]))
     reference = reference_controller(labels)
     if reference is None:
@@ -102,7 +161,6 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
             h["levels"] = ", ".join(map(str, scope_levels))
             heads.append({"controller": c, "scope": scope, **h})
     pd.DataFrame(heads).to_csv(dest / "headline.csv", index=False)
-    cfg = config.get("config", {})
     meta = {
         "command": command_of(config),
         "reference": reference,
@@ -143,8 +201,19 @@ def _read(folder: Path) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
     )
 
 
+def _judged(row: Any, name: str, target: float | None, higher: bool, digits: int = 1) -> str:
+    """``value [low, high]`` and, against *target*, the verdict by the interval."""
+    cell = _ci_of(row, name, digits)
+    if target is None:
+        return cell
+    call = verdict(row[f"{name}_low"], row[f"{name}_high"], target, higher_is_better=higher)
+    return f"{cell} ({'>=' if higher else '<'} {target:g}: {call})"
+
+
 def headline_table(folder: str | Path, controller: str) -> str:
-    """The short table of one controller against the PID (the README's)."""
+    """The short table of one controller against the PID (the README's): per level its mean
+    absolute final error, peak and RMS reductions and settling ratio, each with its interval
+    and its verdict against the study's per-level claim, and the tail."""
     summary, risk, red, _, meta = _read(Path(folder))
     ref = meta["reference"]
     s = summary.set_index(["controller", "level"])
@@ -152,30 +221,34 @@ def headline_table(folder: str | Path, controller: str) -> str:
     r = red[red.controller == controller].set_index("level")
     rows = []
     for level in sorted(r.index):
+        paper = PAPER_RESULTS[int(level)]
+        row = r.loc[level]
         rows.append(
             [
                 str(level),
-                f"{fmt_num(s.loc[(ref, level), 'final_error_deg_mean'])} / "
-                f"{fmt_num(s.loc[(controller, level), 'final_error_deg_mean'])}",
+                str(int(row.seeds)) if "seeds" in row else "1",
+                _judged(row, "abs_final_error_deg", paper.sac_final_error_bound_deg, False, 2),
+                fmt_num(s.loc[(ref, level), "final_error_deg_mean"]),
                 f"{fmt_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
                 f"{fmt_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
                 str(int(k.loc[(controller, level), "catastrophic"])),
-                _ci_of(r.loc[level], "peak_reduction_pct"),
-                _ci_of(r.loc[level], "rms_reduction_pct"),
-                _ci_of(r.loc[level], "settling_ratio", digits=2),
-                f"{r.loc[level, 'reference_settled_pct']:.0f} / "
-                f"{r.loc[level, 'other_settled_pct']:.0f}",
+                _judged(row, "peak_reduction_pct", paper.peak_reduction_pct, True),
+                _judged(row, "rms_reduction_pct", paper.rms_reduction_pct, True),
+                _judged(row, "settling_ratio", 1.0, False, 2),
+                f"{row.reference_settled_pct:.0f} / {row.other_settled_pct:.0f}",
             ]
         )
     return _md(
         [
             "level",
-            f"final error (deg): {ref} / {controller}",
-            "worst subject (deg)",
+            "seeds",
+            f"{controller} abs final error (deg) [95 % CI] (paper)",
+            f"{ref} final error (deg)",
+            f"worst subject (deg): {ref} / {controller}",
             "catastrophic subjects",
-            "peak reduction % [95 % CI]",
-            "RMS reduction % [95 % CI]",
-            "settling time ratio [95 % CI]",
+            "peak reduction % (paper)",
+            "RMS reduction % (paper)",
+            f"settling time / {ref}'s (faster than the PID)",
             "settled %",
         ],
         rows,
@@ -215,10 +288,11 @@ def render(folder: str | Path, label: str | None = None) -> str:
         f"<!-- generated by `myoexo results tables` from {label or folder.as_posix()}: do not "
         "edit -->",
         f"Command: `{meta['command']}` ({meta['subjects_per_level']} subjects per level, root "
-        f"seed {meta['root_seed']}, {meta['episodes']} episodes; {versions}). Intervals: 95 %, "
-        "percentile bootstrap over subjects with the pairs kept together. A criterion is met "
-        "when its whole interval is on the good side of the paper's number, missed when "
-        "wholly on the other, a tie otherwise.",
+        f"seed {meta['root_seed']}, {meta['episodes']} episodes; {versions}). A `myoexo "
+        "seeds` folder's checkpoints are one controller named after the folder: its numbers "
+        "are over the seeds and the subjects. Intervals: "
+        f"{INTERVAL_METHOD}. A criterion is met when its whole interval is on the good side "
+        "of the paper's number, missed when wholly on the other, a tie otherwise.",
     ]
     for controller in dict.fromkeys(red.controller):
         parts.append(f"**`{controller}`** against `{meta['reference']}` on the same subjects:")
@@ -263,27 +337,43 @@ def render(folder: str | Path, label: str | None = None) -> str:
     return "\n\n".join(parts) + "\n"
 
 
-def readme_block(root: Path) -> str:
-    """The README's generated block (between :data:`README_START` and :data:`README_END`)."""
-    folder = root / RESULTS_DIR / README_SET
-    _, _, _, _, meta = _read(folder)
-    lines = [
-        README_START,
-        headline_table(folder, "sac"),
-        "",
-        *(f"- {line}" for line in aggregation_lines(folder) if line.startswith("`sac`")),
-        "",
-        f"({meta['subjects_per_level']} evaluation subjects per level, root seed "
+def block_text(root: Path, block: Block) -> str:
+    """The text of a generated block, its markers included."""
+    folder = root / RESULTS_DIR / block.result_set
+    _, _, red, _, meta = _read(folder)
+    missing = [c for c in block.controllers if c not in set(red.controller)]
+    if missing:
+        raise ValueError(f"{block.path}: the result set {block.result_set!r} has no {missing}")
+    lines = [block.start]
+    aggregation = aggregation_lines(folder)
+    for controller in block.controllers:
+        lines += [
+            f"**`{controller}`** against `{meta['reference']}` on the same subjects:",
+            "",
+            headline_table(folder, controller),
+            "",
+            *(f"- {line}" for line in aggregation if line.startswith(f"`{controller}`")),
+            "",
+        ]
+    robust = " perturbed twins," if (meta.get("twin") or {}).get("robustness") else ""
+    lines += [
+        f"({meta['subjects_per_level']} evaluation subjects per level,{robust} root seed "
         f"{meta['root_seed']}; generated by `myoexo results tables` from "
-        f"`{RESULTS_DIR.as_posix()}/{README_SET}`.)",
-        README_END,
+        f"`{RESULTS_DIR.as_posix()}/{block.result_set}`.)",
+        block.end,
     ]
     return "\n".join(lines)
 
 
-def write_tables(root: Path, check: bool = False) -> list[str]:
-    """Render every result set under ``root/docs/results`` and the README block; with
-    *check*, write nothing and return the files that differ from what they should hold."""
+def write_tables(root: Path, check: bool = False, blocks: Sequence[Block] = BLOCKS) -> list[str]:
+    """Render every result set under ``root/docs/results`` and every generated block of
+    *blocks*; with *check*, write nothing and return the files that differ from what they
+    should hold.
+
+    Raises:
+        ValueError: A folder is no result set, a block's file lacks its markers, or its set
+            or controller does not exist.
+    """
     stale = []
     for folder in sorted(p for p in (root / RESULTS_DIR).iterdir() if p.is_dir()):
         text = render(folder, (RESULTS_DIR / folder.name).as_posix())
@@ -292,18 +382,19 @@ def write_tables(root: Path, check: bool = False) -> list[str]:
             stale.append(str(path.relative_to(root)))
             if not check:
                 path.write_text(text)
-    readme = root / "README.md"
-    if (root / RESULTS_DIR / README_SET).is_dir() and readme.is_file():
-        text = readme.read_text()
-        if README_START not in text or README_END not in text:
-            raise ValueError(f"README.md lacks the markers {README_START} ... {README_END}")
-        head, rest = text.split(README_START, 1)
-        _, tail = rest.split(README_END, 1)
-        new = head + readme_block(root) + tail
+    for block in blocks:
+        path = root / block.path
+        text = path.read_text()
+        if block.start not in text or block.end not in text:
+            raise ValueError(f"{block.path} lacks the markers {block.start} ... {block.end}")
+        head, rest = text.split(block.start, 1)
+        _, tail = rest.split(block.end, 1)
+        new = head + block_text(root, block) + tail
         if new != text:
-            stale.append("README.md")
+            if block.path not in stale:
+                stale.append(block.path)
             if not check:
-                readme.write_text(new)
+                path.write_text(new)
     return stale
 
 

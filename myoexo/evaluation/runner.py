@@ -119,7 +119,10 @@ def evaluate(
     check_backend(backend, address)
     pool_workers = _checked_workers(workers)
     specs, skipped = resolve_controllers(
-        config.controllers, log, root_seed=config.root_seed, twin=config.twin
+        config.controllers,
+        log,
+        root_seed=None if config.selection else config.root_seed,  # a selection run picks
+        twin=config.twin,
     )
     out = _output_folder(out_dir)
     labels = [s.label for s in specs]

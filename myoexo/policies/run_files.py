@@ -6,6 +6,8 @@ it, the run's settings two folders up)::
     <run>/checkpoints/step_<n>/model.zip         CHECKPOINTS_DIR, MODEL_FILE
     <run>/checkpoints/step_<n>/vecnormalize.pkl  VECNORM_FILE
     <run>/checkpoints/step_<n>/state.json        STATE_FILE (with the twin it was trained on)
+    <seeds>/aggregate.json                       AGGREGATE_FILE (a ``myoexo seeds`` folder's
+                                                 selected checkpoint per seed)
 
 The run folder's layout is :mod:`myoexo.training.checkpoints`'s (it writes these files and
 re-exports these names); they are defined here so that :mod:`myoexo.control.specs` reads a
@@ -19,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "AGGREGATE_FILE",
     "CHECKPOINTS_DIR",
     "CONFIG_FILE",
     "MODEL_FILE",
@@ -39,6 +42,9 @@ VECNORM_FILE = "vecnormalize.pkl"
 #: from the checkpoint alone (``twin``: :meth:`~myoexo.envs.options.TwinOptions.to_dict`;
 #: ``env_id``; ``algorithm``).
 STATE_FILE = "state.json"
+#: A ``myoexo seeds`` folder's selection: each seed's chosen checkpoint folder
+#: (``selected_checkpoints``), the seed to ship and the selection root.
+AGGREGATE_FILE = "aggregate.json"
 
 
 def read_state(checkpoint: Path | str) -> dict[str, Any]:

@@ -309,6 +309,32 @@ def reflex_parameters(reflex: str | ReflexModel) -> dict[str, Any]:
     return {"class": f"{type(model).__module__}.{type(model).__qualname__}", **plain(model)}
 
 
+#: Fields of a reflex model's parameters that are provenance, not dynamics.
+PROVENANCE_FIELDS = frozenset({"note", "root_seed"})
+
+
+def reflex_parameter_changes(recorded: Mapping[str, Any], reflex: str | ReflexModel) -> list[str]:
+    """How the parameters *recorded* with a policy (:func:`reflex_parameters` when it was
+    trained) differ from *reflex*'s now: one ``"path: recorded -> now"`` per changed value
+    (provenance fields, :data:`PROVENANCE_FIELDS`, do not count); empty if none does."""
+
+    def flat(value: Any, path: str = "") -> dict[str, Any]:
+        if isinstance(value, Mapping):
+            out: dict[str, Any] = {}
+            for k, v in value.items():
+                if k not in PROVENANCE_FIELDS:
+                    out.update(flat(v, f"{path}.{k}" if path else str(k)))
+            return out
+        return {path: value}
+
+    before, now = flat(dict(recorded)), flat(reflex_parameters(reflex))
+    return [
+        f"{key}: {before.get(key, 'absent')} -> {now.get(key, 'absent')}"
+        for key in sorted(set(before) | set(now))
+        if before.get(key) != now.get(key)
+    ]
+
+
 def reflex_argument(name: str) -> str:
     """``argparse`` type of a ``--reflex`` option: a registered name (plug-ins included),
     else ``argparse.ArgumentTypeError`` listing the registered names."""

@@ -250,9 +250,14 @@ class CalibrationResult:
     Attributes:
         calibration: The fitted per-level parameters.
         reflex: The reflex config with them.
-        outcomes: Level -> the PID's outcome on the verification subjects.
+        outcomes: Level -> the PID's outcome on the verification subjects (the check, on
+            the evaluation root).
         targets: The targets.
         wall_time_s: Time the fit and the verification took.
+        fit_outcomes: Fitted level -> the PID's outcome on the fit's own subjects at the
+            fitted value (the fit, in-sample).
+        fit_root_seed: Root seed of the fit's subjects.
+        check_root_seed: Root seed of the verification's subjects.
     """
 
     calibration: StretchCalibration
@@ -260,6 +265,9 @@ class CalibrationResult:
     outcomes: Mapping[int, PIDOutcome]
     targets: CalibrationTargets
     wall_time_s: float
+    fit_outcomes: Mapping[int, PIDOutcome] = dataclasses.field(default_factory=dict)
+    fit_root_seed: int = CALIBRATION_ROOT_SEED
+    check_root_seed: int = EVALUATION_ROOT_SEED
 
     def table(self) -> Any:
         """Per level: the PID's final error and overshoot next to the paper's, and whether
@@ -340,9 +348,12 @@ def calibrate(
         )
     )
     reflex = StretchReflex(delay_s=delay_s, calibration=cal)
+    fitted: dict[int, PIDOutcome] = {}
     for level, target in sorted(tg.pid_final_error_deg.items()):
         log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
-        shift, _ = fit_threshold_shift(level, target, reflex, subjects, root_seed, log=log)
+        shift, fitted[level] = fit_threshold_shift(
+            level, target, reflex, subjects, root_seed, log=log
+        )
         cal = _with_level(
             cal, level, dataclasses.replace(cal[level], flexor_threshold_shift_deg=round(shift, 2))
         )
@@ -366,6 +377,9 @@ def calibrate(
         outcomes=outcomes,
         targets=tg,
         wall_time_s=elapsed,
+        fit_outcomes=fitted,
+        fit_root_seed=root_seed,
+        check_root_seed=check_root_seed,
     )
 
 
@@ -430,6 +444,10 @@ class PersistentCalibrationResult:
         ramp_s: Duration of the ramp, s.
         targets: The targets.
         wall_time_s: Time the fit and the verification took.
+        fit_outcomes: Fitted level -> the PID on the fit's own subjects at the fitted gain
+            (the fit, in-sample).
+        fit_root_seed: Root seed of the fit's subjects.
+        check_root_seed: Root seed of the verification's subjects.
     """
 
     params: PersistentParams
@@ -439,6 +457,9 @@ class PersistentCalibrationResult:
     ramp_s: float
     targets: CalibrationTargets
     wall_time_s: float
+    fit_outcomes: Mapping[int, PIDOutcome] = dataclasses.field(default_factory=dict)
+    fit_root_seed: int = CALIBRATION_ROOT_SEED
+    check_root_seed: int = EVALUATION_ROOT_SEED
 
     def table(self) -> Any:
         """Per level: the PID (and the ramped PID) next to the paper's PID (pandas)."""
@@ -513,9 +534,12 @@ def calibrate_persistent(
     gains = {lv: 0.0 for lv in VALID_LEVELS}
     reflex = PersistentReflex(after_discharge=base)
     reflex = _with_gains(reflex, gains)
+    fitted: dict[int, PIDOutcome] = {}
     for level, target in sorted(tg.pid_final_error_deg.items()):
         log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
-        gain, _ = fit_persistent_gain(level, target, reflex, subjects, root_seed, log=log)
+        gain, fitted[level] = fit_persistent_gain(
+            level, target, reflex, subjects, root_seed, log=log
+        )
         gains[level] = round(gain, 4)
         reflex = _with_gains(reflex, gains)
     if 2 in gains and 1 in gains:
@@ -553,6 +577,9 @@ def calibrate_persistent(
         ramp_s=ramp_s,
         targets=tg,
         wall_time_s=elapsed,
+        fit_outcomes=fitted,
+        fit_root_seed=root_seed,
+        check_root_seed=check_root_seed,
     )
 
 
@@ -621,13 +648,36 @@ def run(args: argparse.Namespace) -> int:
     return _report("stretch", result.calibration.note, "CALIBRATION", result, args.out)
 
 
+def fit_table(result: Any) -> Any:
+    """The fit's own numbers: per fitted level, the PID on the fit's subjects at the fitted
+    value, next to its target (in-sample; pandas)."""
+    import pandas as pd
+
+    rows = [
+        {
+            "level": level,
+            "subjects": out.subjects,
+            "PID final error (deg)": f"{out.final_error_deg:.2f} ± {out.final_error_std_deg:.2f}",
+            "target (deg)": f"{result.targets.pid_final_error_deg[level]:g}",
+        }
+        for level, out in sorted(result.fit_outcomes.items())
+    ]
+    return pd.DataFrame(rows)
+
+
 def _report(model: str, note: str, constant: str, result: Any, out: Path | None) -> int:
-    """Print the calibration's text (and write ``calibration.md`` / ``.csv`` to *out*)."""
+    """Print the calibration's text (and write ``calibration.md`` / ``.csv`` to *out*): the
+    fit's own numbers on the calibration root, labelled as the fit, then the check on the
+    evaluation root."""
     table = result.table()
     text = (
         f"# Calibration of the {model} reflex\n\n{note}\n\n"
         f"Fitted values (paste into myoexo.spasticity.reflex.{constant}):\n\n```python\n"
-        f"{result.snippet()}\n```\n\n{table.to_markdown(index=False)}\n\n"
+        f"{result.snippet()}\n```\n\n"
+        f"**The fit** (in-sample: the subjects of root {result.fit_root_seed} the values were "
+        f"fitted on):\n\n{fit_table(result).to_markdown(index=False)}\n\n"
+        f"**The check** (root {result.check_root_seed}, subjects the fit never saw):\n\n"
+        f"{table.to_markdown(index=False)}\n\n"
         f"Wall time {result.wall_time_s:.0f} s.\n"
     )
     print(text)

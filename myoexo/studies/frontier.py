@@ -4,8 +4,10 @@
     myoexo frontier --out results/frontier --subjects 10 --controllers sac --seeds-dir runs/s5
     myoexo frontier --out results/frontier --subjects 10 --oracle   # + the torque-aware oracle
 
-Every controller runs on the same subjects (evaluation root seed 0) through the evaluation
-protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in ``OUT/evaluation``): the
+Every controller runs on the same subjects of the **selection root** (root seed 1, a
+selection run: :attr:`~myoexo.evaluation.config.EvaluationConfig.selection`) through the
+evaluation protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in
+``OUT/selection``): the
 paper's PID, the device PID on the exo encoder (``pid:feedback=exo``), the *shaped* PIDs a
 reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, a command clipped at
 ``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), and whatever ``--controllers``
@@ -14,32 +16,40 @@ adds (the shipped policies, model files), and with ``--oracle`` the torque-aware
 settings of :data:`ORACLE_SWEEP`, in its cheap configuration (:data:`CHEAP_ORACLE`). Per
 level and controller: the mean
 settling time, peak interaction torque, RMS interaction torque up to settling and absolute
-final error. A controller is **accurate** at a level when its mean absolute final error is
-within ``--accuracy-deg`` (1 deg) of the best any of them reaches there (at levels 0-1 that is
-the target itself; at levels 2-3 the stall that the motor limit sets). The **frontier** of a
+final error. A level's **accuracy** is the acceptance bound of the final error
+(:class:`~myoexo.evaluation.criteria.Criteria`: 1 deg at levels 0-2, 11.45 deg at level 3)
+where some controller meets it on these subjects, else ``--accuracy-deg`` (1 deg) above the
+best any of them reaches (the stall that the motor limit sets); a controller is
+**accurate** when its mean absolute final error is strictly below it. The **frontier** of a
 level is the set of accurate controllers that no other accurate one beats on both settling
-time and peak torque: the achievable trade-off among the controllers tried, an upper bound
-of the twin's true one.
+time and peak torque, *picked* on the selection subjects.
+
+The picked points are then **confirmed** on ``--confirm-subjects`` subjects of the
+evaluation root (root seed 0, in ``OUT/evaluation``), which played no part in the picking:
+a point is **reachable** only if it is accurate there too (strictly below the level's
+accuracy). The table gives both sets of numbers; only the confirmed ones are results.
 
 The study's SAC is placed at its reported reductions from *our* paper's-PID values (peak and
 RMS reduced by the study's percentages, its settling times), so that it can be read against
 the frontier on this twin. With ``--seeds-dir`` (one or more folders), each seed's selected
 policy
 (``aggregate.json`` of ``myoexo seeds aggregate``) is a point of its own (the spread over
-seeds). Files: ``frontier.csv`` (every point, with ``accurate`` and ``on_frontier``),
-``frontier.md``, ``frontier_level<L>.png`` and ``frontier.png`` (all levels).
+seeds). Files: ``frontier.csv`` (every point on the selection subjects, with
+``accurate`` and ``on_frontier``, and for the frontier's points their ``confirmed_*``
+numbers and ``reachable``), ``frontier.md``, ``frontier_level<L>.png`` and ``frontier.png``
+(all levels, the selection subjects).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.paper import PAPER_RESULTS
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -48,8 +58,8 @@ RAMPS_S: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5, 3.0)
 #: Command limits (x 100 Nm) of the clipped PIDs.
 LIMITS: tuple[float, ...] = (0.5, 0.6, 0.8)
 #: The oracle's cheap configuration for the frontier: 8 rollouts per plan, a plan every 4th
-#: control step (5-6x fewer rollouts than :class:`~myoexo.control.oracle.OracleConfig`'s
-#: default; docs/reference.md section 10 compares the two).
+#: control step, 2 rollouts per step against the 6 of
+#: :class:`~myoexo.control.oracle.OracleConfig`'s default (12 every 2nd step), 3x fewer.
 CHEAP_ORACLE = "samples=8,replan=4"
 #: Torque-aware oracle settings of ``myoexo frontier --oracle``: none (the final-error bound),
 #: a reference ramped over 0.6 s and 1.5 s, and a penalty on the rise of the peak.
@@ -90,16 +100,31 @@ def points(table: Any) -> Any:
     return out.reset_index()
 
 
+def level_accuracy(group: Any, accuracy_deg: float = ACCURACY_DEG) -> float:
+    """A level's accuracy bound from its measured points (*group*: one level's rows): the
+    criteria's final-error bound if some point meets it, else *accuracy_deg* above the best
+    mean absolute final error (deg)."""
+    from myoexo.evaluation.criteria import Criteria
+
+    level = int(group.level.iloc[0])
+    bound = float(Criteria().final_error_deg[level])
+    best = float(group.abs_final_error_deg.min())
+    return bound if best < bound else best + accuracy_deg
+
+
 def mark_frontier(pts: Any, accuracy_deg: float = ACCURACY_DEG) -> Any:
-    """Add ``accurate`` and ``on_frontier`` (see the module docstring) to *pts*."""
+    """Add ``accuracy_deg`` (the level's bound, :func:`level_accuracy`), ``accurate`` and
+    ``on_frontier`` (see the module docstring) to *pts*."""
     pts = pts.copy()
     pts["accurate"] = False
     pts["on_frontier"] = False
-    for _, group in pts.groupby("level"):
+    pts["accuracy_deg"] = math.nan
+    for level, group in pts.groupby("level"):
         measured = group[~group.controller.str.startswith("paper")]
-        best = float(measured.abs_final_error_deg.min())
+        limit = level_accuracy(measured, accuracy_deg)
+        pts.loc[pts.level == level, "accuracy_deg"] = limit
         accurate = group.index[
-            (group.abs_final_error_deg <= best + accuracy_deg)
+            (group.abs_final_error_deg < limit)
             & group.settling_time_s.notna()
             & ~group.controller.str.startswith("paper")
         ]
@@ -117,6 +142,28 @@ def mark_frontier(pts: Any, accuracy_deg: float = ACCURACY_DEG) -> Any:
                 if j != i
             )
             pts.at[i, "on_frontier"] = not dominated
+    return pts
+
+
+def confirm(pts: Any, confirmed: Any) -> Any:
+    """Add the evaluation root's numbers (*confirmed*: :func:`points` of the confirmation
+    run) to the frontier's points of *pts* as ``confirmed_<metric>``, and ``reachable``: on
+    the frontier and strictly below the level's accuracy there as well."""
+    pts = pts.copy()
+    conf = confirmed.set_index(["controller", "level"])
+    pts["reachable"] = False
+    for metric in (*POINT_METRICS, "settled_share", "episodes"):
+        pts[f"confirmed_{metric}"] = math.nan
+    for i, p in pts[pts.on_frontier].iterrows():
+        key = (p.controller, p.level)
+        if key not in conf.index:
+            continue
+        row = conf.loc[key]
+        for metric in (*POINT_METRICS, "settled_share", "episodes"):
+            pts.at[i, f"confirmed_{metric}"] = float(row[metric])
+        pts.at[i, "reachable"] = bool(
+            row.abs_final_error_deg < p.accuracy_deg and math.isfinite(row.settling_time_s)
+        )
     return pts
 
 
@@ -148,20 +195,11 @@ def paper_points(pts: Any, pid_label: str = "pid") -> Any:
 
 
 def seed_controllers(seeds_dir: Path) -> list[str]:
-    """The checkpoints ``myoexo seeds aggregate`` selected, as controller specs (their
-    ``model.zip``; each seed a point of its own)."""
-    from myoexo.training import checkpoints as ck
+    """The checkpoints ``myoexo seeds aggregate`` selected, as controller specs (each seed a
+    point of its own; :func:`~myoexo.control.specs.seeds_controllers`)."""
+    from myoexo.control.specs import seeds_controllers
 
-    path = Path(seeds_dir) / "aggregate.json"
-    if not path.is_file():
-        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
-    chosen = json.loads(path.read_text())["selected_checkpoints"]
-    specs = []
-    for seed in sorted(chosen, key=int):
-        run_config = ck.read_config(Path(chosen[seed]).parent.parent)
-        algorithm = run_config["preset"].get("algorithm", "sac")
-        specs.append(f"{algorithm}:{Path(chosen[seed]) / ck.MODEL_FILE}")
-    return specs
+    return seeds_controllers(seeds_dir)
 
 
 #: Colours of the other controllers' groups (a policy, or one seeds folder's seeds), in order.
@@ -238,9 +276,35 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
 
 
 def markdown(pts: Any) -> str:
-    """The frontier table as Markdown."""
-    cols = ["level", "controller", *POINT_METRICS, "settled_share", "accurate", "on_frontier"]
-    return str(pts[cols].sort_values(["level", "settling_time_s"]).to_markdown(index=False))
+    """The frontier table as Markdown: every point on the selection subjects (in-sample),
+    and the frontier's points confirmed on the evaluation subjects."""
+    cols = [
+        "level", "controller", *POINT_METRICS, "settled_share", "accuracy_deg", "accurate",
+        "on_frontier",
+    ]  # fmt: skip
+    picked = str(pts[cols].sort_values(["level", "settling_time_s"]).to_markdown(index=False))
+    parts = ["Picked on the selection subjects (in-sample):", "", picked]
+    if "reachable" in pts:
+        conf_cols = ["level", "controller", "accuracy_deg"]
+        conf_cols += [f"confirmed_{m}" for m in (*POINT_METRICS, "settled_share", "episodes")]
+        front = pts[pts.on_frontier].sort_values(["level", "confirmed_settling_time_s"])
+        parts += [
+            "",
+            "The frontier confirmed on the evaluation subjects (reachable: accurate there too):",
+            "",
+            str(front[[*conf_cols, "reachable"]].to_markdown(index=False)),
+        ]
+    return "\n".join(parts)
+
+
+def write_markdown(folder: Path) -> str:
+    """Write ``frontier.md`` of *folder* from its ``frontier.csv`` (so the table is what the
+    file gives) and return it."""
+    import pandas as pd
+
+    text = markdown(pd.read_csv(Path(folder) / "frontier.csv")) + "\n"
+    (Path(folder) / "frontier.md").write_text(text)
+    return text
 
 
 def build_frontier(
@@ -254,10 +318,17 @@ def build_frontier(
     progress: bool = True,
     oracle: bool = False,
     twin: TwinOptions | None = None,
+    confirm_subjects: int | None = None,
+    selection_root_seed: int = SELECTION_ROOT_SEED,
 ) -> Any:
-    """Evaluate the controllers on the same subjects of one twin (*twin*, default: the
-    default twin) and write the frontier files (with ``oracle``, also the torque-aware
-    oracle at :data:`ORACLE_SWEEP`)."""
+    """Pick the frontier of the controllers on *subjects* selection subjects of one twin
+    (*twin*, default: the default twin; with ``oracle``, also the torque-aware oracle at
+    :data:`ORACLE_SWEEP`), confirm its points on *confirm_subjects* (default: *subjects*)
+    evaluation subjects, and write the frontier files.
+
+    Raises:
+        ValueError: *selection_root_seed* is the evaluation root, or a run was stopped.
+    """
     import pandas as pd
 
     from myoexo.evaluation.config import EvaluationConfig
@@ -266,31 +337,61 @@ def build_frontier(
     specs = [*shaped_pid_specs(), *controllers, *(oracle_specs() if oracle else [])]
     for seeds_dir in seeds_dirs:
         specs += seed_controllers(seeds_dir)
-    config = EvaluationConfig(
+    twin = twin or TwinOptions()
+    picking = EvaluationConfig(
         controllers=tuple(specs),
         levels=tuple(levels),
         subjects=subjects,
-        twin=twin or TwinOptions(),
+        root_seed=check_fit_root(selection_root_seed, "frontier picking"),
+        twin=twin,
+        selection=True,
     )
-    run = evaluate(config, Path(out) / "evaluation", workers=workers, progress=progress)
+    run = evaluate(picking, Path(out) / "selection", workers=workers, progress=progress)
     if run.table is None:
         raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
     pts = points(run.table)
     pts = pd.concat([pts, paper_points(pts)], ignore_index=True)
     pts = mark_frontier(pts, accuracy_deg)
+    by_label = {parse_label(s): s for s in specs}
+    picked = [by_label[c] for c in dict.fromkeys(pts.controller[pts.on_frontier])]
+    checking = EvaluationConfig(
+        controllers=tuple(dict.fromkeys(["pid", *picked])),
+        levels=tuple(levels),
+        subjects=confirm_subjects or subjects,
+        twin=twin,
+    )
+    run = evaluate(checking, Path(out) / "evaluation", workers=workers, progress=progress)
+    if run.table is None:
+        raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
+    pts = confirm(pts, points(run.table))
     out = Path(out)
     pts.to_csv(out / "frontier.csv", index=False)
-    (out / "frontier.md").write_text(markdown(pts) + "\n")
+    write_markdown(out)
     for lv in levels:
         plot_frontier(pts, lv).savefig(out / f"frontier_level{lv}.png", dpi=130)
     plot_frontier(pts).savefig(out / "frontier.png", dpi=130)
     return pts
 
 
+def parse_label(spec: str) -> str:
+    """The table label of a controller spec (its parsed label)."""
+    from myoexo.control.specs import parse_controller_spec
+
+    return parse_controller_spec(spec).label
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``myoexo frontier``."""
     parser.add_argument("--out", type=Path, default=Path("results/frontier"))
-    parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
+    parser.add_argument(
+        "--subjects", type=int, default=10, help="selection subjects per level (the picking)"
+    )
+    parser.add_argument(
+        "--confirm-subjects",
+        type=int,
+        default=None,
+        help="evaluation subjects per level that confirm the picked points (default: --subjects)",
+    )
     parser.add_argument(
         "--controllers", nargs="*", default=[], help="more controller specs (e.g. sac oracle)"
     )
@@ -321,6 +422,8 @@ def run(args: argparse.Namespace) -> int:
     """Run ``myoexo frontier``."""
     if args.subjects < 1:
         raise ValueError(f"--subjects = {args.subjects} must be >= 1")
+    if args.confirm_subjects is not None and args.confirm_subjects < 1:
+        raise ValueError(f"--confirm-subjects = {args.confirm_subjects} must be >= 1")
     pts = build_frontier(
         args.out,
         args.subjects,
@@ -331,6 +434,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         oracle=args.oracle,
         twin=twin_from_args(args),
+        confirm_subjects=args.confirm_subjects,
     )
     print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
     print(f"wrote {args.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
+from myoexo.policies.run_files import AGGREGATE_FILE
 from myoexo.runtime.files import write_json_atomic, write_text_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, signal_exit_status
 from myoexo.training import checkpoints as ck
@@ -341,7 +342,7 @@ def aggregate_seeds(args: argparse.Namespace) -> int:
     text = markdown_summary(summary)
     write_text_atomic(out / "aggregate.md", text)
     write_json_atomic(
-        out / "aggregate.json",
+        out / AGGREGATE_FILE,
         {
             "training_seeds": sorted(chosen),
             "selected_checkpoints": {str(k): v for k, v in chosen.items()},
@@ -366,7 +367,7 @@ def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> A
     from myoexo.policies import save_actor, shipped_path
     from myoexo.training.export import load_checkpoint_actor
 
-    path = Path(out) / "aggregate.json"
+    path = Path(out) / AGGREGATE_FILE
     if not path.is_file():
         raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
     chosen = json.loads(path.read_text())

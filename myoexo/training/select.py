@@ -129,7 +129,7 @@ def paper_checks(table: Any, episodes: Any) -> Any:
     Columns added: ``sac_p95_abs_final_error_deg`` (95th percentile over subjects),
     ``settled_pct`` (subjects whose response settled), ``p95_ok`` (< 2 deg at levels 0-2),
     ``paper_peak_ok`` / ``paper_rms_ok`` (reduction against the PID at least the paper's;
-    RMS at levels 0-2 only), ``settling_ok`` (mean settling time no longer than the paper's
+    RMS where the paper gives one), ``settling_ok`` (mean settling time no longer than the paper's
     SAC) and ``all_ok`` (these and :func:`compare`'s ``pass``).
     """
     from myoexo.evaluation.paper import PAPER_RESULTS
