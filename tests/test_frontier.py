@@ -76,8 +76,7 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
     """Two weight sweeps each have a seed_0: their points must not share a label."""
     import json
 
-    from myoexo.control.specs import parse_controller_spec
-    from myoexo.studies.frontier import seed_controllers
+    from myoexo.control.specs import parse_controller_spec, seeds_controllers
 
     labels = []
     for name in ("inter0p1", "inter1p0"):
@@ -90,7 +89,7 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
         (tmp_path / name / "aggregate.json").write_text(
             json.dumps({"selected_checkpoints": {"0": str(ckpt)}})
         )
-        (spec,) = seed_controllers(tmp_path / name)
+        (spec,) = seeds_controllers(tmp_path / name)
         assert spec.startswith("sbx_sac:")
         labels.append(parse_controller_spec(spec).label)
     assert labels == ["inter0p1-seed_0-step_0000000100", "inter1p0-seed_0-step_0000000100"]

@@ -194,14 +194,6 @@ def paper_points(pts: Any, pid_label: str = "pid") -> Any:
     return pd.DataFrame(rows)
 
 
-def seed_controllers(seeds_dir: Path) -> list[str]:
-    """The checkpoints ``myoexo seeds aggregate`` selected, as controller specs (each seed a
-    point of its own; :func:`~myoexo.control.specs.seeds_controllers`)."""
-    from myoexo.control.specs import seeds_controllers
-
-    return seeds_controllers(seeds_dir)
-
-
 #: Colours of the other controllers' groups (a policy, or one seeds folder's seeds), in order.
 _GROUP_COLORS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "gold", "tab:gray")
 
@@ -331,12 +323,13 @@ def build_frontier(
     """
     import pandas as pd
 
+    from myoexo.control.specs import seeds_controllers
     from myoexo.evaluation.config import EvaluationConfig
     from myoexo.evaluation.runner import evaluate
 
     specs = [*shaped_pid_specs(), *controllers, *(oracle_specs() if oracle else [])]
     for seeds_dir in seeds_dirs:
-        specs += seed_controllers(seeds_dir)
+        specs += seeds_controllers(seeds_dir)
     twin = twin or TwinOptions()
     picking = EvaluationConfig(
         controllers=tuple(specs),
