@@ -199,10 +199,7 @@ def seeds_controllers(seeds_dir: str | Path) -> list[str]:
 
 def _checkpoint_algorithm(checkpoint: Path) -> str:
     """The algorithm of a checkpoint: its state's, else its run's preset's (``"sac"``)."""
-    try:
-        algorithm = read_state(checkpoint).get("algorithm")
-    except (OSError, ValueError):
-        algorithm = None
+    algorithm = _checkpoint_state(str(checkpoint / MODEL_FILE)).get("algorithm")
     if algorithm is None:
         config = checkpoint.parent.parent / CONFIG_FILE
         preset = json.loads(config.read_text()).get("preset", {}) if config.is_file() else {}

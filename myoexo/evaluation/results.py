@@ -68,13 +68,16 @@ class Block:
     result_set: str
     controllers: tuple[str, ...]
 
+    def _marker(self, edge: str) -> str:
+        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:{edge} -->"
+
     @property
     def start(self) -> str:
-        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:start -->"
+        return self._marker("start")
 
     @property
     def end(self) -> str:
-        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:end -->"
+        return self._marker("end")
 
 
 #: Every generated block outside the result sets' own ``tables.md``.

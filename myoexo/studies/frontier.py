@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
-from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
+from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.paper import PAPER_RESULTS
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -73,6 +73,8 @@ POINT_METRICS: tuple[str, ...] = (
     "peak_interaction_torque_nm",
     "rms_interaction_torque_nm",
 )
+#: Columns a frontier point gets from the evaluation subjects (as ``confirmed_<name>``).
+CONFIRMED_METRICS: tuple[str, ...] = (*POINT_METRICS, "settled_share", "episodes")
 
 
 def shaped_pid_specs(
@@ -152,14 +154,14 @@ def confirm(pts: Any, confirmed: Any) -> Any:
     pts = pts.copy()
     conf = confirmed.set_index(["controller", "level"])
     pts["reachable"] = False
-    for metric in (*POINT_METRICS, "settled_share", "episodes"):
+    for metric in CONFIRMED_METRICS:
         pts[f"confirmed_{metric}"] = math.nan
     for i, p in pts[pts.on_frontier].iterrows():
         key = (p.controller, p.level)
         if key not in conf.index:
             continue
         row = conf.loc[key]
-        for metric in (*POINT_METRICS, "settled_share", "episodes"):
+        for metric in CONFIRMED_METRICS:
             pts.at[i, f"confirmed_{metric}"] = float(row[metric])
         pts.at[i, "reachable"] = bool(
             row.abs_final_error_deg < p.accuracy_deg and math.isfinite(row.settling_time_s)
@@ -278,7 +280,7 @@ def markdown(pts: Any) -> str:
     parts = ["Picked on the selection subjects (in-sample):", "", picked]
     if "reachable" in pts:
         conf_cols = ["level", "controller", "accuracy_deg"]
-        conf_cols += [f"confirmed_{m}" for m in (*POINT_METRICS, "settled_share", "episodes")]
+        conf_cols += [f"confirmed_{m}" for m in CONFIRMED_METRICS]
         front = pts[pts.on_frontier].sort_values(["level", "confirmed_settling_time_s"])
         parts += [
             "",
@@ -335,7 +337,7 @@ def build_frontier(
         controllers=tuple(specs),
         levels=tuple(levels),
         subjects=subjects,
-        root_seed=check_fit_root(selection_root_seed, "frontier picking"),
+        root_seed=selection_root_seed,  # a selection run refuses the evaluation root
         twin=twin,
         selection=True,
     )
