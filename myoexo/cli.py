@@ -49,6 +49,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "myoexo.studies.calibrate",
         "fit the stretch reflex so that the paper's PID behaves as in the study",
     ),
+    "validate": (
+        "myoexo.studies.validate",
+        "hold every reflex model to the study's PID table and the clinical tests, side by side",
+    ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "results": (

@@ -42,8 +42,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from myoexo.model.joint_torque import CoupledJointTorque
-from myoexo.model.leg import KNEE_JOINT
+from myoexo.model import strap_knee_torque
 from myoexo.spasticity.stage import SpasticityStage, StageHost
 
 #: Scale of the interaction torque in the cost (Nm): the motor's peak torque.
@@ -157,7 +156,7 @@ class OracleMPC:
         self._exo_act = int(e._exo_act)
         self._knee_qadr = int(e._knee_qadr)
         self._knee_dadr = int(e._knee_dadr)
-        self._knee_torque = CoupledJointTorque(e.model, KNEE_JOINT)
+        self._strap_torque = strap_knee_torque(e.model)
         self._torque_aware = self.config.interaction_weight > 0 or self.config.peak_weight > 0
         self._target_rad = math.radians(e.target_angle_deg)
         self._steps = max(2, round(self.config.horizon_s / e.dt))
@@ -232,10 +231,9 @@ class OracleMPC:
         return self._start_rad + (self._target_rad - self._start_rad) * time_s / ramp
 
     def _interaction_torque_nm(self, d: mujoco.MjData) -> float:
-        """``|exo torque| + |muscle torque along the knee|`` of the step just taken (Nm), as
-        the env's ``interaction_torque_nm``."""
-        muscle = self._knee_torque.torque_at(d.qpos.item(self._knee_qadr), d.qfrc_actuator)
-        return abs(d.actuator_force.item(self._exo_act)) + abs(muscle)
+        """The strap's torque on the knee of the step just taken (Nm, magnitude), as the
+        env's ``interaction_torque_nm``."""
+        return abs(self._strap_torque(d, d.qpos.item(self._knee_qadr)))
 
     def _plan_now(self) -> None:
         e, cfg = self.env, self.config

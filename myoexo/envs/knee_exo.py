@@ -30,9 +30,14 @@ Reward (MyoSuite ``weighted_reward_keys``; docs/reference.md section 3): the ter
 weights.
 
 Interaction torque (the paper's "sum of the torques applied at the knee: exo actuation and
-spastic reflexes"): ``|exo torque| + |muscle torque at the human knee|``. A signed sum would
-let an exo holding against a spastic flexor look like zero load; the magnitude sum is the
-load the joint and the straps carry. Both components are in ``info`` for other readings.
+spastic reflexes"): the magnitude of the torque the shank strap transmits to the human knee,
+along its coupled motion (the strap weld's constraint force, :func:`myoexo.model
+.strap_knee_torque`). Of four readings compared on the paper's PID and the shipped policy
+(docs/reference.md section 5: also ``|exo| + |muscle|``, the signed sum of exo and muscle
+torques, and the exo torque alone), it is the one on the study's scale (PID peaks about
+105-120 Nm with a 100 Nm motor, mean reduction about 11 Nm against the study's 10.8). The
+others stay in ``info``: ``cuff_knee_torque_nm`` (signed), ``torque_abs_sum_nm``,
+``torque_signed_sum_nm``, ``exo_torque_nm``.
 """
 
 from __future__ import annotations
@@ -576,6 +581,10 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             exo_torque_nm=values[at["exo_torque_nm"]],
             muscle_knee_torque_nm=values[at["muscle_knee_torque_nm"]],
             interaction_torque_nm=values[at["interaction_torque_nm"]],
+            cuff_knee_torque_nm=values[at["cuff_knee_torque_nm"]],
+            torque_abs_sum_nm=abs(values[at["exo_torque_nm"]])
+            + abs(values[at["muscle_knee_torque_nm"]]),
+            torque_signed_sum_nm=values[at["exo_torque_nm"]] + values[at["muscle_knee_torque_nm"]],
             thigh_cuff_force_n=math.hypot(values[thigh], values[thigh + 1], values[thigh + 2]),
             shank_cuff_force_n=math.hypot(values[shank], values[shank + 1], values[shank + 2]),
             sc_total=float(stage.last_sc_total),

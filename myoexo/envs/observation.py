@@ -24,8 +24,8 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from myoexo.model import COUPLING_JOINTS, CUFF_SENSORS, EXO_JOINT, KNEE_JOINT
-from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model import COUPLING_JOINTS, CUFF_SENSORS, EXO_JOINT, KNEE_JOINT, strap_knee_torque
+from myoexo.model.joint_torque import CoupledJointTorque, EqualityJointTorque
 from myoexo.spasticity.levels import SPASTIC_MUSCLES
 
 #: Cuff sensors of the twin: obs key (sensor name + unit) -> sensor name.
@@ -96,8 +96,16 @@ OBS_SCALES: dict[str, float] = {
 }
 
 #: The raw buffer's scalars: the state ones between the time and the interaction torque
-#: (``obs_dict`` and ``info`` only; ``|exo torque| + |muscle knee torque|``) and time_frac.
-SCALAR_KEYS: tuple[str, ...] = ("time", *STATE_OBS_KEYS, "interaction_torque_nm", "time_frac")
+#: (``obs_dict`` and ``info`` only: the magnitude of the torque the shank strap transmits to
+#: the human knee, ``cuff_knee_torque_nm`` with its sign; docs/reference.md section 5), and
+#: time_frac.
+SCALAR_KEYS: tuple[str, ...] = (
+    "time",
+    *STATE_OBS_KEYS,
+    "interaction_torque_nm",
+    "cuff_knee_torque_nm",
+    "time_frac",
+)
 #: Every key of ``obs_dict`` (what ``obs_keys`` may name), in the raw buffer's order.
 RAW_KEYS: tuple[str, ...] = (
     *SCALAR_KEYS,
@@ -131,7 +139,12 @@ OBS_KEY_DOCS: tuple[ObsKeyDoc, ...] = (
     ObsKeyDoc("muscle_knee_torque_nm", "muscle torque along the coupled human knee", "Nm"),
     ObsKeyDoc(
         "interaction_torque_nm",
-        "|exo torque| + |muscle knee torque| (obs_dict and info only)",
+        "|torque the shank strap transmits to the human knee| (obs_dict and info only)",
+        "Nm",
+    ),
+    ObsKeyDoc(
+        "cuff_knee_torque_nm",
+        "that torque with its sign, flexion positive (obs_dict and info only)",
         "Nm",
     ),
     ObsKeyDoc("time_frac", "time / episode duration", "-"),
@@ -166,6 +179,7 @@ OBS_KEY_DOCS: tuple[ObsKeyDoc, ...] = (
     _EXO_TORQUE,
     _MUSCLE_TORQUE,
     _INTERACTION_TORQUE,
+    _CUFF_TORQUE,
     _TIME_FRAC,
 ) = range(len(SCALAR_KEYS))
 
@@ -237,6 +251,7 @@ class ObsLayout:
         knee_qadr, knee_dadr: ``qpos`` / ``qvel`` address of the human knee.
         exo_qadr, exo_dadr: ``qpos`` / ``qvel`` address of the exo knee hinge.
         knee_torque: Muscle torque along the coupled human knee.
+        strap_torque: The shank strap's torque along it (the interaction torque).
         target_rad: The target knee flexion (the ``target_rad`` entry).
         episode_duration_s: Denominator of ``time_frac``.
         slices: Raw buffer layout: key -> slice (:data:`RAW_KEYS` order).
@@ -258,6 +273,7 @@ class ObsLayout:
     exo_qadr: int
     exo_dadr: int
     knee_torque: CoupledJointTorque
+    strap_torque: EqualityJointTorque
     target_rad: float
     episode_duration_s: float
     slices: Mapping[str, slice]
@@ -362,6 +378,7 @@ class ObsLayout:
             exo_qadr=exo_qadr,
             exo_dadr=exo_dadr,
             knee_torque=CoupledJointTorque(m, KNEE_JOINT),
+            strap_torque=strap_knee_torque(m),
             target_rad=float(target_rad),
             episode_duration_s=float(episode_duration_s),
             slices=slices,
@@ -400,17 +417,18 @@ class ObsLayout:
         raw = views.buffer[views.gather_index]
         time_s = views.data.time
         knee_rad = raw.item(_KNEE_ANGLE)
-        exo_torque_nm = raw.item(_EXO_TORQUE)
         if forces_knee_rad is None:
             forces_knee_rad = knee_rad
         muscle_torque_nm = self.knee_torque.torque_at(forces_knee_rad, views.qfrc_actuator)
+        cuff_torque_nm = self.strap_torque(views.data, forces_knee_rad)
         target_rad = self.target_rad
         raw[_TIME] = time_s
         raw[_TARGET] = target_rad
         raw[_ERROR] = knee_rad - target_rad
         raw[_COMMAND] = command
         raw[_MUSCLE_TORQUE] = muscle_torque_nm
-        raw[_INTERACTION_TORQUE] = abs(exo_torque_nm) + abs(muscle_torque_nm)
+        raw[_INTERACTION_TORQUE] = abs(cuff_torque_nm)
+        raw[_CUFF_TORQUE] = cuff_torque_nm
         raw[_TIME_FRAC] = time_s / self.episode_duration_s
         raw -= self.raw_offset
         raw *= self.raw_gain

@@ -31,6 +31,7 @@ from myoexo.model.exo import (
     EXO_JOINTS,
     EXO_SENSORS,
     STRAP_EQUALITY,
+    strap_knee_torque,
 )
 from myoexo.model.leg import HIP_JOINTS, KNEE_JOINT
 from myoexo.model.params import TwinParams
@@ -53,6 +54,7 @@ __all__ = [
     "build_model",
     "knee_axis_fit",
     "pose_twin",
+    "strap_knee_torque",
     "strap_violation",
     "twin_geometry",
 ]

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model.geometry import ExoGeometry
+from myoexo.model.joint_torque import CoupledJointTorque, EqualityJointTorque
 from myoexo.model.params import TwinParams
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "STRAP_SITES",
     "exo_fragment_path",
     "exo_spec",
+    "strap_knee_torque",
     "strap_to_shank",
 ]
 
@@ -63,6 +65,16 @@ EXO_SENSORS: tuple[str, ...] = ("exo_knee_pos", "exo_knee_vel", "exo_motor_torqu
 #: Weld equality of the shank strap and its two sites (cuff side, tibia side).
 STRAP_EQUALITY = "shank_strap"
 STRAP_SITES: tuple[str, str] = ("exo_shank_strap", "tibia_strap")
+
+
+def strap_knee_torque(model: mujoco.MjModel) -> EqualityJointTorque:
+    """The torque the shank strap transmits to the human knee, along its coupled motion (Nm,
+    flexion positive): the interaction torque the envs, the criteria and the reward read
+    (``myoexo.envs``: ``interaction_torque_nm`` is its magnitude). Call it with the data and
+    the knee angle its constraint forces were computed at."""
+    from myoexo.model.leg import KNEE_JOINT
+
+    return EqualityJointTorque(model, STRAP_EQUALITY, CoupledJointTorque(model, KNEE_JOINT))
 
 
 def exo_fragment_path() -> str:

@@ -9,6 +9,8 @@ along the coupled motion is ``qfrc[theta] + sum_j qfrc[q_j] * dpoly_j/dtheta``.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import mujoco
 import numpy as np
 
@@ -61,7 +63,16 @@ class CoupledJointTorque:
         products, which matters in an env step; equal to ``qfrc[theta] + qfrc[q_j] @
         transmission`` up to rounding.
         """
-        s0, s1, s2, s3 = qfrc[self._dofs].dot(self._power_coef).tolist()
+        return self.torque_of_dofs(theta, qfrc[self._dofs])
+
+    @property
+    def dofs(self) -> np.ndarray:
+        """The joint's DOF and its dependent DOFs, in the order :meth:`torque_of_dofs` takes."""
+        return self._dofs
+
+    def torque_of_dofs(self, theta: float, qfrc_dofs: np.ndarray) -> float:
+        """:meth:`torque_at` from the generalized force's entries at :attr:`dofs` only."""
+        s0, s1, s2, s3 = qfrc_dofs.dot(self._power_coef).tolist()
         x = theta
         return s0 + x * (s1 + x * (s2 + x * s3))
 
@@ -72,3 +83,71 @@ class CoupledJointTorque:
     def __call__(self, data: mujoco.MjData) -> float:
         """Actuator torque along the joint from the last computed ``qfrc_actuator`` (Nm)."""
         return self.from_generalized(data, data.qfrc_actuator)
+
+
+class EqualityJointTorque:
+    """Torque an equality constraint (e.g. the weld of a strap) transmits along a coupled
+    joint: its constraint force ``J_eq^T f_eq`` (``efc_J``, ``efc_force`` of its rows)
+    projected by :class:`CoupledJointTorque`'s virtual work.
+
+    MuJoCo orders the constraint rows with the equalities first, by equality id (a joint
+    equality one row, a connect three, a weld six), so the equality's rows are a fixed slice
+    while every equality is active; :meth:`__call__` checks that slice's id and falls back to
+    a search when it does not match.
+
+    Args:
+        model: The compiled model (dense constraint Jacobian: ``mj_isSparse`` false).
+        equality: Name of the equality.
+        joint: The coupled joint the torque is taken along.
+
+    Raises:
+        ValueError: If the model has no such equality, or its Jacobian is sparse.
+    """
+
+    _ROWS: ClassVar[dict[int, int]] = {
+        int(mujoco.mjtEq.mjEQ_CONNECT): 3,
+        int(mujoco.mjtEq.mjEQ_WELD): 6,
+        int(mujoco.mjtEq.mjEQ_JOINT): 1,
+        int(mujoco.mjtEq.mjEQ_TENDON): 1,
+    }
+
+    def __init__(self, model: mujoco.MjModel, equality: str, joint: CoupledJointTorque) -> None:
+        eid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, equality)
+        if eid < 0:
+            raise ValueError(f"equality {equality!r} is not in the model")
+        if mujoco.mj_isSparse(model):
+            raise ValueError("EqualityJointTorque needs a dense constraint Jacobian")
+        self.equality_id = int(eid)
+        self.joint = joint
+        self._nv = int(model.nv)
+        self._rows = self._ROWS.get(int(model.eq_type[eid]), 0)
+        if self._rows == 0:
+            raise ValueError(f"equality {equality!r} has an unsupported type")
+        self._start = sum(self._ROWS.get(int(model.eq_type[e]), 0) for e in range(eid))
+        self._dofs = joint.dofs
+
+    def rows(self, data: mujoco.MjData) -> np.ndarray:
+        """Indices of the equality's constraint rows in *data* (empty if inactive)."""
+        start, stop = self._start, self._start + self._rows
+        if (
+            stop <= data.nefc
+            and data.efc_id[start] == self.equality_id
+            and (data.efc_type[start] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+        ):
+            return np.arange(start, stop)
+        n = data.nefc
+        return np.flatnonzero(
+            (data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+            & (data.efc_id[:n] == self.equality_id)
+        )
+
+    def __call__(self, data: mujoco.MjData, theta: float) -> float:
+        """Torque (Nm, positive along the joint) the equality applies along the joint, from
+        *data*'s last computed constraint forces, at joint value *theta* (the angle those
+        forces were computed at)."""
+        rows = self.rows(data)
+        if rows.size == 0:
+            return 0.0
+        jac = data.efc_J.reshape(-1, self._nv)[rows[0] : rows[-1] + 1]
+        qfrc_dofs = data.efc_force[rows[0] : rows[-1] + 1] @ jac[:, self._dofs]
+        return self.joint.torque_of_dofs(theta, qfrc_dofs)

@@ -144,6 +144,26 @@ def sc_total(theta_deg: Any, vel_rad_s: Any, params: SpasticityParams) -> np.nda
 
 
 # ----------------------------------------------------------------------------- torch twin
+def tensor_getter(like: Any) -> Any:
+    """``get(source, name)``, for the reflex models' torch twins: a mapping's or a
+    dataclass's entry as a tensor like *like*."""
+    import torch
+
+    def get(source: Any, name: str) -> torch.Tensor:
+        value = source[name] if isinstance(source, Mapping) else getattr(source, name)
+        if isinstance(value, torch.Tensor):
+            return value
+        return torch.as_tensor(value, dtype=like.dtype, device=like.device)
+
+    return get
+
+
+def as_tensor(value: Any) -> torch.Tensor:
+    """*value* as a tensor (float64 unless it is one already)."""
+    import torch
+
+    return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
+
 
 _TorchParams = SpasticityParams | Mapping[str, Any]
 

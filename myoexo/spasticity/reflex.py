@@ -71,19 +71,15 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from myoexo.spasticity.coefficients import angle_term, velocity_term
+from myoexo.spasticity.coefficients import angle_term, as_tensor, tensor_getter, velocity_term
+from myoexo.spasticity.delay import STRETCH_DELAY_S
 from myoexo.spasticity.registry import Memory, ReflexModel, register_reflex
+from myoexo.spasticity.tsrt import TSRTReflex
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
 
     from myoexo.spasticity.levels import SpasticityParams
-
-#: Transmission delay of the stretch reflex, s. 20 ms is SCONE's knee reflex delay; the
-#: 30 ms of Falisse et al. 2018 and SpasticMyoElbow drove the paper's PID at level 1
-#: into a sustained oscillation on this twin (8.75 deg peak to peak over the last second,
-#: 6 subjects; 1.07 deg at 20 ms, 0 at 10 ms), which the study's PID does not show.
-STRETCH_DELAY_S = 0.02
 
 
 @dataclass(frozen=True)
@@ -385,25 +381,6 @@ def persistent_step(
     )
 
 
-def _tensor_getter(like: Any) -> Any:
-    """``get(source, name)``: a mapping's or a dataclass's entry as a tensor like *like*."""
-    import torch
-
-    def get(source: Any, name: str) -> torch.Tensor:
-        value = source[name] if isinstance(source, Mapping) else getattr(source, name)
-        if isinstance(value, torch.Tensor):
-            return value
-        return torch.as_tensor(value, dtype=like.dtype, device=like.device)
-
-    return get
-
-
-def _as_tensor(value: Any) -> torch.Tensor:
-    import torch
-
-    return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float64)
-
-
 def persistent_step_torch(
     r: torch.Tensor,
     vel_rad_s: torch.Tensor,
@@ -415,8 +392,8 @@ def persistent_step_torch(
     ``rise_time_s``, ``decay_time_s``, in a mapping or a :class:`PersistentParams`)."""
     import torch
 
-    v = _as_tensor(vel_rad_s)
-    get = _tensor_getter(v)
+    v = as_tensor(vel_rad_s)
+    get = tensor_getter(v)
     dt = dt_s if isinstance(dt_s, torch.Tensor) else torch.as_tensor(dt_s, dtype=v.dtype)
     a_rise = -torch.expm1(-dt / get(params, "rise_time_s"))
     a_decay = -torch.expm1(-dt / get(params, "decay_time_s"))
@@ -460,9 +437,9 @@ def group_excitations_torch(
     names to tensors or floats) and in every calibration parameter given as a tensor."""
     import torch
 
-    x = _as_tensor(theta_deg)
-    v = _as_tensor(vel_rad_s)
-    get = _tensor_getter(x)
+    x = as_tensor(theta_deg)
+    v = as_tensor(vel_rad_s)
+    get = tensor_getter(x)
     c = stretch_constants(
         params, calibration if calibration is not None else LevelCalibration(), get
     )
@@ -548,9 +525,9 @@ class UniformReflex(ReflexModel):
     ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
         import torch
 
-        x = _as_tensor(theta_deg)
+        x = as_tensor(theta_deg)
         sc = uniform_sc(
-            x, _as_tensor(vel_rad_s), uniform_constants(subject, _tensor_getter(x)), torch.tanh
+            x, as_tensor(vel_rad_s), uniform_constants(subject, tensor_getter(x)), torch.tanh
         )
         return sc, sc, tuple(memory)
 
@@ -633,7 +610,7 @@ class PersistentReflex(UniformReflex):
     ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
         sc, _, _ = super().step_torch(level, subject, (), theta_deg, vel_rad_s, control_period_s)
         r = persistent_step_torch(
-            _as_tensor(memory[0]), vel_rad_s, control_period_s, self.after_discharge
+            as_tensor(memory[0]), vel_rad_s, control_period_s, self.after_discharge
         )
         factor = 1.0 if individual is None else float(individual)
         gain = self.after_discharge.gain(level) * factor
@@ -649,6 +626,7 @@ BUILTIN_REFLEXES: Mapping[str, ReflexModel] = MappingProxyType(
         "stretch": StretchReflex(),
         "uniform": UniformReflex(),
         "persistent": PersistentReflex(),
+        "tsrt": TSRTReflex(),
     }
 )
 

@@ -1,0 +1,315 @@
+"""``"tsrt"``: the tonic-stretch-reflex-threshold reading of the spastic reflex.
+
+In the tonic stretch reflex threshold (TSRT) account of spasticity (Levin and Feldman 1994;
+Calota and Levin 2009) a muscle's stretch reflex fires once its length passes a threshold
+``lambda``, and stretching it faster lowers that threshold (``lambda - mu v``): the catch of
+a fast stretch comes earlier in the range than the tone of a slow one, and spasticity is a
+threshold moved inside the joint's range. Read on the knee angle (the length proxy of each
+group; flexion positive, deg; velocity rad/s, flexion positive)::
+
+    flexors (stretched by extension, v < 0):
+        theta_f*(v) = theta_f + mu_f max(0, -v)                  (the dynamic threshold)
+        e_flex = g_flex below(theta; theta_f*(v), k) [s_theta + s_v below(v; v_lower, k_v)]
+    extensors (stretched by flexion, v > 0):
+        theta_e*(v) = theta_e - mu_e max(0, v)
+        e_ext  = g_ext  above(theta; theta_e*(v), k) [s_theta + s_v above(v; v_upper, k_v)]
+
+with ``below``/``above`` eq. 2's sigmoid (:mod:`myoexo.spasticity.coefficients`). What each
+symbol is read from:
+
+* ``s_theta``, ``s_v``, ``k`` (the angle slope, 1/deg), ``v_lower``, ``v_upper``: the
+  subject's Table I values (10 % spread per subject), as in ``"stretch"``.
+* ``theta_f = theta_ext + flexor_threshold_shift_deg`` and ``theta_e = theta_flex +
+  extensor_threshold_shift_deg``: Table I's windows moved by a fitted shift per level (the
+  static threshold the tone starts at; per subject it carries Table I's spread).
+* ``mu_f = dynamic_shift_deg / |v_lower|``, ``mu_e = dynamic_shift_deg / v_upper``: how far
+  one window-width of stretch speed moves the threshold into the range. Table I's narrower
+  velocity windows at the higher levels (1 / 0.5 / 0.25 rad/s) make the same shift per
+  window-width a larger shift per rad/s: the velocity dependence grows with the level as the
+  Tardieu scale has it, from Table I's own numbers.
+* ``k_v`` = ``velocity_slope_per_rad_s``: the velocity term's slope. The study prints one
+  slope ``k`` for both terms (0.5 / 0.2 / 0.1), which per rad/s leaves the velocity term
+  nearly flat over the speeds the clinic tests (0 to 3 rad/s); the study's text names two
+  slopes (``k_ang``, ``k_vel``), so the velocity slope is a reading, fitted here
+  (:data:`TSRT_CALIBRATION`, ``myoexo calibrate --reflex tsrt``).
+* ``g_flex``, ``g_ext``: a gain per group and level.
+
+Unlike ``"stretch"`` (whose flexors' velocity term fires at any angle, so a fast stretch
+"catches" as soon as it starts), the velocity term here only scales a reflex the angle gate
+lets through, so a fast stretch catches where its dynamic threshold is crossed, and a
+relaxed limb inside the thresholds rests without tone. No memory; a 20 ms transmission delay
+(:data:`~myoexo.spasticity.delay.STRETCH_DELAY_S`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+from myoexo.spasticity.coefficients import as_tensor, tensor_getter
+from myoexo.spasticity.delay import STRETCH_DELAY_S
+from myoexo.spasticity.registry import Memory, ReflexModel
+
+if TYPE_CHECKING:  # torch is imported lazily
+    import torch
+
+    from myoexo.spasticity.levels import SpasticityParams
+
+__all__ = [
+    "TSRT_CALIBRATION",
+    "TSRTCalibration",
+    "TSRTConstants",
+    "TSRTLevel",
+    "TSRTReflex",
+    "tsrt_constants",
+    "tsrt_excitations",
+    "tsrt_excitations_torch",
+    "tsrt_terms",
+]
+
+
+@dataclass(frozen=True)
+class TSRTLevel:
+    """The ``"tsrt"`` reflex's parameters at one level (module docstring).
+
+    Attributes:
+        flexor_threshold_shift_deg: Added to Table I's ``theta_ext`` for the flexors' static
+            threshold, deg (> 0 moves it into the motion).
+        extensor_threshold_shift_deg: Added to Table I's ``theta_flex`` for the extensors'
+            static threshold, deg (> 0 moves it out of the resting range).
+        dynamic_shift_deg: Threshold shift per velocity-window width of stretch speed, deg
+            (``mu = dynamic_shift_deg / |window|``, in deg per rad/s).
+        velocity_slope_per_rad_s: Slope ``k_v`` of the velocity term, 1/(rad/s).
+        flexor_gain: Gain of the flexors' excitation (-).
+        extensor_gain: Gain of the extensors' excitation (-).
+    """
+
+    flexor_threshold_shift_deg: float = 0.0
+    extensor_threshold_shift_deg: float = 0.0
+    dynamic_shift_deg: float = 0.0
+    velocity_slope_per_rad_s: float = 10.0
+    flexor_gain: float = 1.0
+    extensor_gain: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name, low, high, unit in (
+            ("flexor_threshold_shift_deg", -50.0, 150.0, "deg"),
+            ("extensor_threshold_shift_deg", -100.0, 100.0, "deg"),
+            ("dynamic_shift_deg", 0.0, 60.0, "deg"),
+            ("velocity_slope_per_rad_s", 0.0, 100.0, "1/(rad/s)"),
+            ("flexor_gain", 0.0, 20.0, "-"),
+            ("extensor_gain", 0.0, 20.0, "-"),
+        ):
+            value = getattr(self, name)
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            if not (ok and math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"TSRTLevel.{name} = {value!r} is outside [{low}, {high}] {unit}")
+
+
+def _default_levels() -> Mapping[int, TSRTLevel]:
+    return MappingProxyType({lv: TSRTLevel() for lv in range(4)})
+
+
+@dataclass(frozen=True)
+class TSRTCalibration:
+    """Per-level parameters of the ``"tsrt"`` reflex (level -> :class:`TSRTLevel`).
+
+    Attributes:
+        levels: Parameters of each level; a level not listed uses :class:`TSRTLevel`'s
+            defaults (Table I's thresholds, no dynamic shift).
+        note: Provenance: the command and the numbers the fit gave.
+        root_seed: Root seed of the subjects the values were fitted on (``None``: not
+            fitted).
+    """
+
+    levels: Mapping[int, TSRTLevel] = field(default_factory=_default_levels)
+    note: str = ""
+    root_seed: int | None = None
+
+    def __post_init__(self) -> None:
+        levels = {int(lv): value for lv, value in dict(self.levels).items()}
+        for lv, value in levels.items():
+            if lv not in range(4):
+                raise ValueError(f"TSRTCalibration.levels has level {lv!r}; levels are 0-3")
+            if not isinstance(value, TSRTLevel):
+                raise ValueError(
+                    f"TSRTCalibration.levels[{lv}] must be a TSRTLevel, got {type(value).__name__}"
+                )
+        object.__setattr__(self, "levels", MappingProxyType(levels))
+
+    def __getitem__(self, level: int) -> TSRTLevel:
+        return self.levels.get(int(level), TSRTLevel())
+
+
+#: The ``"tsrt"`` reflex's per-level parameters, fitted jointly to the study's PID table and
+#: the clinical rows on the calibration root (see ``docs/studies/calibration_tsrt``).
+TSRT_CALIBRATION = TSRTCalibration(
+    levels=MappingProxyType(
+        {
+            1: TSRTLevel(
+                flexor_threshold_shift_deg=30.0,
+                extensor_threshold_shift_deg=10.0,
+                dynamic_shift_deg=8.0,
+                extensor_gain=0.5,
+            ),
+            2: TSRTLevel(
+                flexor_threshold_shift_deg=44.0,
+                extensor_threshold_shift_deg=10.0,
+                dynamic_shift_deg=8.0,
+                extensor_gain=0.5,
+            ),
+            3: TSRTLevel(
+                flexor_threshold_shift_deg=27.0,
+                extensor_threshold_shift_deg=10.0,
+                dynamic_shift_deg=8.0,
+                extensor_gain=0.5,
+            ),
+        }
+    ),
+    note="initial values (not fitted)",
+    root_seed=None,
+)
+
+
+class TSRTConstants(NamedTuple):
+    """A subject's constants of the ``"tsrt"`` reflex (halved slopes; gains multiplied in)."""
+
+    half_k: Any
+    half_k_v: Any
+    flex_theta_deg: Any
+    ext_theta_deg: Any
+    flex_mu_deg_s_rad: Any
+    ext_mu_deg_s_rad: Any
+    v_lower_rad_s: Any
+    v_upper_rad_s: Any
+    flex_s_theta: Any
+    flex_s_v: Any
+    ext_s_theta: Any
+    ext_s_v: Any
+
+
+def tsrt_constants(p: Any, cal: Any, get: Any = getattr) -> TSRTConstants:
+    """:class:`TSRTConstants` of subject *p* with the level's :class:`TSRTLevel` *cal* (read
+    with *get*: ``getattr``, or :func:`~myoexo.spasticity.coefficients.tensor_getter` for
+    the torch twin)."""
+    dyn = get(cal, "dynamic_shift_deg")
+    g_f, g_e = get(cal, "flexor_gain"), get(cal, "extensor_gain")
+    v_lower, v_upper = get(p, "v_lower_rad_s"), get(p, "v_upper_rad_s")
+    return TSRTConstants(
+        half_k=0.5 * get(p, "k"),
+        half_k_v=0.5 * get(cal, "velocity_slope_per_rad_s"),
+        flex_theta_deg=get(p, "theta_ext_deg") + get(cal, "flexor_threshold_shift_deg"),
+        ext_theta_deg=get(p, "theta_flex_deg") + get(cal, "extensor_threshold_shift_deg"),
+        flex_mu_deg_s_rad=dyn / abs(v_lower),
+        ext_mu_deg_s_rad=dyn / abs(v_upper),
+        v_lower_rad_s=v_lower,
+        v_upper_rad_s=v_upper,
+        flex_s_theta=g_f * get(p, "s_theta"),
+        flex_s_v=g_f * get(p, "s_v"),
+        ext_s_theta=g_e * get(p, "s_theta"),
+        ext_s_v=g_e * get(p, "s_v"),
+    )
+
+
+def tsrt_terms(theta_deg: Any, vel_rad_s: Any, c: TSRTConstants, tanh: Any) -> tuple[Any, Any]:
+    """``(e_flex, e_ext)`` of the ``"tsrt"`` reflex (module docstring) in any array library
+    (``tanh``: ``math.tanh``, ``np.tanh`` or ``torch.tanh``; ``abs`` is Python's, which
+    every one of them takes)."""
+    extending = 0.5 * (abs(vel_rad_s) - vel_rad_s)  # max(0, -v)
+    flexing = 0.5 * (abs(vel_rad_s) + vel_rad_s)  # max(0, v)
+    flex_gate = 0.5 * (
+        1.0 - tanh(c.half_k * (theta_deg - c.flex_theta_deg - c.flex_mu_deg_s_rad * extending))
+    )
+    ext_gate = 0.5 * (
+        1.0 + tanh(c.half_k * (theta_deg - c.ext_theta_deg + c.ext_mu_deg_s_rad * flexing))
+    )
+    flex_vel = 0.5 * (1.0 - tanh(c.half_k_v * (vel_rad_s - c.v_lower_rad_s)))
+    ext_vel = 0.5 * (1.0 + tanh(c.half_k_v * (vel_rad_s - c.v_upper_rad_s)))
+    flex = flex_gate * (c.flex_s_theta + c.flex_s_v * flex_vel)
+    ext = ext_gate * (c.ext_s_theta + c.ext_s_v * ext_vel)
+    return flex, ext
+
+
+def tsrt_excitations(
+    theta_deg: Any, vel_rad_s: Any, params: Any, level: TSRTLevel | None = None
+) -> tuple[Any, Any]:
+    """The ``"tsrt"`` reflex's ``(e_flex, e_ext)`` at knee states (numpy, broadcast).
+
+    Args:
+        theta_deg: Knee angle(s), deg, flexion positive.
+        vel_rad_s: Knee velocity(ies), rad/s, flexion positive.
+        params: A :class:`~myoexo.spasticity.SpasticityParams` (level or subject).
+        level: The level's :class:`TSRTLevel` (default: its defaults).
+    """
+    import numpy as np
+
+    c = tsrt_constants(params, level or TSRTLevel())
+    theta = np.asarray(theta_deg, dtype=np.float64)
+    vel = np.asarray(vel_rad_s, dtype=np.float64)
+    return tsrt_terms(theta, vel, c, np.tanh)
+
+
+def tsrt_excitations_torch(
+    theta_deg: Any,
+    vel_rad_s: Any,
+    params: Mapping[str, Any],
+    level: Mapping[str, Any] | TSRTLevel | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Torch twin of :func:`tsrt_excitations`, differentiable in the inputs, in every subject
+    parameter (a mapping from :class:`~myoexo.spasticity.SpasticityParams` field names to
+    tensors or floats) and in every :class:`TSRTLevel` parameter given as a tensor."""
+    import torch
+
+    x = as_tensor(theta_deg)
+    v = as_tensor(vel_rad_s)
+    c = tsrt_constants(params, level if level is not None else TSRTLevel(), tensor_getter(x))
+    return tsrt_terms(x, v, c, torch.tanh)
+
+
+@dataclass(frozen=True)
+class TSRTReflex(ReflexModel):
+    """``"tsrt"``: each muscle group's stretch reflex fires past a threshold that stretch
+    velocity moves into the range (module docstring).
+
+    Attributes:
+        delay_s: Transmission delay, s (:data:`~myoexo.spasticity.delay.STRETCH_DELAY_S`).
+        calibration: Per-level parameters (:data:`TSRT_CALIBRATION`).
+    """
+
+    delay_s: float = STRETCH_DELAY_S
+    calibration: TSRTCalibration = TSRT_CALIBRATION
+
+    def subject_constants(
+        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
+    ) -> TSRTConstants:
+        return tsrt_constants(subject, self.calibration[level])
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        flex, ext = tsrt_terms(theta_deg, vel_rad_s, constants, math.tanh)
+        return flex, ext, memory
+
+    def step_torch(
+        self,
+        level: int,
+        subject: Mapping[str, Any],
+        memory: Any,
+        theta_deg: torch.Tensor,
+        vel_rad_s: torch.Tensor,
+        control_period_s: float,
+        individual: Any = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        flex, ext = tsrt_excitations_torch(theta_deg, vel_rad_s, subject, self.calibration[level])
+        return flex, ext, tuple(memory)
+
+
+def with_level(calibration: TSRTCalibration, level: int, **changes: Any) -> TSRTCalibration:
+    """*calibration* with ``level``'s :class:`TSRTLevel` fields replaced by *changes*."""
+    levels = dict(calibration.levels)
+    levels[level] = dataclasses.replace(calibration[level], **changes)
+    return TSRTCalibration(levels=MappingProxyType(levels), note=calibration.note)
