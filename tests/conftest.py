@@ -52,3 +52,29 @@ def lock_holder():
             proc.wait()
 
     return hold
+
+
+@pytest.fixture
+def strap_torque_reference():
+    """``f(model, data, theta) -> Nm``: the shank strap's torque along the knee, computed
+    independently of the package's fixed-row shortcut: every constraint row of the weld
+    found by search, ``J^T f`` by MuJoCo's own ``mj_mulJacTVec``, projected along the
+    coupled knee at the angle *theta* (rad)."""
+    import mujoco
+    import numpy as np
+
+    from myoexo.model.joint_torque import CoupledJointTorque
+
+    def torque(model, data, theta):
+        eq = model.equality("shank_strap").id
+        n = data.nefc
+        rows = (data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY) & (
+            data.efc_id[:n] == eq
+        )
+        assert rows.sum() == 6  # a weld
+        f = np.where(rows, data.efc_force[:n], 0.0)
+        qfrc = np.zeros(model.nv)
+        mujoco.mj_mulJacTVec(model, data, qfrc, f)
+        return CoupledJointTorque(model, "knee_angle_r").torque_at(theta, qfrc)
+
+    return torque

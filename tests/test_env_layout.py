@@ -53,7 +53,11 @@ def test_keys_are_written_once_and_the_env_module_re_exports_them():
     from myoexo.envs import knee_exo
 
     assert len(set(RAW_KEYS)) == len(RAW_KEYS)
-    assert set(DEFAULT_OBS_KEYS) == set(RAW_KEYS) - {"time", "interaction_torque_nm"}
+    assert set(DEFAULT_OBS_KEYS) == set(RAW_KEYS) - {
+        "time",
+        "interaction_torque_nm",
+        "cuff_knee_torque_nm",
+    }
     assert set(EXO_SENSOR_OBS_KEYS) <= set(DEFAULT_OBS_KEYS)
     # the raw buffer's scalars are the vector's state scalars between time and the
     # interaction torque, then time_frac
@@ -61,6 +65,7 @@ def test_keys_are_written_once_and_the_env_module_re_exports_them():
         "time",
         *observation.STATE_OBS_KEYS,
         "interaction_torque_nm",
+        "cuff_knee_torque_nm",
         "time_frac",
     )
     assert DEFAULT_OBS_KEYS[: len(observation.STATE_OBS_KEYS)] == observation.STATE_OBS_KEYS
@@ -71,7 +76,7 @@ def test_keys_are_written_once_and_the_env_module_re_exports_them():
     assert knee_exo.MyoExoKneeEnv.DEFAULT_OBS_KEYS == list(DEFAULT_OBS_KEYS)
 
 
-def test_layout_gathers_each_quantity_from_its_definition(twin):
+def test_layout_gathers_each_quantity_from_its_definition(twin, strap_torque_reference):
     """One index gathers what the names say, after an ``mj_forward`` (so every entry refers
     to the current state); the muscle block normalized, everything else exact."""
     from myoexo.model.joint_torque import CoupledJointTorque
@@ -88,6 +93,7 @@ def test_layout_gathers_each_quantity_from_its_definition(twin):
     knee, exo = model.joint("knee_angle_r"), model.joint("exo_knee")
     muscle = CoupledJointTorque(model, "knee_angle_r")(data)
     exo_torque = data.qfrc_actuator[exo.dofadr[0]]
+    strap = strap_torque_reference(model, data, data.qpos[knee.qposadr[0]])
     expected = {
         "time": data.time,
         "knee_angle_rad": data.qpos[knee.qposadr[0]],
@@ -99,7 +105,8 @@ def test_layout_gathers_each_quantity_from_its_definition(twin):
         "command": -0.25,
         "exo_torque_nm": exo_torque,
         "muscle_knee_torque_nm": muscle,
-        "interaction_torque_nm": abs(exo_torque) + abs(muscle),
+        "interaction_torque_nm": abs(strap),
+        "cuff_knee_torque_nm": strap,
         "time_frac": data.time / 8.0,
     }
     for key, value in expected.items():

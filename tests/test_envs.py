@@ -233,7 +233,7 @@ def test_instability_truncates_with_a_flag_and_finite_observation(env1):
     assert np.isfinite(obs).all() and np.isfinite(reward)
 
 
-def test_step_is_raw_physics_and_forces_are_those_of_the_last_substep():
+def test_step_is_raw_physics_and_forces_are_those_of_the_last_substep(strap_torque_reference):
     """The documented timing of ``step``: the state after the step is exactly
     ``mj_step(frame_skip)`` with the step's ``ctrl``; the force-like observations equal what a
     fresh ``mj_forward`` of the state at t - h (the last substep's start) gives."""
@@ -263,7 +263,13 @@ def test_step_is_raw_physics_and_forces_are_those_of_the_last_substep():
     muscle = CoupledJointTorque(model, "knee_angle_r")(replica)
     assert od["exo_torque_nm"][0] == exo == info["exo_torque_nm"]
     assert od["muscle_knee_torque_nm"][0] == muscle == info["muscle_knee_torque_nm"]
-    assert od["interaction_torque_nm"][0] == abs(exo) + abs(muscle)
+    strap = strap_torque_reference(
+        model, replica, replica.qpos[model.joint("knee_angle_r").qposadr[0]]
+    )
+    assert od["cuff_knee_torque_nm"][0] == pytest.approx(strap, abs=1e-9)
+    assert od["interaction_torque_nm"][0] == abs(od["cuff_knee_torque_nm"][0])
+    assert info["torque_abs_sum_nm"] == abs(exo) + abs(muscle)
+    assert info["torque_signed_sum_nm"] == exo + muscle
     for key, sensor in myoexo.envs.knee_exo.CUFF_OBS_KEYS.items():
         np.testing.assert_array_equal(od[key], replica.sensor(sensor).data)
     np.testing.assert_array_equal(od["spastic_force"], replica.actuator_force[ids] * (-1.0 / f0))

@@ -105,7 +105,7 @@ def test_the_planner_reads_the_interaction_torque_as_the_env_reports_it():
 
 
 def test_a_peak_penalty_lowers_the_peak_and_a_ramp_starts_the_reference_at_the_knee():
-    env = make_env(1, episode_duration_s=0.4)
+    env = make_env(2, episode_duration_s=0.4)
     plain = run_episode(env, OracleMPC.from_env(env, **FAST), seed=3)
     capped = run_episode(env, OracleMPC.from_env(env, **FAST, peak_weight=30.0), seed=3)
     assert (
