@@ -27,13 +27,15 @@ from myoexo.spasticity.registry import get_reflex, reflex_names
 from myoexo.spasticity.stage import SpasticityStage
 
 DT = 0.01
+#: Level 1's Table I velocity window, rad/s: the default ignition speed of its subjects.
+WINDOW = 1.0
 
 
 def _run(params: PersistentParams, vel: float, steps: int, r0: float = 0.0) -> float:
     a_rise, a_decay = params.rates(DT)
     r = r0
     for _ in range(steps):
-        r = float(persistent_step(r, vel, a_rise, a_decay, params))
+        r = float(persistent_step(r, vel, a_rise, a_decay, params, WINDOW))
     return r
 
 
@@ -53,19 +55,35 @@ def test_presets_list_the_persistent_model_and_the_default_stays_stretch() -> No
 
 def test_after_discharge_rises_fast_at_fast_extension_and_decays_slowly() -> None:
     p = PERSISTENT
-    r = _run(p, -3.0, 20)  # 0.2 s of a 3 rad/s extension: four rise time constants
+    assert (p.rise_time_s, p.decay_time_s) == (0.2, 2.0)  # onset and decay in seconds
+    r = _run(p, -3.0, 80)  # 0.8 s of a 3 rad/s extension: four rise time constants
     assert r > 0.95
-    held = _run(p, 0.0, 100, r0=r)  # then 1 s at rest: it decays with the 30 s constant
-    assert held == pytest.approx(r * math.exp(-1.0 / p.decay_time_s), rel=1e-6)
-    assert held > 0.9
+    held = _run(p, 0.0, 100, r0=r)  # then 1 s at rest: it decays with the 2 s constant
+    gate_at_rest = 0.5 * (1.0 + math.tanh(0.5 * 8.0 / WINDOW * (0.0 - WINDOW)))
+    assert held == pytest.approx(r * math.exp(-1.0 / p.decay_time_s), rel=0.05)
+    assert 0.5 < held < 0.7 and gate_at_rest < 0.02
+    assert _run(p, 0.0, 600, r0=r) < 0.06  # 6 s later it is nearly gone: no latch
     assert _run(p, 2.0, 100, r0=r) < r  # flexion (the flexors shorten) never ignites it
 
 
-@pytest.mark.parametrize("vel", [0.0, -0.2, -1.0, -1.3, 1.0, 4.0])
-def test_after_discharge_stays_off_below_the_ignition_speed(vel: float) -> None:
-    """A slow stretch (below 1.5 rad/s of extension) for 5 s leaves r at ~0 (< 1 % even
-    0.2 rad/s below the threshold, where the smooth gate is 5e-5)."""
-    assert _run(PERSISTENT, vel, 500) < (1e-2 if vel == -1.3 else 1e-6)
+def test_the_ignition_comes_from_the_subjects_velocity_window() -> None:
+    p = PERSISTENT
+    for window in (1.0, 0.5, 0.25):  # Table I's windows at levels 1-3
+        v_ig, slope = p.ignition(window)
+        assert v_ig == window and slope == pytest.approx(8.0 / window)
+    with pytest.raises(ValueError, match="window_rad_s = None"):
+        p.ignition(None)
+    # a smooth gate: at the threshold half on, a quarter window either side 12 % / 88 %
+    a_rise, a_decay = p.rates(DT)
+    gains = [float(persistent_step(0.0, -v, 1.0, 0.0, p, WINDOW)) for v in (0.75, 1.0, 1.25)]
+    assert gains == pytest.approx([0.119, 0.5, 0.881], abs=2e-3)
+
+
+@pytest.mark.parametrize("vel", [0.0, -0.1, -0.2, 1.0, 4.0])
+def test_after_discharge_stays_low_well_below_the_ignition_speed(vel: float) -> None:
+    """A slow stretch (a fifth of level 1's 1 rad/s window or less) for 5 s leaves r below
+    5 % (the smooth gate is under 4 % there and the decay pulls it back)."""
+    assert _run(PERSISTENT, vel, 500) < 0.05
 
 
 def test_stage_adds_the_after_discharge_to_the_flexors_only_and_not_at_level_0() -> None:
@@ -102,16 +120,25 @@ def test_torch_twin_agrees_and_differentiates() -> None:
     a_rise, a_decay = p.rates(DT)
     r = np.linspace(0.0, 1.0, 11)[:, None]
     v = np.linspace(-4.0, 2.0, 25)[None, :]
-    ref = persistent_step(r, v, a_rise, a_decay, p)
+    ref = persistent_step(r, v, a_rise, a_decay, p, WINDOW)
     got = persistent_step_torch(
-        torch.as_tensor(r, dtype=torch.float64), torch.as_tensor(v, dtype=torch.float64), DT, p
+        torch.as_tensor(r, dtype=torch.float64),
+        torch.as_tensor(v, dtype=torch.float64),
+        DT,
+        p,
+        WINDOW,
     )
     np.testing.assert_allclose(got.numpy(), ref, rtol=1e-12, atol=1e-14)
 
-    names = ("ignition_velocity_rad_s", "ignition_slope_per_rad_s", "rise_time_s", "decay_time_s")
-    params = {n: torch.tensor(float(getattr(p, n)), dtype=torch.float64) for n in names}
+    v_ig, slope = p.ignition(WINDOW)
+    params = {
+        "ignition_velocity_rad_s": torch.tensor(v_ig, dtype=torch.float64),
+        "ignition_slope_per_rad_s": torch.tensor(slope, dtype=torch.float64),
+        "rise_time_s": torch.tensor(p.rise_time_s, dtype=torch.float64),
+        "decay_time_s": torch.tensor(p.decay_time_s, dtype=torch.float64),
+    }
     r_t = torch.tensor([0.2, 0.7], dtype=torch.float64, requires_grad=True)
-    v_t = torch.tensor([-1.52, -1.45], dtype=torch.float64, requires_grad=True)
+    v_t = torch.tensor([-1.02, -0.95], dtype=torch.float64, requires_grad=True)
     tau = torch.tensor(p.rise_time_s, dtype=torch.float64, requires_grad=True)
 
     def f(r_: torch.Tensor, v_: torch.Tensor, tau_: torch.Tensor) -> torch.Tensor:
@@ -124,8 +151,10 @@ def test_torch_twin_agrees_and_differentiates() -> None:
     # the torch step rolled over a motion matches the stage's scalar update
     r_np, r_torch = 0.0, torch.tensor(0.0, dtype=torch.float64)
     for vel in [-0.5, -2.0, -3.5, -3.5, -1.0, 0.0, 0.5]:
-        r_np = float(persistent_step(r_np, vel, a_rise, a_decay, p))
-        r_torch = persistent_step_torch(r_torch, torch.tensor(vel, dtype=torch.float64), DT, p)
+        r_np = float(persistent_step(r_np, vel, a_rise, a_decay, p, WINDOW))
+        r_torch = persistent_step_torch(
+            r_torch, torch.tensor(vel, dtype=torch.float64), DT, p, WINDOW
+        )
     assert float(r_torch) == pytest.approx(r_np, rel=1e-12)
 
 

@@ -401,7 +401,7 @@ def fit_persistent_gain(
     base: PersistentReflex,
     subjects: int,
     root_seed: int = CALIBRATION_ROOT_SEED,
-    bracket: tuple[float, float] = (0.1, 0.5),
+    bracket: tuple[float, float] = (0.3, 1.0),
     tol: float = 0.004,
     log: Callable[[str], None] | None = None,
 ) -> tuple[float, PIDOutcome]:
