@@ -53,6 +53,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "myoexo.studies.validate",
         "hold every reflex model to the study's PID table and the clinical tests, side by side",
     ),
+    "torque-readings": (
+        "myoexo.studies.torque_readings",
+        "compare four readings of the interaction torque with the study's numbers",
+    ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "results": (

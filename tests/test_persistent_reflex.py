@@ -74,7 +74,6 @@ def test_the_ignition_comes_from_the_subjects_velocity_window() -> None:
     with pytest.raises(ValueError, match="window_rad_s = None"):
         p.ignition(None)
     # a smooth gate: at the threshold half on, a quarter window either side 12 % / 88 %
-    a_rise, a_decay = p.rates(DT)
     gains = [float(persistent_step(0.0, -v, 1.0, 0.0, p, WINDOW)) for v in (0.75, 1.0, 1.25)]
     assert gains == pytest.approx([0.119, 0.5, 0.881], abs=2e-3)
 
@@ -98,7 +97,7 @@ def test_stage_adds_the_after_discharge_to_the_flexors_only_and_not_at_level_0()
         d = base.data
         d.qvel[stage._dof_adr] = -3.0  # a fast extension, held for the test
         ctrl = np.zeros(base.model.nu)
-        for _ in range(20):
+        for _ in range(80):  # 0.8 s: four rise time constants
             out = stage.apply(base, ctrl.copy())
         flex = out[stage.actuator_ids[: len(stage.flexors)]]
         ext = out[stage.actuator_ids[len(stage.flexors) :]]
@@ -168,7 +167,7 @@ def test_history_state_is_saved_and_restored_by_the_planning_copy_and_reset_clea
     stage.bind(base.model, base.dt)
     base.data.qvel[stage._dof_adr] = -3.0
     ctrl = np.zeros(base.model.nu)
-    for _ in range(5):
+    for _ in range(20):
         stage.apply(base, ctrl.copy())
     saved = stage.history_state()
     r = stage.memory[0]
@@ -259,16 +258,24 @@ def test_zero_gains_give_the_uniform_trajectory_and_other_models_have_no_memory(
         env.close()
 
 
-def test_a_ramped_target_reaches_where_the_pid_stalls() -> None:
-    """Mean over three level-2 subjects: the paper's PID (fast extension) ignites the
-    after-discharge and stops short; the same PID on a target ramped over 3 s does not."""
+def test_the_pids_fast_extension_ignites_the_after_discharge_and_it_fades() -> None:
+    """Level 2: the paper's PID extends far faster than the 0.5 rad/s window and ignites the
+    after-discharge; with a decay of seconds it fades while the knee is held, so the PID
+    still ends at the target at 8 s (the reason the model is not fitted to the study's
+    stall, docs/reference.md section 11)."""
+    from myoexo.control import PID
+    from myoexo.control.rollout import rollout
+    from myoexo.envs import make_env
     from myoexo.studies.calibrate import pid_outcome
 
-    cfg = get_reflex("persistent")
-    gentle = pid_outcome(2, cfg, 3, root_seed=0, ramp_s=3.0)
-    assert abs(gentle.final_error_deg) < 1.0
-    fast = pid_outcome(2, cfg, 3, root_seed=0)
-    assert fast.peak_exo_torque_nm > gentle.peak_exo_torque_nm
+    env = make_env(2, reflex="persistent")
+    rollout(env, PID.from_env(env), seed=7, until_s=0.6)
+    ignited = env.unwrapped.spasticity.memory[0]
+    rollout(env, PID.from_env(env), seed=7)
+    faded = env.unwrapped.spasticity.memory[0]
+    env.close()
+    assert ignited > 0.5 and faded < 0.1 * ignited
+    assert abs(pid_outcome(2, get_reflex("persistent"), 3).final_error_deg) < 1.0
 
 
 def test_hold_test_separates_memory_from_no_memory() -> None:

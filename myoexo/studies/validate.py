@@ -402,7 +402,7 @@ def markdown(
         cells = [rec["test"], rec["observation"], rec["tolerance"]]
         cells += [str(rec[m]) for m in long["model"].unique()]
         cells.append(rec["source"])
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     counts = long.groupby("model", sort=False)["passed"].agg(["sum", "count"])
     lines.append("")
     lines.append(
