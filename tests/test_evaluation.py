@@ -237,5 +237,8 @@ def test_pid_on_the_twin_follows_the_papers_pattern():
     assert stats[3].final_error_deg > stats[2].final_error_deg  # further short (paper 9.3)
     overshoot = [stats[lvl].target_overshoot_deg for lvl in range(4)]
     assert overshoot[0] > overshoot[3]  # the reflex damps the overshoot
+    # the strap's torque on the knee (the interaction torque): on the scale of the study's
+    # 100 Nm motor at every level, the level-0 overshoot braked hardest
     peak = [stats[lvl].peak_interaction_torque_nm for lvl in range(4)]
-    assert peak[3] > peak[0] + 20.0  # ... and loads the knee more
+    assert all(90.0 < p < 130.0 for p in peak), peak
+    assert peak[0] == max(peak)

@@ -133,7 +133,10 @@ def test_fitting_or_choosing_on_the_evaluation_root_is_refused_in_the_api(tmp_pa
 def test_the_fitted_reflex_values_record_their_root():
     from myoexo.evaluation.config import CALIBRATION_ROOT_SEED
     from myoexo.spasticity import CALIBRATION, PERSISTENT, UNCALIBRATED
+    from myoexo.spasticity.tsrt import TSRT_CALIBRATION
 
-    # the shipped calibrations are fitted on the calibration root
-    assert CALIBRATION.root_seed == CALIBRATION_ROOT_SEED == PERSISTENT.root_seed
+    # the shipped calibrations are fitted on the calibration root; the persistent gains are
+    # chosen, not fitted, and say so
+    assert CALIBRATION.root_seed == CALIBRATION_ROOT_SEED == TSRT_CALIBRATION.root_seed
+    assert PERSISTENT.root_seed is None and PERSISTENT.note.startswith("chosen, not fitted")
     assert UNCALIBRATED.root_seed is None

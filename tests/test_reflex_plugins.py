@@ -177,7 +177,7 @@ def _cli(*args: str, env_plugins: str | None = None) -> subprocess.CompletedProc
 def test_an_unknown_reflex_on_the_command_line_lists_the_registered_ones():
     out = _cli("tardieu", "--reflex", "clonus", "--levels", "1")
     assert out.returncode == 2
-    assert "clonus" in out.stderr and "persistent, stretch, uniform" in out.stderr
+    assert "clonus" in out.stderr and "persistent, stretch, tsrt, uniform" in out.stderr
 
 
 @pytest.mark.slow

@@ -42,7 +42,7 @@ def test_the_record_parses_validates_and_round_trips():
     assert TwinOptions().env_kwargs() == {}  # the default twin adds nothing
     assert twin.replace(episode_duration_s=None).task == ()
     for bad, match in (
-        ("reflex=clonus", "registered: persistent, stretch, uniform"),
+        ("reflex=clonus", "registered: persistent, stretch, tsrt, uniform"),
         ("episode_duration_s=-1", "outside the accepted range"),
         ("reward_weights=nope:1", "accepted"),
         ("obs_preset=nope", "accepted"),

@@ -148,48 +148,44 @@ class TSRTCalibration:
         return self.levels.get(int(level), TSRTLevel())
 
 
-#: The ``"tsrt"`` reflex's per-level parameters, a first joint fit on the calibration root
-#: (root seed 2). A random search (the clinical rows of ``myoexo validate`` on one subject
-#: per level and the paper's PID on six, about 90 candidates) chose the velocity slope, the
-#: dynamic shifts, the extensors' thresholds and the gains; then the flexors' static
-#: threshold of levels 2 and 3 was fitted by bisection on the PID's mean final error over 10
-#: subjects (6.27 +- 2.85 deg at level 2, 9.27 +- 4.02 deg at level 3; targets 6.3 / 9.3).
-#: Level 1's threshold is not fitted: the PID there ends 1.9-2.9 deg short for every static
-#: threshold tried (-20 to -3 deg), held by the phasic term near the target. Not the default
-#: twin: the validation table (docs/studies/validation) shows what it passes and misses.
+#: The ``"tsrt"`` reflex's per-level parameters, fitted jointly to the study's PID table and
+#: the clinical rows of the validation table on the calibration root
+#: (``myoexo calibrate --reflex tsrt``, :mod:`myoexo.studies.joint_fit`; the record and its
+#: check: ``docs/studies/calibration_tsrt``).
 TSRT_CALIBRATION = TSRTCalibration(
     levels=MappingProxyType(
         {
             1: TSRTLevel(
-                flexor_threshold_shift_deg=30.1,
-                extensor_threshold_shift_deg=12.66,
-                dynamic_shift_deg=14.0,
-                velocity_slope_per_rad_s=14.3,
-                flexor_gain=1.17,
-                extensor_gain=0.3,
+                flexor_threshold_shift_deg=32.0,
+                extensor_threshold_shift_deg=4.66,
+                dynamic_shift_deg=22.0,
+                velocity_slope_per_rad_s=16.3,
+                flexor_gain=0.3,
+                extensor_gain=0.45,
             ),
             2: TSRTLevel(
-                flexor_threshold_shift_deg=41.25,
+                flexor_threshold_shift_deg=41.19,
                 extensor_threshold_shift_deg=19.75,
-                dynamic_shift_deg=10.64,
-                velocity_slope_per_rad_s=14.3,
+                dynamic_shift_deg=11.0,
+                velocity_slope_per_rad_s=16.3,
                 flexor_gain=0.82,
-                extensor_gain=0.61,
+                extensor_gain=0.535,
             ),
             3: TSRTLevel(
-                flexor_threshold_shift_deg=8.83,
-                extensor_threshold_shift_deg=9.11,
-                dynamic_shift_deg=9.61,
-                velocity_slope_per_rad_s=14.3,
+                flexor_threshold_shift_deg=1.77,
+                extensor_threshold_shift_deg=36.0,
+                dynamic_shift_deg=6.0,
+                velocity_slope_per_rad_s=16.3,
                 flexor_gain=1.03,
                 extensor_gain=0.29,
             ),
         }
     ),
     note=(
-        "random search of the clinical rows (root 2) + bisection of the level 2-3 flexor "
-        "thresholds on the paper's PID (10 subjects of root 2): L2 6.27 +- 2.85 deg, "
-        "L3 9.27 +- 4.02 deg; level 1 not fitted"
+        "myoexo calibrate --reflex tsrt --subjects 6 --clinical-subjects 1 --sweeps 2 "
+        "--verify-subjects 50 --seed 2: fitted on root 2 (12 of 17 validation rows in-sample); "
+        "check on root 0, PID final error L0 0.00 +- 0.00 deg, L1 0.12 +- 0.57 deg, "
+        "L2 6.97 +- 3.11 deg, L3 10.73 +- 4.44 deg"
     ),
     root_seed=2,
 )

@@ -13,7 +13,7 @@ validation table (``docs/studies/validation``) is this command's output::
 What is measured, per model and level (means over the subjects; the clinical tests'
 definitions are in :mod:`myoexo.clinical`):
 
-* the paper's PID on the task (:func:`myoexo.studies.calibrate.pid_outcome`): final error
+* the paper's PID on the task (:func:`myoexo.studies.pid_check.pid_outcome`): final error
   and overshoot;
 * Tardieu (:func:`~myoexo.clinical.tardieu.run_tardieu`): R1, R2, R2 - R1, and the
   velocity-dependent resistance ``fast_peak_nm - slow_peak_nm`` (the muscles' resisting torque
@@ -196,6 +196,11 @@ def _pid_short(
     return check
 
 
+def _pid_settles(m: Measures) -> tuple[str, bool]:
+    fractions = [m["pid"][lv].settled_fraction for lv in VALID_LEVELS]
+    return " / ".join(f"{100 * f:.0f} %" for f in fractions), min(fractions) >= 0.9
+
+
 def _catch_inside(m: Measures) -> tuple[str, bool]:
     t = m["tardieu"]
     values = [float(t["r1_deg"][lv]) for lv in (1, 2, 3)]
@@ -243,6 +248,9 @@ ROWS: tuple[ValidationRow, ...] = (
                   "6.3 ± 1.5 deg (mean)", "study", _pid_short(2, 6.3, 1.5)),
     ValidationRow("pid_l3", "PID", "level 3: ends 9.3 deg short of the target",
                   "9.3 ± 1.5 deg (mean)", "study", _pid_short(3, 9.3, 1.5)),
+    ValidationRow("pid_settles", "PID", "the PID settles at every level (the study gives its "
+                  "settling times; 2 % band): no sustained oscillation",
+                  "settled in >= 90 % of the subjects, levels 0-3", "study", _pid_settles),
     ValidationRow("tardieu_velocity", "Tardieu",
                   "velocity-dependent resistance (fast minus slow peak, Nm) grows with the level",
                   "rises at every step, levels 0-3", "velocity",
@@ -308,7 +316,7 @@ def measure_model(
     from myoexo.clinical.tardieu import TardieuParams, run_tardieu
     from myoexo.model import TwinParams
     from myoexo.spasticity.registry import resolve_reflex
-    from myoexo.studies.calibrate import pid_outcome
+    from myoexo.studies.pid_check import pid_outcome
 
     model = resolve_reflex(reflex)
     t0 = time.perf_counter()

@@ -1,0 +1,266 @@
+"""The joint fit of the ``"tsrt"`` reflex: the study's PID table and the clinical rows
+together, on the calibration root.
+
+``myoexo calibrate --reflex tsrt`` runs :func:`calibrate_tsrt`. Its objective is the
+validation table's (:mod:`myoexo.studies.validate`): the number of rows a candidate passes,
+with a small continuous term that breaks ties towards the study's PID final errors (6.3 / 9.3
+deg at levels 2-3, within 0.5 deg of the target at level 1), a velocity-dependent resistance
+and spasticity angle that rise with the level, and catches inside the range. The search is
+coordinate-wise: each sweep tries one step up and one down of every
+:class:`~myoexo.spasticity.tsrt.TSRTLevel` field of every spastic level (the velocity slope
+is shared by the levels), keeps a step that raises the objective, and halves the steps for
+the next sweep. Then the flexors' static threshold of levels 2 and 3 is fitted by bisection
+on the PID's mean final error (as the stretch reflex's calibration does), and the PID is
+checked on the evaluation root. The fit reads the calibration root only (the evaluation root
+is refused).
+
+    myoexo calibrate --reflex tsrt --subjects 6 --clinical-subjects 1 --sweeps 2 \\
+        --verify-subjects 50 --out docs/studies/calibration_tsrt
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+from myoexo.evaluation.config import CALIBRATION_ROOT_SEED, EVALUATION_ROOT_SEED, check_fit_root
+from myoexo.spasticity.levels import VALID_LEVELS
+from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRTCalibration, TSRTLevel, TSRTReflex
+from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
+from myoexo.studies.validate import ValidationConfig, measure_model, score
+
+__all__ = ["STEPS", "JointFitResult", "calibrate_tsrt", "objective"]
+
+#: The first sweep's step of every fitted field (halved each sweep), and its bounds.
+STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
+    {
+        "flexor_threshold_shift_deg": (4.0, -50.0, 150.0),
+        "dynamic_shift_deg": (3.0, 0.0, 60.0),
+        "flexor_gain": (0.2, 0.0, 20.0),
+        "extensor_gain": (0.15, 0.0, 20.0),
+        "extensor_threshold_shift_deg": (8.0, -100.0, 100.0),
+    }
+)
+#: The shared velocity slope's first step, 1/(rad/s), and its bounds.
+VELOCITY_SLOPE_STEP: tuple[float, float, float] = (4.0, 1.0, 100.0)
+#: The PID's final-error targets of the tie-break, deg (the study's table).
+_TARGETS_DEG = {2: 6.3, 3: 9.3}
+
+
+def objective(measures: Mapping[str, Any]) -> tuple[float, int]:
+    """``(value, rows passed)`` of one candidate's measurements: the rows passed plus a
+    tie-break in ``(-0.3, 0.3)`` (module docstring)."""
+    passed = sum(ok for _, ok in score(measures).values())
+    pid = measures["pid"]
+    t = measures["tardieu"]
+    vel = [float(t["velocity_nm"][lv]) for lv in VALID_LEVELS]
+    ang = [float(t["r2_minus_r1_deg"][lv]) for lv in (1, 2, 3)]
+    r1 = [float(t["r1_deg"][lv]) for lv in (1, 2, 3)]
+    soft = (
+        -sum(abs(pid[lv].final_error_deg - target) / 3.0 for lv, target in _TARGETS_DEG.items())
+        - max(0.0, abs(pid[1].final_error_deg) - 0.5)
+        + 0.02 * min(vel[2] - vel[1], vel[3] - vel[2], 20.0)
+        + 0.02 * min(ang[1] - ang[0], ang[2] - ang[1], 20.0)
+        - 0.02 * sum(max(0.0, r - 70.0) for r in r1)
+    )
+    return passed + 0.3 * math.tanh(soft / 3.0), passed
+
+
+@dataclass(frozen=True)
+class JointFitResult:
+    """What :func:`calibrate_tsrt` found.
+
+    Attributes:
+        calibration: The fitted per-level parameters (with their provenance note).
+        rows: Row key -> (value, passed) of the validation rows at the fitted values, on
+            the fit's subjects (in-sample).
+        fit_outcomes: Level -> the PID on the fit's subjects at the fitted threshold.
+        outcomes: Level -> the PID on the check's subjects (the evaluation root).
+        evaluations: Candidates measured.
+        wall_time_s: Time the fit and the check took.
+        fit_root_seed: Root seed of the fit's subjects.
+        check_root_seed: Root seed of the check's subjects.
+    """
+
+    calibration: TSRTCalibration
+    rows: Mapping[str, tuple[str, bool]]
+    fit_outcomes: Mapping[int, PIDOutcome]
+    outcomes: Mapping[int, PIDOutcome]
+    evaluations: int
+    wall_time_s: float
+    fit_root_seed: int = CALIBRATION_ROOT_SEED
+    check_root_seed: int = EVALUATION_ROOT_SEED
+
+    def snippet(self) -> str:
+        """The fitted levels as Python, for :data:`myoexo.spasticity.tsrt.TSRT_CALIBRATION`."""
+        lines = ["{"]
+        for level, c in sorted(self.calibration.levels.items()):
+            fields = ", ".join(f"{f.name}={getattr(c, f.name):.4g}" for f in dataclasses.fields(c))
+            lines.append(f"    {level}: TSRTLevel({fields}),")
+        lines.append("}")
+        return "\n".join(lines)
+
+    def markdown(self) -> str:
+        """The calibration record: note, fitted values, the fit's rows, the check."""
+        passed = sum(ok for _, ok in self.rows.values())
+        lines = [
+            "# Calibration of the tsrt reflex",
+            "",
+            self.calibration.note,
+            "",
+            "Fitted values (paste into myoexo.spasticity.tsrt.TSRT_CALIBRATION):",
+            "",
+            "```python",
+            self.snippet(),
+            "```",
+            "",
+            f"**The fit** (in-sample, root {self.fit_root_seed}): {passed} of "
+            f"{len(self.rows)} validation rows pass on the fit's subjects; the PID at the "
+            "fitted thresholds:",
+            "",
+            "| level | subjects | PID final error (deg) | target (deg) |",
+            "|---|---|---|---|",
+        ]
+        for level, out in sorted(self.fit_outcomes.items()):
+            lines.append(
+                f"| {level} | {out.subjects} | {out.final_error_deg:.2f} ± "
+                f"{out.final_error_std_deg:.2f} | {_TARGETS_DEG[level]:g} |"
+            )
+        lines += [
+            "",
+            f"**The check** (root {self.check_root_seed}, subjects the fit never saw): the "
+            "paper's PID",
+            "",
+            "| level | subjects | PID final error (deg) | overshoot (deg) | settled |",
+            "|---|---|---|---|---|",
+        ]
+        for level, out in sorted(self.outcomes.items()):
+            lines.append(
+                f"| {level} | {out.subjects} | {out.final_error_deg:.2f} ± "
+                f"{out.final_error_std_deg:.2f} | {out.overshoot_deg:.2f} | "
+                f"{100 * out.settled_fraction:.0f} % |"
+            )
+        lines += ["", f"{self.evaluations} candidates; wall time {self.wall_time_s:.0f} s.", ""]
+        return "\n".join(lines)
+
+
+def _model(levels: Mapping[int, TSRTLevel]) -> TSRTReflex:
+    return TSRTReflex(calibration=TSRTCalibration(levels=MappingProxyType(dict(levels))))
+
+
+def calibrate_tsrt(
+    start: TSRTCalibration = TSRT_CALIBRATION,
+    pid_subjects: int = 6,
+    clinical_subjects: int = 1,
+    sweeps: int = 2,
+    verify_subjects: int = 50,
+    root_seed: int = CALIBRATION_ROOT_SEED,
+    check_root_seed: int = EVALUATION_ROOT_SEED,
+    log: Callable[[str], None] = print,
+) -> JointFitResult:
+    """Fit the ``"tsrt"`` reflex jointly to the PID table and the clinical rows (module
+    docstring), starting from *start*.
+
+    Args:
+        start: The starting values (every spastic level must be listed).
+        pid_subjects: Subjects per level of the PID in the fit.
+        clinical_subjects: Subjects per level of the clinical tests in the fit.
+        sweeps: Coordinate sweeps (each halves the steps).
+        verify_subjects: Subjects per level of the PID check on the evaluation root.
+        root_seed: Root seed of the fit's subjects (the evaluation root is refused).
+        check_root_seed: Root seed of the check.
+        log: Progress lines.
+    """
+    root_seed = check_fit_root(root_seed, "calibration")
+    if sweeps < 0:
+        raise ValueError(f"sweeps = {sweeps} must be >= 0")
+    t0 = time.perf_counter()
+    config = ValidationConfig(
+        subjects=clinical_subjects, pid_subjects=pid_subjects, root_seed=root_seed
+    )
+    levels = {lv: start[lv] for lv in VALID_LEVELS if lv > 0}
+    evaluations = 0
+
+    def evaluate(candidate: Mapping[int, TSRTLevel]) -> tuple[float, int]:
+        nonlocal evaluations
+        evaluations += 1
+        return objective(measure_model(_model(candidate), config))
+
+    best, passed = evaluate(levels)
+    log(f"start: {passed} rows, objective {best:.3f}")
+    steps = {name: step for name, (step, _, _) in STEPS.items()}
+    slope_step = VELOCITY_SLOPE_STEP[0]
+    for sweep in range(sweeps):
+        moves: list[tuple[int | None, str, float]] = [
+            (lv, name, step) for lv in sorted(levels) for name, step in steps.items()
+        ]
+        moves.append((None, "velocity_slope_per_rad_s", slope_step))
+        for level, name, step in moves:
+            for sign in (1.0, -1.0):
+                trial = dict(levels)
+                if level is None:  # the shared velocity slope
+                    _, low, high = VELOCITY_SLOPE_STEP
+                    value = min(max(levels[1].velocity_slope_per_rad_s + sign * step, low), high)
+                    trial = {lv: dataclasses.replace(c, **{name: value}) for lv, c in trial.items()}
+                else:
+                    _, low, high = STEPS[name]
+                    value = min(max(getattr(levels[level], name) + sign * step, low), high)
+                    trial[level] = dataclasses.replace(levels[level], **{name: value})
+                val, n = evaluate(trial)
+                log(f"  sweep {sweep} L{level or '*'} {name} {value:.3g}: {n} rows, {val:.3f}")
+                if val > best:
+                    best, passed, levels = val, n, trial
+                    break
+        steps = {name: step / 2 for name, step in steps.items()}
+        slope_step /= 2
+        log(f"sweep {sweep}: {passed} rows, objective {best:.3f}")
+
+    fit_outcomes: dict[int, PIDOutcome] = {}
+    for level, target in sorted(_TARGETS_DEG.items()):
+        current = levels[level].flexor_threshold_shift_deg
+
+        def outcome(shift: float, level: int = level) -> PIDOutcome:
+            trial = dict(levels)
+            trial[level] = dataclasses.replace(levels[level], flexor_threshold_shift_deg=shift)
+            return pid_outcome(level, _model(trial), pid_subjects, root_seed)
+
+        shift, fit_outcomes[level] = bisect_final_error(
+            outcome, (current - 15.0, current + 15.0), target, 0.1, level, "threshold shift"
+        )
+        levels[level] = dataclasses.replace(
+            levels[level], flexor_threshold_shift_deg=round(shift, 2)
+        )
+        log(f"L{level}: threshold shift {shift:.2f} deg")
+    rows = score(measure_model(_model(levels), config))
+    outcomes = {
+        lv: pid_outcome(lv, _model(levels), verify_subjects, check_root_seed) for lv in VALID_LEVELS
+    }
+    note = (
+        f"myoexo calibrate --reflex tsrt --subjects {pid_subjects} --clinical-subjects "
+        f"{clinical_subjects} --sweeps {sweeps} --verify-subjects {verify_subjects} --seed "
+        f"{root_seed}: fitted on root {root_seed} ({sum(ok for _, ok in rows.values())} of "
+        f"{len(rows)} validation rows in-sample); check on root {check_root_seed}, PID final "
+        "error "
+        + ", ".join(
+            f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
+            for lv, o in outcomes.items()
+        )
+    )
+    calibration = TSRTCalibration(
+        levels=MappingProxyType(dict(levels)), note=note, root_seed=root_seed
+    )
+    return JointFitResult(
+        calibration=calibration,
+        rows=rows,
+        fit_outcomes=fit_outcomes,
+        outcomes=outcomes,
+        evaluations=evaluations,
+        wall_time_s=time.perf_counter() - t0,
+        fit_root_seed=root_seed,
+        check_root_seed=check_root_seed,
+    )
