@@ -34,7 +34,7 @@ same knee angle: ``excess_nm`` = resisting torque minus level 0's. Per level (ra
 
 CLI::
 
-    myoexo mas-exam [--levels 0 1 2 3] [--reflex stretch|uniform|persistent] [--end-deg 10]
+    myoexo mas-exam [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
                     [--duration-s 1.0] [--subject-seed N] [--out DIR]
 """
 

@@ -51,7 +51,7 @@ lengthens.
 
 CLI::
 
-    myoexo pendulum [--levels 0 1 2 3] [--reflex stretch|uniform|persistent]
+    myoexo pendulum [--levels 0 1 2 3] [--reflex NAME]
                     [--posture seated|reclined] [--start-deg D] [--swing-s 10]
                     [--device worn|freed] [--subject-seed N] [--out DIR]
 """

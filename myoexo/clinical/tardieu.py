@@ -43,7 +43,7 @@ reflex), as far as the posture allows without saturating the 100 Nm motor.
 
 CLI::
 
-    myoexo tardieu [--levels 0 1 2 3] [--reflex stretch|uniform|persistent] [--end-deg 10]
+    myoexo tardieu [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
                    [--slow 0.2] [--fast 3.0] [--subject-seed N] [--out DIR]
 """
 

@@ -17,7 +17,7 @@ import os
 import platform
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -90,6 +90,27 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def write_study_files(folder: str | os.PathLike[str], files: Mapping[str, Any]) -> list[Path]:
+    """Write a study's outputs into *folder* (created if missing), each atomically: name ->
+    text (a ``str``) or table (anything with ``to_csv``, written without its index).
+
+    Returns:
+        The paths written, in the order given.
+    """
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, content in files.items():
+        path = out / name
+        if isinstance(content, str):
+            write_text_atomic(path, content)
+        else:
+            with atomic_path(path) as tmp:
+                content.to_csv(tmp, index=False)
+        paths.append(path)
+    return paths
 
 
 def write_json_atomic(path: str | os.PathLike[str], data: Any, indent: int = 1) -> None:

@@ -78,7 +78,12 @@ import numpy as np
 
 from myoexo.spasticity.coefficients import angle_term, as_tensor, tensor_getter, velocity_term
 from myoexo.spasticity.delay import STRETCH_DELAY_S
-from myoexo.spasticity.registry import Memory, ReflexModel, register_reflex
+from myoexo.spasticity.registry import (
+    Memory,
+    MemorylessGroupReflex,
+    ReflexModel,
+    register_reflex,
+)
 from myoexo.spasticity.tsrt import TSRTReflex
 
 if TYPE_CHECKING:  # torch is imported lazily
@@ -486,7 +491,7 @@ def group_excitations_torch(
 
 # ----------------------------------------------------------------------------- the models
 @dataclass(frozen=True)
-class StretchReflex(ReflexModel):
+class StretchReflex(MemorylessGroupReflex):
     """``"stretch"``: each muscle group answers its own stretch (the clinical stretch
     reflex, Lance 1980; the envs' default; module docstring).
 
@@ -499,29 +504,16 @@ class StretchReflex(ReflexModel):
     delay_s: float = STRETCH_DELAY_S
     calibration: StretchCalibration = CALIBRATION
 
-    def subject_constants(
-        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
-    ) -> StretchConstants:
-        return stretch_constants(subject, self.calibration[level])
+    def constants(self, subject: Any, level_parameters: Any) -> StretchConstants:
+        return stretch_constants(subject, level_parameters)
 
-    def step(
-        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
-    ) -> tuple[float, float, Memory]:
-        flex, ext = stretch_terms(theta_deg, vel_rad_s, constants, math.tanh)
-        return flex, ext, memory
+    def terms(self, theta_deg: Any, vel_rad_s: Any, constants: Any, tanh: Any) -> tuple[Any, Any]:
+        return stretch_terms(theta_deg, vel_rad_s, constants, tanh)
 
-    def step_torch(
-        self,
-        level: int,
-        subject: Mapping[str, Any],
-        memory: Any,
-        theta_deg: torch.Tensor,
-        vel_rad_s: torch.Tensor,
-        control_period_s: float,
-        individual: Any = None,
-    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
-        flex, ext = group_excitations_torch(theta_deg, vel_rad_s, subject, self.calibration[level])
-        return flex, ext, tuple(memory)
+    def terms_torch(
+        self, theta_deg: Any, vel_rad_s: Any, subject: Mapping[str, Any], level_parameters: Any
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        return group_excitations_torch(theta_deg, vel_rad_s, subject, level_parameters)
 
 
 @dataclass(frozen=True)

@@ -153,6 +153,54 @@ class ReflexModel(abc.ABC):
         model's own parameters are its fields)."""
 
 
+class MemorylessGroupReflex(ReflexModel):
+    """A reflex without memory whose per-level parameters live in a ``calibration`` field
+    (``calibration[level]``) and whose step is one function of the knee state, written once
+    for floats and for torch: subclasses give :meth:`constants` (a subject's constants),
+    :meth:`terms` (``(flexor, extensor)`` from them, in any array library) and
+    :meth:`terms_torch` (the differentiable twin from the subject's parameters)."""
+
+    calibration: Any
+
+    @abc.abstractmethod
+    def constants(self, subject: Any, level_parameters: Any) -> Any:
+        """The subject's constants with its level's parameters."""
+
+    @abc.abstractmethod
+    def terms(self, theta_deg: Any, vel_rad_s: Any, constants: Any, tanh: Any) -> tuple[Any, Any]:
+        """``(flexor, extensor)`` excitations; *tanh* is the array library's."""
+
+    @abc.abstractmethod
+    def terms_torch(
+        self, theta_deg: Any, vel_rad_s: Any, subject: Mapping[str, Any], level_parameters: Any
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The torch twin of :meth:`terms` from the subject's parameters."""
+
+    def subject_constants(
+        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
+    ) -> Any:
+        return self.constants(subject, self.calibration[level])
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        flex, ext = self.terms(theta_deg, vel_rad_s, constants, math.tanh)
+        return flex, ext, memory
+
+    def step_torch(
+        self,
+        level: int,
+        subject: Mapping[str, Any],
+        memory: Any,
+        theta_deg: torch.Tensor,
+        vel_rad_s: torch.Tensor,
+        control_period_s: float,
+        individual: Any = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        flex, ext = self.terms_torch(theta_deg, vel_rad_s, subject, self.calibration[level])
+        return flex, ext, tuple(memory)
+
+
 _REGISTRY: dict[str, ReflexModel] = {}
 
 #: Environment variable naming modules (comma-separated) that register reflex models when

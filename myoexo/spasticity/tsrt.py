@@ -55,12 +55,11 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 from myoexo.spasticity.coefficients import as_tensor, tensor_getter
 from myoexo.spasticity.delay import STRETCH_DELAY_S
-from myoexo.spasticity.registry import Memory, ReflexModel
+from myoexo.spasticity.registry import MemorylessGroupReflex
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
 
-    from myoexo.spasticity.levels import SpasticityParams
 
 __all__ = [
     "TSRT_CALIBRATION",
@@ -286,7 +285,7 @@ def tsrt_excitations_torch(
 
 
 @dataclass(frozen=True)
-class TSRTReflex(ReflexModel):
+class TSRTReflex(MemorylessGroupReflex):
     """``"tsrt"``: each muscle group's stretch reflex fires past a threshold that stretch
     velocity moves into the range (module docstring).
 
@@ -298,29 +297,16 @@ class TSRTReflex(ReflexModel):
     delay_s: float = STRETCH_DELAY_S
     calibration: TSRTCalibration = TSRT_CALIBRATION
 
-    def subject_constants(
-        self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float
-    ) -> TSRTConstants:
-        return tsrt_constants(subject, self.calibration[level])
+    def constants(self, subject: Any, level_parameters: Any) -> TSRTConstants:
+        return tsrt_constants(subject, level_parameters)
 
-    def step(
-        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
-    ) -> tuple[float, float, Memory]:
-        flex, ext = tsrt_terms(theta_deg, vel_rad_s, constants, math.tanh)
-        return flex, ext, memory
+    def terms(self, theta_deg: Any, vel_rad_s: Any, constants: Any, tanh: Any) -> tuple[Any, Any]:
+        return tsrt_terms(theta_deg, vel_rad_s, constants, tanh)
 
-    def step_torch(
-        self,
-        level: int,
-        subject: Mapping[str, Any],
-        memory: Any,
-        theta_deg: torch.Tensor,
-        vel_rad_s: torch.Tensor,
-        control_period_s: float,
-        individual: Any = None,
-    ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
-        flex, ext = tsrt_excitations_torch(theta_deg, vel_rad_s, subject, self.calibration[level])
-        return flex, ext, tuple(memory)
+    def terms_torch(
+        self, theta_deg: Any, vel_rad_s: Any, subject: Mapping[str, Any], level_parameters: Any
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        return tsrt_excitations_torch(theta_deg, vel_rad_s, subject, level_parameters)
 
 
 def with_level(calibration: TSRTCalibration, level: int, **changes: Any) -> TSRTCalibration:

@@ -628,7 +628,7 @@ def _run_tsrt(args: argparse.Namespace) -> int:
     text = result.markdown()
     print(text)
     if args.out is not None:
-        from myoexo.runtime.files import write_text_atomic
+        from myoexo.runtime.files import write_study_files
 
-        write_text_atomic(args.out / "calibration.md", text)
+        write_study_files(args.out, {"calibration.md": text})
     return 0

@@ -215,8 +215,8 @@ def run(args: argparse.Namespace) -> int:
     text = markdown(table, episodes, args.policy, time.perf_counter() - t0)
     print(text)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "torque_readings.md").write_text(text)
-        episodes.to_csv(args.out / "episodes.csv", index=False)
-        print(f"wrote {args.out / 'torque_readings.md'}, {args.out / 'episodes.csv'}")
+        from myoexo.runtime.files import write_study_files
+
+        files = {"torque_readings.md": text, "episodes.csv": episodes}
+        print("wrote " + ", ".join(str(p) for p in write_study_files(args.out, files)))
     return 0

@@ -472,8 +472,8 @@ def run(args: argparse.Namespace) -> int:
     text = markdown(table, long, config, wall)
     print(text)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "validation.md").write_text(text)
-        long.to_csv(args.out / "validation.csv", index=False)
-        print(f"wrote {args.out / 'validation.md'}, {args.out / 'validation.csv'}")
+        from myoexo.runtime.files import write_study_files
+
+        paths = write_study_files(args.out, {"validation.md": text, "validation.csv": long})
+        print("wrote " + ", ".join(str(p) for p in paths))
     return 0
