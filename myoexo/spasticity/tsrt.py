@@ -168,23 +168,23 @@ TSRT_CALIBRATION = TSRTCalibration(
                 dynamic_shift_deg=11.0,
                 velocity_slope_per_rad_s=16.3,
                 flexor_gain=0.82,
-                extensor_gain=0.535,
+                extensor_gain=0.385,
             ),
             3: TSRTLevel(
-                flexor_threshold_shift_deg=1.77,
+                flexor_threshold_shift_deg=1.59,
                 extensor_threshold_shift_deg=36.0,
                 dynamic_shift_deg=6.0,
                 velocity_slope_per_rad_s=16.3,
                 flexor_gain=1.03,
-                extensor_gain=0.29,
+                extensor_gain=0.365,
             ),
         }
     ),
     note=(
-        "myoexo calibrate --reflex tsrt --subjects 6 --clinical-subjects 1 --sweeps 2 "
-        "--verify-subjects 50 --seed 2: fitted on root 2 (12 of 17 validation rows in-sample); "
+        "myoexo calibrate --reflex tsrt --subjects 8 --clinical-subjects 3 --sweeps 2 "
+        "--verify-subjects 50 --seed 2: fitted on root 2 (12 of 18 validation rows in-sample); "
         "check on root 0, PID final error L0 0.00 +- 0.00 deg, L1 0.12 +- 0.57 deg, "
-        "L2 6.97 +- 3.11 deg, L3 10.73 +- 4.44 deg"
+        "L2 7.02 +- 3.19 deg, L3 9.86 +- 4.45 deg"
     ),
     root_seed=2,
 )
