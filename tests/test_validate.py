@@ -102,6 +102,19 @@ def test_pid_rows_hold_the_studys_table() -> None:
     assert not score(m)["pid_settles"][1] and score(m)["pid_l3"][1]
 
 
+def test_the_joint_fits_objective_counts_rows_and_breaks_ties_towards_the_study() -> None:
+    from myoexo.studies.joint_fit import calibrate_tsrt, objective
+
+    value, passed = objective(_measures())
+    assert passed == len(ROWS) and len(ROWS) - 0.3 < value < len(ROWS) + 0.3
+    off = _measures()
+    off["pid"][2] = PIDOutcome(2, 5, 7.5, 2.0, 0.0, 1.0)  # still within 1.5 deg: passes
+    off_value, off_passed = objective(off)
+    assert off_passed == passed and off_value < value  # but further from 6.3 deg
+    with pytest.raises(ValueError, match="root"):
+        calibrate_tsrt(root_seed=0)
+
+
 def test_validation_refuses_the_evaluation_root() -> None:
     with pytest.raises(ValueError, match="root"):
         ValidationConfig(root_seed=0)

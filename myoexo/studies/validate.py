@@ -50,8 +50,10 @@ __all__ = [
     "ValidationConfig",
     "ValidationRow",
     "add_arguments",
+    "markdown",
     "measure_model",
     "run",
+    "score",
     "validate",
     "validation_table",
 ]
