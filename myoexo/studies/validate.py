@@ -117,7 +117,7 @@ class ValidationRow:
 
     Attributes:
         key: Short identifier.
-        test: The test (``PID``, ``Tardieu``, ``MAS``, ``pendulum``, ``stretch``).
+        test: The test (``PID``, ``Tardieu``, ``MAS``, ``pendulum``, ``instrumented stretch``).
         observation: What is observed, in words.
         tolerance: The accepted range, in words.
         source: Key of :data:`SOURCES`.
@@ -266,7 +266,7 @@ ROWS: tuple[ValidationRow, ...] = (
                   "tardieu", _catch_inside),
     ValidationRow("tardieu_r2_healthy", "Tardieu", "level 0: the slow range R2 (popliteal angle)",
                   "0-50 deg", "katz", _within("tardieu", "r2_deg", (0,), 0.0, 50.0, 1)),
-    ValidationRow("stretch_ratio", "stretch",
+    ValidationRow("stretch_ratio", "instrumented stretch",
                   "instrumented fast/slow peak resistance: about 1 without spasticity, "
                   "higher with it, rising with the level",
                   "level 0 < 1.1; rises at every step, levels 0-3", "velocity",
