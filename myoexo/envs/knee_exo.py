@@ -567,6 +567,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             measured_exo_deg = math.degrees(sensed.item(at["exo_angle_rad"]))
         target_deg = self.task.target_angle_deg
         thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
+        exo_nm, muscle_nm = values[at["exo_torque_nm"]], values[at["muscle_knee_torque_nm"]]
         stage = self.spasticity
         info.update(
             time_s=values[at["time"]],
@@ -578,13 +579,12 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,
-            exo_torque_nm=values[at["exo_torque_nm"]],
-            muscle_knee_torque_nm=values[at["muscle_knee_torque_nm"]],
+            exo_torque_nm=exo_nm,
+            muscle_knee_torque_nm=muscle_nm,
             interaction_torque_nm=values[at["interaction_torque_nm"]],
             cuff_knee_torque_nm=values[at["cuff_knee_torque_nm"]],
-            torque_abs_sum_nm=abs(values[at["exo_torque_nm"]])
-            + abs(values[at["muscle_knee_torque_nm"]]),
-            torque_signed_sum_nm=values[at["exo_torque_nm"]] + values[at["muscle_knee_torque_nm"]],
+            torque_abs_sum_nm=abs(exo_nm) + abs(muscle_nm),
+            torque_signed_sum_nm=exo_nm + muscle_nm,
             thigh_cuff_force_n=math.hypot(values[thigh], values[thigh + 1], values[thigh + 2]),
             shank_cuff_force_n=math.hypot(values[shank], values[shank + 1], values[shank + 2]),
             sc_total=float(stage.last_sc_total),

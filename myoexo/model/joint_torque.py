@@ -126,28 +126,28 @@ class EqualityJointTorque:
         self._start = sum(self._ROWS.get(int(model.eq_type[e]), 0) for e in range(eid))
         self._dofs = joint.dofs
 
-    def rows(self, data: mujoco.MjData) -> np.ndarray:
-        """Indices of the equality's constraint rows in *data* (empty if inactive)."""
+    def rows(self, data: mujoco.MjData) -> slice:
+        """The equality's constraint rows in *data* (an empty slice if it is inactive)."""
         start, stop = self._start, self._start + self._rows
         if (
             stop <= data.nefc
             and data.efc_id[start] == self.equality_id
-            and (data.efc_type[start] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+            and data.efc_type[start] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
         ):
-            return np.arange(start, stop)
+            return slice(start, stop)
         n = data.nefc
-        return np.flatnonzero(
+        found = np.flatnonzero(
             (data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
             & (data.efc_id[:n] == self.equality_id)
         )
+        return slice(int(found[0]), int(found[-1]) + 1) if found.size else slice(0, 0)
 
     def __call__(self, data: mujoco.MjData, theta: float) -> float:
         """Torque (Nm, positive along the joint) the equality applies along the joint, from
         *data*'s last computed constraint forces, at joint value *theta* (the angle those
         forces were computed at)."""
         rows = self.rows(data)
-        if rows.size == 0:
+        if rows.stop == rows.start:
             return 0.0
-        jac = data.efc_J.reshape(-1, self._nv)[rows[0] : rows[-1] + 1]
-        qfrc_dofs = data.efc_force[rows[0] : rows[-1] + 1] @ jac[:, self._dofs]
-        return self.joint.torque_of_dofs(theta, qfrc_dofs)
+        jac = data.efc_J.reshape(-1, self._nv)[rows, self._dofs]
+        return self.joint.torque_of_dofs(theta, data.efc_force[rows] @ jac)

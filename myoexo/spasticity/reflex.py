@@ -82,6 +82,7 @@ from myoexo.spasticity.registry import (
     Memory,
     MemorylessGroupReflex,
     ReflexModel,
+    check_parameter,
     register_reflex,
 )
 from myoexo.spasticity.tsrt import TSRTReflex
@@ -228,11 +229,7 @@ class PersistentParams:
             value = getattr(self, name)
             if value is None and name.startswith("ignition_"):
                 continue  # from the subject's velocity window
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            if not (ok and math.isfinite(value) and low <= value <= high):
-                raise ValueError(
-                    f"PersistentParams.{name} = {value!r} is outside [{low}, {high}] {unit}"
-                )
+            check_parameter("PersistentParams", name, value, low, high, unit)
         gains = {int(lv): float(g) for lv, g in dict(self.gains).items()}
         for lv, g in gains.items():
             if lv not in range(4):

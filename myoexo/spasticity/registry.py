@@ -55,6 +55,15 @@ Memory = tuple[float, ...]
 MAX_DELAY_S = 0.2
 
 
+def check_parameter(owner: str, name: str, value: Any, low: float, high: float, unit: str) -> None:
+    """Raise a ``ValueError`` naming ``owner.name``, the value and the accepted range unless
+    *value* is a real number (no ``bool``) in ``[low, high]`` *unit*: the check of every
+    bounded reflex-model parameter."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value) and low <= value <= high):
+        raise ValueError(f"{owner}.{name} = {value!r} is outside [{low}, {high}] {unit}")
+
+
 @dataclass(frozen=True)
 class ReflexModel(abc.ABC):
     """Base of every reflex model: a frozen dataclass of the model's parameters.

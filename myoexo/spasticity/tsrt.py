@@ -46,8 +46,6 @@ transmission delay (:data:`~myoexo.spasticity.delay.STRETCH_DELAY_S`).
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -55,7 +53,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 from myoexo.spasticity.coefficients import as_tensor, tensor_getter
 from myoexo.spasticity.delay import STRETCH_DELAY_S
-from myoexo.spasticity.registry import MemorylessGroupReflex
+from myoexo.spasticity.registry import MemorylessGroupReflex, check_parameter
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
@@ -106,10 +104,7 @@ class TSRTLevel:
             ("flexor_gain", 0.0, 20.0, "-"),
             ("extensor_gain", 0.0, 20.0, "-"),
         ):
-            value = getattr(self, name)
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            if not (ok and math.isfinite(value) and low <= value <= high):
-                raise ValueError(f"TSRTLevel.{name} = {value!r} is outside [{low}, {high}] {unit}")
+            check_parameter("TSRTLevel", name, getattr(self, name), low, high, unit)
 
 
 def _default_levels() -> Mapping[int, TSRTLevel]:
@@ -307,10 +302,3 @@ class TSRTReflex(MemorylessGroupReflex):
         self, theta_deg: Any, vel_rad_s: Any, subject: Mapping[str, Any], level_parameters: Any
     ) -> tuple[torch.Tensor, torch.Tensor]:
         return tsrt_excitations_torch(theta_deg, vel_rad_s, subject, level_parameters)
-
-
-def with_level(calibration: TSRTCalibration, level: int, **changes: Any) -> TSRTCalibration:
-    """*calibration* with ``level``'s :class:`TSRTLevel` fields replaced by *changes*."""
-    levels = dict(calibration.levels)
-    levels[level] = dataclasses.replace(calibration[level], **changes)
-    return TSRTCalibration(levels=MappingProxyType(levels), note=calibration.note)
