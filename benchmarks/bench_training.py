@@ -8,7 +8,11 @@ transition, against the arithmetic limit of one core.
 A learner is ``ALGORITHM[:K]``: a preset algorithm (``sac``, ``tqc``, ``crossq``,
 ``sbx_sac``, ``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
 ``K x n_envs`` gradient updates, i.e. one update per transition for every ``K`` (default 1;
-a larger ``K`` runs many compiled updates per call). Every learner uses the ``cpu`` preset's
+a larger ``K`` runs many compiled updates per call). ``sbx_sac:KxN`` trains ``N`` seeds
+together, their updates in one compiled call (``jax.vmap`` over seeds,
+:class:`myoexo.training.vmap.SeedBatchedSAC`); its rates are *seed-updates* per second (every
+seed's updates counted), the unit that compares it with one seed trained alone. Every
+learner uses the ``cpu`` preset's
 networks (64-64 GELU), batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). Measured in one
 process, one learner after the other:
 
@@ -34,8 +38,17 @@ import time
 
 import numpy as np
 
-FULL_LEARNERS = ("sac", "sbx_sac", "sbx_sac:16", "sbx_sac:64", "sbx_tqc:16", "sbx_crossq:16")
-QUICK_LEARNERS = ("sac", "sbx_sac:16")
+FULL_LEARNERS = (
+    "sac",
+    "sbx_sac",
+    "sbx_sac:16",
+    "sbx_sac:64",
+    "sbx_sac:16x2",
+    "sbx_sac:16x5",
+    "sbx_tqc:16",
+    "sbx_crossq:16",
+)
+QUICK_LEARNERS = ("sac", "sbx_sac:16", "sbx_sac:16x5")
 
 
 def main() -> None:
@@ -130,7 +143,10 @@ def measure(
     from myoexo.training.train import build_model, make_vec_env
 
     algorithm, _, k = learner.partition(":")
+    k, _, n = k.partition("x")
     k_steps = int(k or 1)
+    if n:
+        return measure_batched(learner, algorithm, k_steps, int(n), updates, learn_steps, seed)
     base = get_preset("cpu")
     preset = get_preset(
         "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * base.n_envs
@@ -182,6 +198,81 @@ def measure(
         "env_sps": env_sps,
         "ups": ups,
         "learn_sps": learn_sps,
+        "learn_ups": learn_ups,
+        "flop_per_update": flop,
+    }
+
+
+def measure_batched(
+    learner: str,
+    algorithm: str,
+    k_steps: int,
+    n_seeds: int,
+    updates: int,
+    learn_steps: int,
+    seed: int,
+) -> dict:
+    """The updates and learn measurements of ``n_seeds`` seeds trained together, their
+    updates vmapped in one call (rates in seed-updates/s and seed-transitions/s)."""
+    from stable_baselines3.common.logger import configure
+
+    from myoexo.training import get_preset
+    from myoexo.training.callbacks import RewardTermsCallback
+    from myoexo.training.train import build_model, make_vec_env
+    from myoexo.training.vmap import SeedBatchedSAC, learn_seed_batched
+
+    if algorithm != "sbx_sac":
+        raise SystemExit(f"{learner}: only sbx_sac batches seeds")
+    base = get_preset("cpu")
+    preset = get_preset(
+        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * base.n_envs
+    )
+    models, venvs = [], []
+    for i in range(n_seeds):
+        venv = make_vec_env(preset, seed + i)
+        model = build_model(preset, venv, seed + i)
+        model.learning_starts = 0
+        model.set_logger(configure(None, []))
+        rng = np.random.default_rng(seed + i)
+        obs = venv.reset()
+        for _ in range(max(1, 1_000 // preset.n_envs)):
+            action = rng.uniform(-1.0, 1.0, (preset.n_envs, 1)).astype(np.float32)
+            new_obs, reward, done, infos = venv.step(action)
+            model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
+            obs = new_obs
+        models.append(model)
+        venvs.append(venv)
+    batch = SeedBatchedSAC(models)
+    chunk = preset.gradient_steps
+    batch.train(chunk)  # compile / warm up
+    calls = max(1, updates // chunk)
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        batch.train(chunk)
+    ups = n_seeds * calls * chunk / (time.perf_counter() - t0)
+
+    learn_seed_batched(batch, preset.n_envs * preset.train_freq)  # warm up learn
+    before = sum(m._n_updates for m in models)
+    t0 = time.perf_counter()
+    learn_seed_batched(batch, learn_steps, [RewardTermsCallback() for _ in models])
+    dt = time.perf_counter() - t0
+    learn_ups = (sum(m._n_updates for m in models) - before) / dt
+    obs_dim = int(venvs[0].observation_space.shape[0])
+    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, preset.batch_size)
+    print(
+        f"[{learner}] {n_seeds} seeds in one call: updates alone {ups:.0f} seed-updates/s; "
+        f"learn {n_seeds * learn_steps / dt:.0f} seed-transitions/s, {learn_ups:.0f} "
+        "seed-updates/s",
+        flush=True,
+    )
+    for venv in venvs:
+        venv.close()
+    return {
+        "learner": learner,
+        "upd_per_transition": preset.gradient_steps / (preset.train_freq * preset.n_envs),
+        "env_sps": None,
+        "ups": ups,
+        "learn_sps": n_seeds * learn_steps / dt,
         "learn_ups": learn_ups,
         "flop_per_update": flop,
     }

@@ -9,6 +9,10 @@ spec                               controller
 ``pid``                            :class:`~myoexo.control.pid.PID`, the paper's gains
 ``pid:kp=10,ki=30,kd=0.1``         PID with other gains (any of ``kp ki kd``)
 ``pid:feedback=exo``               PID on the exo encoder instead of the human knee
+``pid:tuned=exo``                  a PID tuned for its sensors by Ziegler-Nichols on the twin
+                                   (:data:`~myoexo.control.tuned.TUNED_PIDS`: ``exo``, the
+                                   device PID on the encoder; ``latency``, the human knee
+                                   read 10 ms late, for perturbed twins)
 ``pid:anti_windup=none``           ``clamping`` (default), ``back_calculation`` or ``none``
 ``pid:derivative=error``           derivative on the error instead of the measurement
 ``pid:textbook``                   plain parallel PID (derivative on error, no anti-windup)
@@ -26,6 +30,9 @@ spec                               controller
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
                                    and the torque-aware ``interaction_weight``,
                                    ``peak_weight``, ``ramp_s``
+``guard:SPEC``                      any controller above with the stall guard on top: integral
+                                   action once the knee stalls far from the target
+                                   (:mod:`myoexo.control.guard`), e.g. ``guard:sac``
 ``path/to/actor.npz``              an exported numpy actor (``myoexo export-policy``), with
                                    its ``.json`` beside it
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
@@ -42,6 +49,7 @@ policy was trained on).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Mapping
@@ -73,6 +81,7 @@ _PID_KEYS = (
     "textbook",
     "ramp_s",
     "limit",
+    "tuned",
 )
 
 
@@ -93,6 +102,8 @@ class ControllerSpec:
         algorithm: Alias of :data:`~myoexo.policies.algorithms.ALGORITHMS` (``sb3`` only).
         options: PID options (``pid``), as :class:`PIDConfig` keyword arguments, or
             :class:`~myoexo.control.oracle.OracleConfig` fields (``oracle``).
+        guard: The controller runs with the stall guard on top (``guard:SPEC``,
+            :class:`~myoexo.control.guard.StallGuard`); ``kind`` and the rest describe SPEC.
     """
 
     kind: str
@@ -101,6 +112,7 @@ class ControllerSpec:
     path: str | None = None
     algorithm: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
+    guard: bool = False
 
     @property
     def slug(self) -> str:
@@ -117,6 +129,13 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     """Parse one spec (see the module docstring); ``ValueError`` on anything else."""
     text = text.strip()
     head, _, tail = text.partition(":")
+    if head.lower() == "guard":
+        if not tail.strip():
+            raise ValueError("controller 'guard:' needs the controller it guards: 'guard:sac'")
+        inner = parse_controller_spec(tail)
+        if inner.guard:
+            raise ValueError(f"controller {text!r} guards a guarded controller")
+        return dataclasses.replace(inner, label=f"guard:{inner.label}", text=text, guard=True)
     if head.lower() == "pid":
         return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
     from myoexo.policies import SHIPPED_POLICIES
@@ -222,6 +241,14 @@ def _pid_options(tail: str) -> dict[str, Any]:
                 options["output_limit" if key == "limit" else key] = float(value)
             except ValueError:
                 raise ValueError(f"PID option {key}={value!r} is not a number") from None
+        elif key == "tuned":
+            from myoexo.control.tuned import tuned_pid
+
+            tuned = tuned_pid(value.strip())
+            options.setdefault("kp", tuned.gains.kp)
+            options.setdefault("ki", tuned.gains.ki)
+            options.setdefault("kd", tuned.gains.kd)
+            options.setdefault("feedback", tuned.feedback)
         elif key == "derivative":
             if value not in ("measurement", "error"):
                 raise ValueError(f"PID option derivative={value!r}; accepted: measurement, error")
@@ -291,6 +318,11 @@ def load_actor_file(path: str) -> Any:
 
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
+    if spec.guard:
+        from myoexo.control.guard import StallGuard, StallGuardConfig
+
+        inner = build_controller(dataclasses.replace(spec, guard=False), env)
+        return StallGuard(inner, StallGuardConfig(control_period_s=float(env.unwrapped.dt)))
     if spec.kind == "pid":
         return PID.from_env(env, pid_config(spec.options))
     if spec.kind == "shipped":

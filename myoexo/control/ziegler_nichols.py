@@ -59,6 +59,10 @@ class ZieglerNicholsSettings:
             ``False`` draws an individual subject from ``seed``.
         seed: Episode seed (start-angle perturbation; the subject if not nominal).
         feedback: Feedback signal of the P controller (``"knee"`` or ``"exo"``).
+        latency_s: Sensor latency of the tuning twin (s, a whole number of 10-ms control
+            periods; 0: exact sensors): tunes a PID for the latency it will run with, e.g.
+            the perturbed twins' 10 ms. Only the latency is applied (no noise, no other
+            perturbation), so the ultimate gain is that of the nominal plant seen late.
         target_angle_deg: Operating point of the test (knee target, deg); ``None``: the
             task's (7 deg). A target the motor cannot reach (the loop then sits saturated
             against a limit) gives no oscillation at any gain.
@@ -76,6 +80,7 @@ class ZieglerNicholsSettings:
     nominal_subject: bool = True
     seed: int = 0
     feedback: str = "knee"
+    latency_s: float = 0.0
     target_angle_deg: float | None = None
     kp_start: float = 1.0
     kp_max: float = 2000.0
@@ -89,6 +94,10 @@ class ZieglerNicholsSettings:
     def __post_init__(self) -> None:
         if self.level not in VALID_LEVELS:
             raise ValueError(f"level = {self.level!r}; accepted: {VALID_LEVELS}")
+        if not (math.isfinite(self.latency_s) and 0.0 <= self.latency_s <= 1.0):
+            raise ValueError(
+                f"latency_s = {self.latency_s!r} is outside the accepted range [0, 1] s"
+            )
         if not 0.0 < self.kp_start < self.kp_max:
             raise ValueError(f"need 0 < kp_start ({self.kp_start}) < kp_max ({self.kp_max})")
         if not 0.0 < self.rel_tol < 1.0:
@@ -211,15 +220,25 @@ class ZieglerNicholsResult:
 
 
 def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
-    """The level's env; with ``nominal_subject`` its reflex keeps Table I's values."""
+    """The level's env; with ``nominal_subject`` its reflex keeps Table I's values; with a
+    ``latency_s`` its sensors are that late (and exact)."""
     from myoexo.envs import TaskParams, make_env
+    from myoexo.envs.robustness import RobustnessParams
 
     task = TaskParams()
     if settings.episode_duration_s is not None:
         task = dataclasses.replace(task, episode_duration_s=settings.episode_duration_s)
     if settings.target_angle_deg is not None:
         task = dataclasses.replace(task, target_angle_deg=settings.target_angle_deg)
-    return make_env(settings.level, task=task, subject_noise=not settings.nominal_subject)
+    robustness = None
+    if settings.latency_s > 0.0:
+        robustness = dataclasses.replace(RobustnessParams.nominal(), latency_s=settings.latency_s)
+    return make_env(
+        settings.level,
+        task=task,
+        subject_noise=not settings.nominal_subject,
+        robustness=robustness,
+    )
 
 
 def p_only_trial(env: Any, kp: float, settings: ZieglerNicholsSettings) -> GainTrial:
@@ -331,7 +350,8 @@ def format_result(result: ZieglerNicholsResult) -> str:
         [
             f"Ziegler-Nichols on the twin (level {result.settings.level}, "
             f"{'nominal' if result.settings.nominal_subject else 'seeded'} subject, "
-            f"{result.settings.feedback} feedback, target "
+            f"{result.settings.feedback} feedback, "
+            f"{1000 * result.settings.latency_s:g} ms latency, target "
             f"{result.settings.target_angle_deg or 'of the task'} deg, "
             f"{len(result.trials)} P-only episodes):",
             f"  ultimate gain Ku = {result.ultimate_gain:.3f} /rad, "
@@ -358,6 +378,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=d.seed, help="episode seed")
     parser.add_argument("--feedback", choices=("knee", "exo"), default=d.feedback)
     parser.add_argument(
+        "--latency-ms",
+        type=float,
+        default=1000 * d.latency_s,
+        help="sensor latency of the tuning twin (ms, a multiple of the 10-ms control period; "
+        "default 0: exact sensors)",
+    )
+    parser.add_argument(
         "--target", type=float, default=None, help="target knee angle of the test (deg)"
     )
     parser.add_argument("--rel-tol", type=float, default=d.rel_tol, help="bisection tolerance")
@@ -375,6 +402,7 @@ def run(args: argparse.Namespace) -> int:
             nominal_subject=not args.individual_subject,
             seed=args.seed,
             feedback=args.feedback,
+            latency_s=args.latency_ms / 1000.0,
             target_angle_deg=args.target,
             rel_tol=args.rel_tol,
         )

@@ -41,8 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=["pid", "sac"],
         metavar="SPEC",
         help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,"
-        "limit=..]' (ramp_s: a ramped setpoint; limit: a clipped command), 'sac' / 'sac_exo' "
-        "(the shipped full-state / exo-sensor policies; skipped with a message if absent), "
+        "limit=..,tuned=..]' (ramp_s: a ramped setpoint; limit: a clipped command; tuned=exo: "
+        "gains tuned on the exo encoder, tuned=latency: tuned for the perturbed twins' 10 ms "
+        "latency), 'sac' / 'student_exo' / 'sac_exo' (the shipped policies; skipped with a "
+        "message if absent), "
         "'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the achievable bound, "
         "slow) or paths of SB3 .zip models (default: pid sac)",
     )

@@ -1,9 +1,11 @@
 """``myoexo demo`` (what ``make demo`` runs): the paper's evaluation protocol, small.
 
-Evaluates the paper's PID, the device's own PID (``pid:feedback=exo``, closed on the exo
-encoder, what a real exoskeleton can run), the full-state ``sac`` and the deployable
-``student_exo`` (the exoskeleton's own sensors with memory) on 20 subjects per spasticity
-level (paper: 1000), and the
+Evaluates the paper's PID, the device's own PID closed on the exo encoder (what a real
+exoskeleton can run) with the paper's gains (``pid:feedback=exo``) and with gains tuned on the
+encoder by Ziegler-Nichols (``pid:tuned=exo``, :mod:`myoexo.control.tuned`), the paper's PID
+with its setpoint ramped over 1 s (``pid:ramp_s=1``), the full-state ``sac`` and the
+deployable ``student_exo`` (the exoskeleton's own sensors with memory) on 20 subjects per
+spasticity level (paper: 1000), and the
 achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
 then writes the figures and the Markdown report (with each controller's distance to the
 bound) and prints where they are. About 5 minutes on 2 cores, most of it the oracle.
@@ -22,7 +24,14 @@ from myoexo.envs.options import add_twin_arguments, twin_from_args
 
 #: Defaults of the demo.
 DEMO_SUBJECTS = 20
-DEMO_CONTROLLERS = ("pid", "pid:feedback=exo", "sac", "student_exo")
+DEMO_CONTROLLERS = (
+    "pid",
+    "pid:feedback=exo",
+    "pid:tuned=exo",
+    "pid:ramp_s=1",
+    "sac",
+    "student_exo",
+)
 #: Subjects per level of the oracle (the bound); it costs ~15 s of a quiet core per episode.
 DEMO_BOUND_SUBJECTS = 2
 DEMO_OUT = Path("results") / "demo"

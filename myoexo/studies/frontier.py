@@ -8,7 +8,8 @@ Every controller runs on the same subjects of the **selection root** (root seed 
 selection run: :attr:`~myoexo.evaluation.config.EvaluationConfig.selection`) through the
 evaluation protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in
 ``OUT/selection``): the
-paper's PID, the device PID on the exo encoder (``pid:feedback=exo``), the *shaped* PIDs a
+paper's PID, the device PID on the exo encoder (``pid:feedback=exo``; tuned on the encoder,
+``pid:tuned=exo``), the *shaped* PIDs a
 reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, a command clipped at
 ``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), and whatever ``--controllers``
 adds (the shipped policies, model files), and with ``--oracle`` the torque-aware oracle
@@ -81,7 +82,7 @@ def shaped_pid_specs(
     ramps_s: Sequence[float] = RAMPS_S, limits: Sequence[float] = LIMITS
 ) -> list[str]:
     """The baseline controller specs: the paper's PID, the device PID, ramped and clipped."""
-    specs = ["pid", "pid:feedback=exo"]
+    specs = ["pid", "pid:feedback=exo", "pid:tuned=exo"]
     specs += [f"pid:ramp_s={r:g}" for r in ramps_s]
     specs += [f"pid:limit={lim:g}" for lim in limits]
     return specs
@@ -220,6 +221,7 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
     styles = {
         "pid": ("black", "^", "paper's PID"),
         "pid:feedback=exo": ("grey", "v", "device PID (exo encoder)"),
+        "pid:tuned=exo": ("dimgrey", "<", "device PID, tuned on the encoder"),
     }
     others = sorted({point_group(str(c)) for c in pts.controller})
     legend: dict[str, Any] = {}
