@@ -17,6 +17,8 @@ the code is generated from the code at build time, never typed twice.
       (:data:`myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`);
   ``env-table``
       the registered env ids and their spasticity levels;
+  ``tuned-pid-table``
+      :data:`myoexo.control.tuned.TUNED_PIDS` beside the paper's gains;
   ``cli-reference``
       every command of :func:`myoexo.cli.build_parser` (sub-commands of commands
       included): its ``--help`` (usage, description, options).
@@ -270,7 +272,15 @@ def cli_reference() -> str:
     return "\n".join(lines)
 
 
+def tuned_pid_table() -> str:
+    """The PIDs tuned for their sensors and latency (:mod:`myoexo.control.tuned`)."""
+    from myoexo.control.tuned import tuned_pids_markdown
+
+    return tuned_pids_markdown()
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
+    "tuned-pid-table": tuned_pid_table,
     "observation-table": observation_table,
     "reward-table": reward_table,
     "env-table": env_table,

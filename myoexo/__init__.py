@@ -36,8 +36,7 @@ register_envs()
 
 def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentController:
     """A policy shipped with the package, by name: ``"sac"`` (the twin's full state,
-    default), ``"student_exo"`` (the exoskeleton's own sensors with memory: deployable) or
-    ``"sac_exo"`` (the exoskeleton's sensors and an episode clock).
+    default) or ``"student_exo"`` (the exoskeleton's own sensors with memory: deployable).
 
     Args:
         name: A name of :data:`myoexo.policies.SHIPPED_POLICIES` (or a file stem inside

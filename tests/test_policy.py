@@ -1,4 +1,4 @@
-"""The shipped SAC policies (``myoexo.load_policy("sac" | "sac_exo")``) and the numpy actor
+"""The shipped SAC policy (``myoexo.load_policy("sac")``) and the numpy actor
 they are made of."""
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def test_shipped_policy_loads_offline_and_is_small(no_network, name):
     keys = ("env_id", "preset", "seed", "num_timesteps", "obs_keys", "obs_preset")
     for key in (*keys, "selection_root_seed", "reward_weights"):
         assert policy.metadata.get(key) is not None, key
-    assert policy.obs_preset == {"sac": "full", "sac_exo": "exo"}[name]
+    assert policy.obs_preset == "full"
     from myoexo.policies.algorithms import get_algorithm
 
     assert get_algorithm(policy.metadata["algorithm"]).class_name == "SAC"  # torch or JAX
@@ -87,10 +87,10 @@ def test_shipped_policy_fits_the_env(name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("name", "tolerance_deg"), [("sac", 3.0), ("sac_exo", 8.0)])
+@pytest.mark.parametrize(("name", "tolerance_deg"), [("sac", 3.0)])
 def test_shipped_policy_extends_the_knee_at_level_1(name, tolerance_deg):
     """One full 8-s episode: each shipped policy brings the knee from 90 deg near 7 deg
-    (``sac_exo`` is known to end ~7 deg past it, in full extension: its model card)."""
+    """
     import gymnasium as gym
 
     import myoexo

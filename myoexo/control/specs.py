@@ -23,8 +23,6 @@ spec                               controller
 ``student_exo``                    the deployable controller: the exo's own sensors, a
                                    memory of 10 frames, no clock (``load_policy
                                    ("student_exo")``, env ``obs_preset="exo"``)
-``sac_exo``                        the shipped policy on the exo's own sensors and an
-                                   episode clock (``load_policy("sac_exo")``)
 ``oracle``                         sampling-based MPC on a copy of the twin (true state):
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
@@ -94,7 +92,7 @@ class ControllerSpec:
     """A parsed controller spec.
 
     Attributes:
-        kind: ``"pid"``, ``"shipped"`` (``sac``, ``sac_exo``), ``"oracle"``, ``"sb3"`` (a
+        kind: ``"pid"``, ``"shipped"`` (``sac``, ``student_exo``), ``"oracle"``, ``"sb3"`` (a
             model file) or ``"actor"`` (an exported numpy actor, ``.npz`` + ``.json``).
         label: Name in tables and figures.
         text: The spec as given.
@@ -158,7 +156,6 @@ def parse_controller_spec(text: str) -> ControllerSpec:
     if path.suffix != ".zip":
         raise ValueError(
             f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'student_exo', "
-            "'sac_exo', "
             "'oracle[:options]', the path of a stable-baselines3 model file (.zip) or of an "
             "exported actor (.npz beside its .json)"
         )

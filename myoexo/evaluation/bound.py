@@ -4,7 +4,7 @@ The oracle is slow, so it usually runs on the first few subjects of a level whil
 controllers run on many; the distance is taken on the subjects both have (subject *i* is the
 same person for every controller of an evaluation with the same root seed and twin).
 
-    table = load_table("results/eval")            # pid, sac, sac_exo: 1000 subjects/level
+    table = load_table("results/eval")            # pid, sac, student_exo: 1000 subjects/level
     bound = load_table("results/oracle")          # oracle: 10 subjects/level
     distance_to_bound(pd.concat([table, bound]))
 """

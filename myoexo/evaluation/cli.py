@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,"
         "limit=..,tuned=..]' (ramp_s: a ramped setpoint; limit: a clipped command; tuned=exo: "
         "gains tuned on the exo encoder, tuned=latency: tuned for the perturbed twins' 10 ms "
-        "latency), 'sac' / 'student_exo' / 'sac_exo' (the shipped policies; skipped with a "
+        "latency), 'sac' / 'student_exo' (the shipped policies; skipped with a "
         "message if absent), "
         "'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the achievable bound, "
         "slow) or paths of SB3 .zip models (default: pid sac)",

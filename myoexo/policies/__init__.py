@@ -12,10 +12,11 @@ name             files (``<stem>.npz/json``)  observation
                                               memory of the last 10 frames, no clock:
                                               deployable; distilled from ``sac``;
                                               ``MODEL_CARD_student_exo.md``
-``sac_exo``      ``sac_exo_sensors``          ``obs_preset="exo"``: the same sensors plus an
-                                              episode clock (``time_frac``), which a device
-                                              does not have; ``MODEL_CARD_sac_exo.md``
 ===============  ===========================  ==================================================
+
+``sac_exo`` (the exoskeleton's sensors plus an episode clock) is retired: it read a clock a
+device does not have and ended 20-50 deg off on perturbed level-3 twins; ``student_exo``
+supersedes it (``MODEL_CARD_sac_exo.md`` says why and what it measured).
 
     import gymnasium as gym, myoexo
 
@@ -27,7 +28,7 @@ name             files (``<stem>.npz/json``)  observation
     action, _ = policy.predict(obs, deterministic=True)   # SB3's signature
     action = policy(obs)                                   # or simply call it
 
-``sac`` and ``sac_exo`` are the deterministic actors of SAC runs (observation normalization
+``sac`` is the deterministic actor of a SAC run (observation normalization
 included) as numpy :class:`~myoexo.policies.actor.MLPActor` (``to_torch()`` gives a torch
 module); ``student_exo`` is a :class:`~myoexo.policies.student.StudentController` (its MLP
 actor on a memory of sensor frames, ``reset()`` clears it). Each expects the env observation
@@ -53,7 +54,6 @@ SHIPPED_POLICY = "sac_knee_exo"
 #: Shipped policies: name -> file stem inside this folder.
 SHIPPED_POLICIES: dict[str, str] = {
     "sac": SHIPPED_POLICY,
-    "sac_exo": "sac_exo_sensors",
     "student_exo": "student_exo",
 }
 
@@ -79,8 +79,7 @@ def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentCont
     """Load a policy shipped with the package (no network, no SB3 needed).
 
     Args:
-        name: ``"sac"`` (full-state observation), ``"sac_exo"`` (the exoskeleton's own
-            sensors and an episode clock), ``"student_exo"`` (the exoskeleton's own sensors
+        name: ``"sac"`` (full-state observation), ``"student_exo"`` (the exoskeleton's own sensors
             with a memory of 10 frames, no clock: deployable; a
             :class:`~myoexo.policies.student.StudentController`), or a file stem inside
             ``myoexo/policies/``.

@@ -1,7 +1,7 @@
 """A deployable knee-exo controller: an MLP on a short memory of the exoskeleton's own sensors.
 
 The study's learned controllers read the human knee angle (``sac``) or an episode clock
-(``sac_exo`` reads ``time_frac``), neither of which a real exoskeleton has. The
+(the retired ``sac_exo`` read ``time_frac``), neither of which a real exoskeleton has. The
 :class:`StudentController` reads only what the device measures, one *frame* per control
 step (:data:`FRAME_KEYS`, in the units and scales of the env's observation vector): the
 exo encoder angle and velocity, the target, the last motor command, the motor torque and

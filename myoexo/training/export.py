@@ -273,7 +273,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         const="sac",
         metavar="NAME",
         help="write the numpy actor into the package as NAME (default 'sac', what "
-        "myoexo.load_policy() returns; 'sac_exo' for the exo-sensor policy)",
+        "myoexo.load_policy() returns; 'student_exo' is written by myoexo distill)",
     )
     parser.add_argument(
         "--selection-root-seed",

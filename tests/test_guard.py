@@ -1,0 +1,97 @@
+"""The stall guard (``guard:SPEC``): silent unless the knee stalls far from the target, then
+integral action toward it, within the motor's range."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from myoexo.control.guard import StallGuard, StallGuardConfig
+from myoexo.control.policy import as_controller
+from myoexo.control.specs import build_controller, parse_controller_spec
+
+
+def _info(knee_deg: float, target_deg: float = 7.0) -> dict:
+    return {"knee_angle_deg": knee_deg, "target_angle_deg": target_deg}
+
+
+def _frozen(command: float = -0.1):
+    return as_controller(lambda obs: np.array([command], dtype=np.float32), name="frozen")
+
+
+def test_silent_while_the_error_is_small_or_early():
+    guard = StallGuard(_frozen(), StallGuardConfig(engage_error_deg=17.0, engage_after_s=2.0))
+    guard.reset()
+    obs = np.zeros(3, dtype=np.float32)
+    for step in range(400):  # 4 s: a large error before 2 s, a small one after
+        knee = 80.0 if step < 200 else 20.0
+        assert guard.act(obs, _info(knee))[0] == pytest.approx(-0.1)
+    assert guard.engaged_at_s is None
+
+
+def test_engages_on_a_stall_and_pushes_toward_the_target_within_the_motor_range():
+    guard = StallGuard(_frozen(), StallGuardConfig(engage_after_s=2.0, ki_per_rad_s=4.0))
+    guard.reset()
+    obs = np.zeros(3, dtype=np.float32)
+    commands = [float(guard.act(obs, _info(70.0))[0]) for _ in range(400)]
+    assert guard.engaged_at_s == pytest.approx(2.0)
+    assert commands[199] == pytest.approx(-0.1)  # untouched before it engages
+    # knee 63 deg above the target: extension grows (negative), by ki * error * dt per step
+    step = -4.0 * np.radians(63.0) * 0.01
+    assert commands[201] - commands[200] == pytest.approx(step, rel=1e-4)
+    assert min(commands) >= -1.0 and commands[-1] == pytest.approx(-1.0)
+    # conditional integration: the term stopped growing at saturation (at most one step
+    # past it), so it unwinds within a few steps once the knee passes the target
+    back = [float(guard.act(obs, _info(0.0))[0]) for _ in range(20)]  # 7 deg past it
+    assert back[-1] > -1.0 and back[-1] > back[-2]
+    guard.reset()
+    assert guard.engaged_at_s is None and guard.integral == 0.0
+
+
+def test_guard_spec_wraps_any_controller_and_rejects_nonsense():
+    spec = parse_controller_spec("guard:pid:ramp_s=1")
+    assert spec.guard and spec.kind == "pid" and spec.label == "guard:pid:ramp_s=1"
+    assert spec.options == {"ramp_s": 1.0}
+    with pytest.raises(ValueError, match="needs the controller"):
+        parse_controller_spec("guard:")
+    with pytest.raises(ValueError, match="guarded"):
+        parse_controller_spec("guard:guard:pid")
+    with pytest.raises(ValueError, match="engage_error_deg"):
+        StallGuardConfig(engage_error_deg=-1.0)
+
+    class _Env:
+        class unwrapped:  # noqa: N801 (the env attribute)
+            dt = 0.01
+
+    controller = build_controller(spec, _Env())
+    assert isinstance(controller, StallGuard)
+    assert controller.config.control_period_s == 0.01
+
+
+@pytest.mark.slow
+def test_guard_frees_a_stalled_subject_of_the_shipped_policy_and_leaves_others_alone():
+    """Closed loop on the twin: on a subject where the shipped policy stays far from the
+    target the guard brings the knee within the PID's usual error; on a subject where it
+    does not stall the trajectory is the policy's own, step for step."""
+    import gymnasium as gym
+
+    import myoexo
+    from myoexo.control.rollout import rollout
+    from myoexo.evaluation.config import subject_seed
+
+    policy = myoexo.load_policy("sac")
+    env = gym.make("MyoExoKnee-v2")
+    try:
+        finals = {}
+        for idx in range(40):
+            seed = subject_seed(2, idx, 0)
+            raw = rollout(env, as_controller(policy), seed, channels=("error_deg",))
+            guarded_ctrl = StallGuard(as_controller(policy))
+            guarded = rollout(env, guarded_ctrl, seed, channels=("error_deg",))
+            e_raw, e_guard = raw.signals["error_deg"], guarded.signals["error_deg"]
+            if guarded_ctrl.engaged_at_s is None:
+                np.testing.assert_array_equal(e_raw, e_guard)
+            finals[idx] = (abs(float(e_raw[-1])), abs(float(e_guard[-1])))
+    finally:
+        env.close()
+    assert all(g <= 20.0 for _, g in finals.values()), finals
