@@ -60,7 +60,7 @@ def test_guard_spec_wraps_any_controller_and_rejects_nonsense():
         StallGuardConfig(engage_error_deg=-1.0)
 
     class _Env:
-        class unwrapped:  # noqa: N801 (the env attribute)
+        class unwrapped:
             dt = 0.01
 
     controller = build_controller(spec, _Env())
@@ -95,3 +95,24 @@ def test_guard_frees_a_stalled_subject_of_the_shipped_policy_and_leaves_others_a
     finally:
         env.close()
     assert all(g <= 20.0 for _, g in finals.values()), finals
+
+
+def test_a_device_controller_gets_a_guard_on_the_encoder():
+    guard = StallGuard(_frozen(), StallGuardConfig(feedback="exo", engage_after_s=0.0))
+    guard.reset()
+    obs = np.zeros(3, dtype=np.float32)
+    # the knee is far, the encoder is near: an encoder guard stays silent
+    info = {"knee_angle_deg": 70.0, "exo_angle_deg": 10.0, "target_angle_deg": 7.0}
+    assert guard.act(obs, info)[0] == pytest.approx(-0.1) and guard.engaged_at_s is None
+    info["measured_exo_angle_deg"] = 60.0  # the sensed encoder angle is what it reads
+    assert guard.act(obs, info)[0] < -0.1 and guard.engaged_at_s is not None
+    with pytest.raises(ValueError, match="feedback"):
+        StallGuardConfig(feedback="hip")
+
+    class _Env:
+        class unwrapped:
+            dt = 0.01
+
+    pid_guard = build_controller(parse_controller_spec("guard:pid:feedback=exo"), _Env())
+    assert pid_guard.config.feedback == "exo"
+    assert build_controller(parse_controller_spec("guard:pid"), _Env()).config.feedback == "knee"

@@ -89,8 +89,7 @@ def test_shipped_policy_fits_the_env(name):
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "tolerance_deg"), [("sac", 3.0)])
 def test_shipped_policy_extends_the_knee_at_level_1(name, tolerance_deg):
-    """One full 8-s episode: each shipped policy brings the knee from 90 deg near 7 deg
-    """
+    """One full 8-s episode: each shipped policy brings the knee from 90 deg near 7 deg"""
     import gymnasium as gym
 
     import myoexo

@@ -19,7 +19,9 @@ the rest of the episode, it adds an integral term to the controller's command,
 with conditional integration (the term stops growing while the summed command is saturated
 in the same direction) and the sum clipped to the motor's range. It reads the knee as the
 PID does (``info["measured_knee_angle_deg"]``, noisy and late on a perturbed twin, else
-``info["knee_angle_deg"]``), so it needs what the wrapped full-state policy already needs. A
+``info["knee_angle_deg"]``), so it needs what the wrapped full-state policy already needs; a
+controller that reads only the exoskeleton's sensors gets a guard on the exo encoder
+(``feedback="exo"``), the one angle it has. A
 controller that never stalls beyond ``engage_error_deg`` is unchanged, command for command.
 """
 
@@ -49,14 +51,20 @@ class StallGuardConfig:
         ki_per_rad_s: Integral gain (command per rad per s): from a 60 deg stall the term
             reaches the motor's full torque in about 0.25 s.
         control_period_s: The controller's step (s).
+        feedback: The angle it reads: ``"knee"`` (the human knee, as a full-state policy
+            reads it) or ``"exo"`` (the exo encoder, all a device controller has; the knee
+            error is then estimated by the encoder's).
     """
 
     engage_error_deg: float = 17.0
     engage_after_s: float = 2.0
     ki_per_rad_s: float = 4.0
     control_period_s: float = 0.01
+    feedback: str = "knee"
 
     def __post_init__(self) -> None:
+        if self.feedback not in ("knee", "exo"):
+            raise ValueError(f"feedback = {self.feedback!r}; accepted: 'knee', 'exo'")
         for name, low, high in (
             ("engage_error_deg", 0.0, 180.0),
             ("engage_after_s", 0.0, 1e4),
@@ -99,8 +107,8 @@ class StallGuard:
         t_s = self._steps * c.control_period_s
         self._steps += 1
         try:
-            measured = info.get("measured_knee_angle_deg")
-            knee_deg = float(info["knee_angle_deg"] if measured is None else measured)
+            measured = info.get(f"measured_{c.feedback}_angle_deg")
+            knee_deg = float(info[f"{c.feedback}_angle_deg"] if measured is None else measured)
             error_rad = math.radians(knee_deg - float(info["target_angle_deg"]))
         except KeyError as exc:
             raise ValueError(

@@ -319,7 +319,13 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
         from myoexo.control.guard import StallGuard, StallGuardConfig
 
         inner = build_controller(dataclasses.replace(spec, guard=False), env)
-        return StallGuard(inner, StallGuardConfig(control_period_s=float(env.unwrapped.dt)))
+        reads_exo = getattr(inner, "obs_preset", None) == "exo" or (
+            isinstance(inner, PID) and inner.config.feedback == "exo"
+        )
+        config = StallGuardConfig(
+            control_period_s=float(env.unwrapped.dt), feedback="exo" if reads_exo else "knee"
+        )
+        return StallGuard(inner, config)
     if spec.kind == "pid":
         return PID.from_env(env, pid_config(spec.options))
     if spec.kind == "shipped":

@@ -82,10 +82,13 @@ class Block:
 
 #: Every generated block outside the result sets' own ``tables.md``.
 BLOCKS: tuple[Block, ...] = (
-    Block("README.md", "eval_1000", ("sac_5seeds",)),
-    Block("myoexo/policies/MODEL_CARD.md", "eval_1000", ("sac", "sac_5seeds")),
-    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000", ("student_exo",)),
-    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_100_perturbed", ("student_exo",)),
+    Block("README.md", "eval_500", ("guard:sac",)),
+    Block("README.md", "eval_seeds_100", ("sac_5seeds",)),
+    Block("myoexo/policies/MODEL_CARD.md", "eval_500", ("sac", "guard:sac")),
+    Block("myoexo/policies/MODEL_CARD.md", "eval_200_perturbed", ("guard:sac",)),
+    Block("myoexo/policies/MODEL_CARD.md", "eval_seeds_100", ("sac_5seeds",)),
+    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_500", ("student_exo",)),
+    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_200_perturbed", ("student_exo",)),
     Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
 )
 

@@ -3,7 +3,8 @@
 Evaluates the paper's PID, the device's own PID closed on the exo encoder (what a real
 exoskeleton can run) with the paper's gains (``pid:feedback=exo``) and with gains tuned on the
 encoder by Ziegler-Nichols (``pid:tuned=exo``, :mod:`myoexo.control.tuned`), the paper's PID
-with its setpoint ramped over 1 s (``pid:ramp_s=1``), the full-state ``sac`` and the
+with its setpoint ramped over 1 s (``pid:ramp_s=1``), the full-state ``sac`` alone and with
+its stall guard as deployed (``guard:sac``, :mod:`myoexo.control.guard`), and the
 deployable ``student_exo`` (the exoskeleton's own sensors with memory) on 20 subjects per
 spasticity level (paper: 1000), and the
 achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
@@ -30,6 +31,7 @@ DEMO_CONTROLLERS = (
     "pid:tuned=exo",
     "pid:ramp_s=1",
     "sac",
+    "guard:sac",
     "student_exo",
 )
 #: Subjects per level of the oracle (the bound); it costs ~15 s of a quiet core per episode.
@@ -94,10 +96,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"myoexo demo: error: {exc}", file=sys.stderr)
         return 2
     summary = summarize(result.table)
-    print("\ncontroller  level  final error (deg)  overshoot (deg)  settling (s)  peak (Nm)")
+    print("\ncontroller        level  final error (deg)  overshoot (deg)  settling (s)  peak (Nm)")
     for s in summary.itertuples():
         print(
-            f"{s.controller:<10s}  {s.level:5d}  {s.final_error_deg_mean:17.2f}  "
+            f"{s.controller:<16s}  {s.level:5d}  {s.final_error_deg_mean:17.2f}  "
             f"{s.target_overshoot_deg_mean:15.2f}  {s.settling_time_s_mean:12.2f}  "
             f"{s.peak_interaction_torque_nm_mean:9.1f}"
         )
@@ -109,10 +111,12 @@ def run(args: argparse.Namespace) -> int:
 
         both = pd.concat([result.table, load_table(bound_dir)], ignore_index=True)
         d = distance_to_bound(both)
-        print("\ncontroller  level  |final error| (deg)  bound (deg)  distance (deg)  subjects")
+        print(
+            "\ncontroller        level  |final error| (deg)  bound (deg)  distance (deg)  subjects"
+        )
         for r in d.itertuples():
             print(
-                f"{r.controller:<10s}  {r.level:5d}  {r.abs_final_error_deg:19.2f}  "
+                f"{r.controller:<16s}  {r.level:5d}  {r.abs_final_error_deg:19.2f}  "
                 f"{r.bound_abs_final_error_deg:11.2f}  {r.distance_deg:14.2f}  {r.subjects:8d}"
             )
     print(f"\n{len(result.table)} episodes in {time.perf_counter() - t0:.0f} s")
