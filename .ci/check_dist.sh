@@ -77,7 +77,8 @@ import os, gymnasium as gym, myoexo
 site = os.path.realpath(os.environ["MYOEXO_WHEEL_SITE"])
 assert os.path.realpath(myoexo.__file__).startswith(site + os.sep), myoexo.__file__
 gym.make("MyoExoKnee-v1").reset(seed=0)
-for name in ("sac", "student_exo", "sac_exo"):
+from myoexo.policies import SHIPPED_POLICIES
+for name in SHIPPED_POLICIES:
     myoexo.load_policy(name)
 print("  import, env reset and shipped policies from", os.path.dirname(myoexo.__file__))
 '
