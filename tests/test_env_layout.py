@@ -110,7 +110,8 @@ def test_layout_gathers_each_quantity_from_its_definition(twin, strap_torque_ref
         "time_frac": data.time / 8.0,
     }
     for key, value in expected.items():
-        assert od[key].shape == (1,) and od[key][0] == value, key
+        # the strap torque is summed in another order here: equal to round-off
+        assert od[key].shape == (1,) and od[key][0] == pytest.approx(value, rel=1e-12), key
     for key, sensor in CUFF_OBS_KEYS.items():
         np.testing.assert_array_equal(od[key], data.sensor(sensor).data)
     jq = [model.joint(n) for n in layout.coupling_joints]
