@@ -35,6 +35,7 @@ import argparse
 import itertools
 import os
 import time
+from typing import Any
 
 import numpy as np
 
@@ -138,36 +139,17 @@ def measure(
     """The three measurements of one learner."""
     import torch
 
-    from myoexo.training import get_preset
     from myoexo.training.callbacks import RewardTermsCallback
-    from myoexo.training.train import build_model, make_vec_env
 
     algorithm, _, k = learner.partition(":")
     k, _, n = k.partition("x")
     k_steps = int(k or 1)
     if n:
         return measure_batched(learner, algorithm, k_steps, int(n), updates, learn_steps, seed)
-    base = get_preset("cpu")
-    preset = get_preset(
-        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * base.n_envs
-    )
+    preset = learner_preset(algorithm, k_steps)
     torch.set_num_threads(preset.torch_threads)
-    venv = make_vec_env(preset, seed)
-    model = build_model(preset, venv, seed)
-    model.learning_starts = 0
-    from stable_baselines3.common.logger import configure
-
-    model.set_logger(configure(None, []))
-    rng = np.random.default_rng(seed)
-    obs = venv.reset()
-    n_vec = max(1, env_steps // preset.n_envs)
-    t0 = time.perf_counter()
-    for _ in range(n_vec):
-        action = rng.uniform(-1.0, 1.0, (preset.n_envs, 1)).astype(np.float32)
-        new_obs, reward, done, infos = venv.step(action)
-        model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
-        obs = new_obs
-    env_sps = n_vec * preset.n_envs / (time.perf_counter() - t0) if measure_env else None
+    venv, model, fill_sps = filled_model(preset, seed, env_steps)
+    env_sps = fill_sps if measure_env else None
 
     chunk = max(1, preset.gradient_steps)
     model.train(gradient_steps=chunk, batch_size=preset.batch_size)  # compile / warm up
@@ -192,15 +174,7 @@ def measure(
         flush=True,
     )
     venv.close()
-    return {
-        "learner": learner,
-        "upd_per_transition": preset.gradient_steps / (preset.train_freq * preset.n_envs),
-        "env_sps": env_sps,
-        "ups": ups,
-        "learn_sps": learn_sps,
-        "learn_ups": learn_ups,
-        "flop_per_update": flop,
-    }
+    return row(learner, preset, env_sps, ups, learn_sps, learn_ups, flop)
 
 
 def measure_batched(
@@ -214,34 +188,15 @@ def measure_batched(
 ) -> dict:
     """The updates and learn measurements of ``n_seeds`` seeds trained together, their
     updates vmapped in one call (rates in seed-updates/s and seed-transitions/s)."""
-    from stable_baselines3.common.logger import configure
-
-    from myoexo.training import get_preset
     from myoexo.training.callbacks import RewardTermsCallback
-    from myoexo.training.train import build_model, make_vec_env
     from myoexo.training.vmap import SeedBatchedSAC, learn_seed_batched
 
     if algorithm != "sbx_sac":
         raise SystemExit(f"{learner}: only sbx_sac batches seeds")
-    base = get_preset("cpu")
-    preset = get_preset(
-        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * base.n_envs
-    )
-    models, venvs = [], []
-    for i in range(n_seeds):
-        venv = make_vec_env(preset, seed + i)
-        model = build_model(preset, venv, seed + i)
-        model.learning_starts = 0
-        model.set_logger(configure(None, []))
-        rng = np.random.default_rng(seed + i)
-        obs = venv.reset()
-        for _ in range(max(1, 1_000 // preset.n_envs)):
-            action = rng.uniform(-1.0, 1.0, (preset.n_envs, 1)).astype(np.float32)
-            new_obs, reward, done, infos = venv.step(action)
-            model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
-            obs = new_obs
-        models.append(model)
-        venvs.append(venv)
+    preset = learner_preset(algorithm, k_steps)
+    filled = [filled_model(preset, seed + i, 1_000) for i in range(n_seeds)]
+    venvs = [venv for venv, _, _ in filled]
+    models = [model for _, model, _ in filled]
     batch = SeedBatchedSAC(models)
     chunk = preset.gradient_steps
     batch.train(chunk)  # compile / warm up
@@ -267,12 +222,59 @@ def measure_batched(
     )
     for venv in venvs:
         venv.close()
+    return row(learner, preset, None, ups, n_seeds * learn_steps / dt, learn_ups, flop)
+
+
+def learner_preset(algorithm: str, k_steps: int) -> Any:
+    """The ``cpu`` preset with *algorithm*, training every *k_steps* vector steps with one
+    update per transition."""
+    from myoexo.training import get_preset
+
+    n_envs = get_preset("cpu").n_envs
+    return get_preset(
+        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * n_envs
+    )
+
+
+def filled_model(preset: Any, seed: int, env_steps: int) -> tuple[Any, Any, float]:
+    """A model of *preset* on its vector env, its replay buffer filled with *env_steps*
+    transitions of random actions: ``(venv, model, transitions/s of the filling)``."""
+    from stable_baselines3.common.logger import configure
+
+    from myoexo.training.train import build_model, make_vec_env
+
+    venv = make_vec_env(preset, seed)
+    model = build_model(preset, venv, seed)
+    model.learning_starts = 0
+    model.set_logger(configure(None, []))
+    rng = np.random.default_rng(seed)
+    obs = venv.reset()
+    n_vec = max(1, env_steps // preset.n_envs)
+    t0 = time.perf_counter()
+    for _ in range(n_vec):
+        action = rng.uniform(-1.0, 1.0, (preset.n_envs, 1)).astype(np.float32)
+        new_obs, reward, done, infos = venv.step(action)
+        model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
+        obs = new_obs
+    return venv, model, n_vec * preset.n_envs / (time.perf_counter() - t0)
+
+
+def row(
+    learner: str,
+    preset: Any,
+    env_sps: float | None,
+    ups: float,
+    learn_sps: float,
+    learn_ups: float,
+    flop: float,
+) -> dict:
+    """One learner's line of the table."""
     return {
         "learner": learner,
         "upd_per_transition": preset.gradient_steps / (preset.train_freq * preset.n_envs),
-        "env_sps": None,
+        "env_sps": env_sps,
         "ups": ups,
-        "learn_sps": n_seeds * learn_steps / dt,
+        "learn_sps": learn_sps,
         "learn_ups": learn_ups,
         "flop_per_update": flop,
     }

@@ -29,11 +29,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from myoexo.control.pid import FEEDBACK_KEYS, sensed_angle_deg
 from myoexo.control.protocol import Controller
 
 
@@ -63,8 +64,8 @@ class StallGuardConfig:
     feedback: str = "knee"
 
     def __post_init__(self) -> None:
-        if self.feedback not in ("knee", "exo"):
-            raise ValueError(f"feedback = {self.feedback!r}; accepted: 'knee', 'exo'")
+        if self.feedback not in FEEDBACK_KEYS:
+            raise ValueError(f"feedback = {self.feedback!r}; accepted: {sorted(FEEDBACK_KEYS)}")
         for name, low, high in (
             ("engage_error_deg", 0.0, 180.0),
             ("engage_after_s", 0.0, 1e4),
@@ -107,9 +108,8 @@ class StallGuard:
         t_s = self._steps * c.control_period_s
         self._steps += 1
         try:
-            measured = info.get(f"measured_{c.feedback}_angle_deg")
-            knee_deg = float(info[f"{c.feedback}_angle_deg"] if measured is None else measured)
-            error_rad = math.radians(knee_deg - float(info["target_angle_deg"]))
+            angle_deg = sensed_angle_deg(info, c.feedback)
+            error_rad = math.radians(angle_deg - float(info["target_angle_deg"]))
         except KeyError as exc:
             raise ValueError(
                 f"StallGuard.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict)"
@@ -123,10 +123,6 @@ class StallGuard:
         if not ((total >= 1.0 and step > 0.0) or (total <= -1.0 and step < 0.0)):
             self.integral += step
         return np.array([np.clip(float(u[0]) + self.integral, -1.0, 1.0)], dtype=np.float32)
-
-    def describe(self) -> dict[str, Any]:
-        """The configuration, for metadata and model cards."""
-        return {"kind": "stall_guard", **asdict(self.config)}
 
     def __repr__(self) -> str:
         return f"StallGuard({self.controller!r}, {self.config})"

@@ -54,6 +54,19 @@ ANTI_WINDUP_SCHEMES: tuple[str, ...] = ("clamping", "back_calculation", "none")
 FEEDBACK_KEYS: dict[str, str] = {"knee": "knee_angle_deg", "exo": "exo_angle_deg"}
 
 
+def sensed_angle_deg(info: Mapping[str, Any], feedback: str) -> float:
+    """The *feedback* angle (``"knee"`` or ``"exo"``, deg) a controller reads from the env's
+    ``info``: the sensed one (``measured_*``, noisy and late on a perturbed twin) when the
+    env gives one, else the true one.
+
+    Raises:
+        KeyError: ``info`` holds neither.
+    """
+    key = FEEDBACK_KEYS[feedback]
+    measured = info.get("measured_" + key)
+    return float(info[key] if measured is None else measured)
+
+
 @dataclass(frozen=True)
 class PIDGains:
     """Parallel-form PID gains on the knee error in radians, output in the normalized command.
@@ -169,8 +182,6 @@ class PID:
             raise ValueError(f"dt_s = {dt_s!r} must be a positive sample time in seconds")
         self.config = config if config is not None else PIDConfig()
         self.dt_s = float(dt_s)
-        self._feedback_key = FEEDBACK_KEYS[self.config.feedback]
-        self._measured_key = "measured_" + self._feedback_key
         self.reset()
 
     @classmethod
@@ -222,9 +233,7 @@ class PID:
         del obs
         try:
             target_deg = float(info["target_angle_deg"])
-            # the sensed angle (noisy and late on a perturbed twin) when the env gives one
-            measured = info.get(self._measured_key)
-            measured_deg = float(info[self._feedback_key] if measured is None else measured)
+            measured_deg = sensed_angle_deg(info, self.config.feedback)
         except KeyError as exc:
             raise ValueError(
                 f"PID.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict); got keys "
