@@ -348,3 +348,29 @@ def test_a_distillation_folder_in_use_is_refused(tmp_path, lock_holder):
         with pytest.raises(FolderInUseError, match=f"in use by pid {holder.pid}"):
             distill(DistillConfig(rounds=1), folder, log=lambda m: None)
         assert sorted(p.name for p in folder.iterdir()) == [LOCK_FILE]
+
+
+def test_expert_with_the_stall_guard_pushes_only_after_a_stall():
+    """With teacher_guard the labels are guard:sac's on the true knee error: unchanged for
+    the first 2 s and near the target; past 17 deg after 2 s the label is pushed towards
+    the target, more at each step, and a reset disengages it."""
+    import myoexo
+    from myoexo.control.guard import StallGuardConfig
+    from myoexo.studies.distill import Expert
+
+    teacher = myoexo.load_policy("sac")
+    plain, guarded = Expert(teacher), Expert(teacher, guard=StallGuardConfig())
+    x = np.random.default_rng(1).normal(0, 0.3, teacher.obs_dim)
+    x[5] = np.radians(40.0)  # knee 40 deg too flexed: the guard's integral extends (negative)
+    guarded.reset(0)
+    steps = round(2.0 / 0.01)
+    for _ in range(steps):
+        np.testing.assert_array_equal(guarded(x), plain(x))
+    labels = [float(guarded(x)[0]) for _ in range(5)]
+    base = float(plain(x)[0])
+    assert all(b < a for a, b in zip([base, *labels], labels, strict=False)) or base == -1.0
+    guarded.reset(0)
+    np.testing.assert_array_equal(guarded(x), plain(x))
+    x[5] = np.radians(5.0)  # near the target: never engages
+    for _ in range(steps + 10):
+        np.testing.assert_array_equal(guarded(x), plain(x))

@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.control.guard import StallGuard, StallGuardConfig
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root, subject_seed
 from myoexo.policies.actor import MLPActor
@@ -99,6 +100,12 @@ class DistillConfig:
             settles 0.5-0.7 deg short at levels 0-1), zero far from it (levels 2-3, the
             transient); 0 labels with the teacher alone.
         fine_width_rad: Width of that term (rad).
+        teacher_guard: Label with the teacher under the stall guard
+            (:class:`~myoexo.control.guard.StallGuard`, its default settings, on the true
+            knee error): once the knee has stalled far from the target, the labels carry the
+            guard's integral action along the visited trajectory, so that the student, whose
+            frames hold its last command, can learn to keep pushing (``guard:sac`` is the
+            shipped full-state controller). ``False``: the teacher alone.
         root_seed: Root seed of the training and selection subjects (never the evaluation
             root 0).
         subject_offset: First subject index of the training episodes (selection uses
@@ -130,6 +137,7 @@ class DistillConfig:
     teacher: str = "sac"
     fine_gain: float = 0.0
     fine_width_rad: float = 0.02
+    teacher_guard: bool = False
     root_seed: int = SELECTION_ROOT_SEED
     subject_offset: int = 10_000
     selection_subjects: int = 8
@@ -199,25 +207,58 @@ def true_full_observation(env: Any, info: dict[str, Any] | None) -> np.ndarray:
 
 class Expert:
     """The labelling expert: the teacher on the true full state, plus the optional
-    fine-positioning term on the true knee error (:class:`DistillConfig`)."""
+    fine-positioning term on the true knee error and the optional stall guard on it
+    (:class:`DistillConfig`). With the guard it has a state: :meth:`reset` at each episode's
+    start, then one call per control step."""
 
-    def __init__(self, teacher: MLPActor, fine_gain: float = 0.0, fine_width_rad: float = 0.02):
+    def __init__(
+        self,
+        teacher: MLPActor,
+        fine_gain: float = 0.0,
+        fine_width_rad: float = 0.02,
+        guard: StallGuardConfig | None = None,
+    ):
         self.teacher = teacher
         self.fine_gain = float(fine_gain)
         self.fine_width_rad = float(fine_width_rad)
         keys = list(teacher.metadata.get("obs_keys") or [])
-        if self.fine_gain and keys[:6] != [
+        if (self.fine_gain or guard is not None) and keys[:6] != [
             "knee_angle_rad", "knee_vel_rad_s", "exo_angle_rad", "exo_vel_rad_s",
             "target_rad", "error_rad",
         ]:  # fmt: skip
             raise ValueError(f"the teacher's observation has no error_rad at index 5: {keys}")
+        self._label = np.zeros(1, np.float32)
+        self.guard = None if guard is None else StallGuard(_LastLabel(self), guard)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode (disengages the guard)."""
+        if self.guard is not None:
+            self.guard.reset(seed)
 
     def __call__(self, x_full: np.ndarray) -> np.ndarray:
         a = self.teacher(x_full)
+        e = float(x_full[5])  # error_rad (scale 1): knee minus target, true state
         if self.fine_gain:
-            e = float(x_full[5])  # error_rad (scale 1)
             a = a - self.fine_gain * e * math.exp(-((e / self.fine_width_rad) ** 2))
-        return np.clip(np.asarray(a, np.float32), -1.0, 1.0)
+        a = np.clip(np.asarray(a, np.float32).reshape(1), -1.0, 1.0)
+        if self.guard is None:
+            return a
+        self._label = a
+        # the guard reads knee minus target: the true error, as an angle from a zero target
+        return self.guard.act(x_full, {"knee_angle_deg": math.degrees(e), "target_angle_deg": 0.0})
+
+
+class _LastLabel:
+    """The expert's unguarded label of the current step, as the controller the guard wraps."""
+
+    def __init__(self, expert: Expert) -> None:
+        self.expert = expert
+
+    def reset(self, seed: int | None = None) -> None:
+        pass
+
+    def act(self, obs: np.ndarray, info: Any) -> np.ndarray:
+        return self.expert._label
 
 
 def load_teacher(name: str = "sac") -> MLPActor:
@@ -313,6 +354,9 @@ def collect_episode(
     teacher from the true full state. Returns ``(frames, labels, summary)``."""
     idx = frame_indices(list(env.unwrapped.obs_keys))
     obs, info = env.reset(seed=int(seed))
+    reset = getattr(teacher, "reset", None)
+    if reset is not None:  # a stateful expert (the stall guard) starts its episode
+        reset(seed)
     if student is not None:
         student.bind(env).reset(seed)
     frames, labels = [], []
@@ -596,7 +640,8 @@ def _distill(
     student = load_student(_round_stem(run_dir, start - 1)) if start else None
     actor = load_teacher(config.teacher)
     provenance = teacher_provenance(actor)
-    teacher = Expert(actor, config.fine_gain, config.fine_width_rad)
+    guard = StallGuardConfig() if config.teacher_guard else None
+    teacher = Expert(actor, config.fine_gain, config.fine_width_rad, guard)
     envs = EnvPool(config.twin)
     try:
         for r in range(start, config.rounds):
@@ -684,6 +729,7 @@ def _provenance(
         "teacher_provenance": teacher,
         "fine_gain": config.fine_gain,
         "fine_width_rad": config.fine_width_rad,
+        "teacher_guard": config.teacher_guard,
         "round": r,
         "dataset_size": int(n),
         "selection_root_seed": int(config.root_seed),
@@ -726,6 +772,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="privileged fine-positioning term on the teacher's labels (0: teacher alone)",
     )
     parser.add_argument("--fine-width", type=float, default=d.fine_width_rad, help="rad")
+    parser.add_argument(
+        "--teacher-guard",
+        action="store_true",
+        help="label with the teacher under the stall guard (guard:sac) on the true knee",
+    )
     parser.add_argument("--selection-subjects", type=int, default=d.selection_subjects)
     add_twin_arguments(parser)
     parser.add_argument("--seed", type=int, default=d.seed)
@@ -759,6 +810,7 @@ def run(args: argparse.Namespace) -> int:
             selection_subjects=args.selection_subjects,
             fine_gain=args.fine_gain,
             fine_width_rad=args.fine_width,
+            teacher_guard=args.teacher_guard,
             twin=twin_from_args(args),
             seed=args.seed,
         )
