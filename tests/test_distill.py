@@ -374,3 +374,46 @@ def test_expert_with_the_stall_guard_pushes_only_after_a_stall():
     x[5] = np.radians(5.0)  # near the target: never engages
     for _ in range(steps + 10):
         np.testing.assert_array_equal(guarded(x), plain(x))
+
+
+def test_ship_students_picks_a_typical_seed_and_groups_the_copies(tmp_path):
+    """Three tiny seeds: the shipped student is the closest_seed of their selection errors,
+    carries the seeds and the rule, and the seed copies are one controller for evaluate."""
+    import pandas as pd
+
+    from myoexo.control.specs import parse_controller_spec, seeds_folder_of
+    from myoexo.envs.options import TwinOptions
+    from myoexo.studies.distill import SHIP_RULE, DistillConfig, distill, ship_students
+    from myoexo.training.seeds import closest_seed
+
+    runs = []
+    for seed in (0, 1, 2):
+        cfg = DistillConfig(
+            rounds=1, episodes_per_round=2, levels=(0, 2), n_frames=2, stride=1, hidden=(4,),
+            epochs_first=1, selection_subjects=1, seed=seed,
+            twin=TwinOptions().replace(episode_duration_s=0.1),
+        )  # fmt: skip
+        distill(cfg, tmp_path / f"s{seed}", log=lambda m: None)
+        runs.append(tmp_path / f"s{seed}")
+    with pytest.raises(ValueError, match=">= 2"):
+        ship_students(runs[:1], log=lambda m: None)
+    with pytest.raises(ValueError, match="two runs of distillation seed 0"):
+        ship_students([runs[0], runs[0]], log=lambda m: None)
+    chosen = ship_students(
+        runs, stem=tmp_path / "shipped", seed_copies=tmp_path / "copies", log=lambda m: None
+    )
+    rows = [
+        {"seed": s, "level": k, "e": v}
+        for s, run in enumerate(runs)
+        for k, v in load_student(run / "student").metadata["selection_scores"].items()
+        if k != "score"
+    ]
+    expected = closest_seed(pd.DataFrame(rows), metrics=("e",))
+    shipped = load_student(tmp_path / "shipped")
+    assert shipped.metadata["ship_seed"] == chosen.metadata["ship_seed"] == expected
+    assert shipped.metadata["distill_seeds"] == [0, 1, 2]
+    assert shipped.metadata["ship_rule"] == SHIP_RULE
+    copies = sorted((tmp_path / "copies").glob("*.npz"))
+    assert [p.stem for p in copies] == [f"student_3seeds-seed_{s}-round_00" for s in (0, 1, 2)]
+    labels = {parse_controller_spec(str(p)).label for p in copies}
+    assert {seeds_folder_of(label) for label in labels} == {"student_3seeds"}

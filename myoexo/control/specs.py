@@ -172,7 +172,7 @@ def parse_controller_spec(text: str) -> ControllerSpec:
 
 #: A ``myoexo seeds`` run folder's name, and the label of one of its checkpoints.
 _SEED_RUN = re.compile(r"seed_\d+")
-_SEED_CHECKPOINT_LABEL = re.compile(r"(?P<seeds>.+)-seed_\d+-step_\d+")
+_SEED_CHECKPOINT_LABEL = re.compile(r"(?P<seeds>.+)-seed_\d+-(?:step|round)_\d+")
 
 
 def _model_label(path: Path) -> str:
@@ -188,7 +188,9 @@ def _model_label(path: Path) -> str:
 
 def seeds_folder_of(label: str) -> str | None:
     """The seeds folder of a checkpoint label written by :func:`_model_label`
-    (``<seeds>-seed_<N>-<step>``), or ``None`` for any other label."""
+    (``<seeds>-seed_<N>-step_<k>``) or of a distillation seed's student
+    (``<seeds>-seed_<N>-round_<r>``, :func:`myoexo.studies.distill.seed_copy_stem`), or
+    ``None`` for any other label."""
     m = _SEED_CHECKPOINT_LABEL.fullmatch(label)
     return m.group("seeds") if m else None
 

@@ -740,11 +740,99 @@ def _provenance(
     }
 
 
+# ---------------------------------------------------------------------------- seeds
+#: How the shipped student is chosen among distillation seeds.
+SHIP_RULE = (
+    "the seed whose selection errors (root 1, per level and twin) lie closest to the "
+    "across-seed means (closest_seed)"
+)
+
+
+def seed_copy_stem(folder: str | Path, name: str, n_seeds: int, seed: int, r: int) -> Path:
+    """Where :func:`ship_students` writes one seed's student for an evaluation over seeds:
+    ``<folder>/<name>_<n>seeds-seed_<seed>-round_<r>`` (``myoexo evaluate`` groups such
+    labels as one controller, :func:`~myoexo.control.specs.seeds_folder_of`)."""
+    return Path(folder) / f"{name}_{int(n_seeds)}seeds-seed_{int(seed)}-round_{int(r):02d}"
+
+
+def ship_students(
+    run_dirs: Sequence[str | Path],
+    name: str | None = None,
+    stem: str | Path | None = None,
+    seed_copies: str | Path | None = None,
+    log: Callable[[str], None] = print,
+) -> StudentController:
+    """Choose one of several distillation seeds' students by :data:`SHIP_RULE`.
+
+    Each run's student is its selected round (``student.npz``); the rule compares the
+    seeds' selection errors (root 1, never the evaluation root). The chosen student gets
+    ``distill_seeds``, ``ship_seed`` and ``ship_rule`` in its metadata and is written into
+    the package as *name* (:func:`myoexo.load_policy`) and/or to *stem*; *seed_copies*
+    receives every seed's student under :func:`seed_copy_stem`, to evaluate them together.
+
+    Raises:
+        ValueError: fewer than two runs, a run without a student, or two runs of one seed.
+    """
+    import pandas as pd
+
+    from myoexo.policies import shipped_path
+    from myoexo.training.seeds import closest_seed
+
+    if len(run_dirs) < 2:
+        raise ValueError(f"{len(run_dirs)} distillation run(s) given: the rule needs >= 2")
+    students: dict[int, tuple[StudentController, int]] = {}
+    rows = []
+    for run_dir in map(Path, run_dirs):
+        if not (run_dir / f"{BEST_STEM}.npz").is_file():
+            raise ValueError(f"{run_dir} has no {BEST_STEM}.npz: not a finished distillation")
+        student = load_student(run_dir / BEST_STEM)
+        seed = int(student.metadata["distill_config"]["seed"])
+        if seed in students:
+            raise ValueError(f"two runs of distillation seed {seed}: {list(map(str, run_dirs))}")
+        students[seed] = (student, int(student.metadata["round"]))
+        for key, value in student.metadata["selection_scores"].items():
+            if key != "score":
+                rows.append({"seed": seed, "level": key, "selection_error_deg": float(value)})
+    ship = closest_seed(pd.DataFrame(rows), metrics=("selection_error_deg",))
+    seeds = sorted(students)
+    for seed in seeds:
+        student, r = students[seed]
+        score = student.metadata["selection_scores"]["score"]
+        mark = "  <- shipped" if seed == ship else ""
+        log(f"[distill] seed {seed}: round {r}, selection score {score:.2f} deg{mark}")
+        if seed_copies is not None:
+            save_student(
+                student, seed_copy_stem(seed_copies, name or "student", len(seeds), seed, r)
+            )
+    chosen = students[ship][0]
+    chosen.metadata.update(distill_seeds=seeds, ship_seed=ship, ship_rule=SHIP_RULE)
+    for target in ([Path(stem)] if stem else []) + ([shipped_path(name)] if name else []):
+        npz, _ = save_student(chosen, target)
+        log(f"[distill] student: {npz} (seed {ship} of {seeds})")
+    return chosen
+
+
 # ---------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``myoexo distill``."""
     d = DistillConfig()
     parser.add_argument("--run-dir", help="output folder (default: runs/distill_<timestamp>)")
+    parser.add_argument(
+        "--ship",
+        nargs="+",
+        metavar="DIR",
+        help="choose among finished runs of several seeds by the seed rule (closest_seed on "
+        "the selection errors) instead of distilling; with --name, --export, --seed-copies",
+    )
+    parser.add_argument(
+        "--name", help="with --ship: write the chosen student into the package under NAME"
+    )
+    parser.add_argument(
+        "--seed-copies",
+        metavar="DIR",
+        help="with --ship: every seed's student as DIR/<name>_<n>seeds-seed_<s>-round_<r>, "
+        "for `myoexo evaluate --controllers DIR/*.npz` (one controller over seeds)",
+    )
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--rounds", type=int, help=f"DAgger rounds (default {d.rounds})")
     parser.add_argument(
@@ -793,6 +881,9 @@ def run(args: argparse.Namespace) -> int:
         if not (args.quiet and "epoch" in msg):
             print(msg, flush=True)
 
+    if args.ship:
+        ship_students(args.ship, args.name, args.export, args.seed_copies, log=log)
+        return 0
     if args.resume:
         run_dir = Path(args.resume)
         distill(DistillConfig(), run_dir, resume=True, rounds=args.rounds, log=log)

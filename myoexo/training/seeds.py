@@ -217,12 +217,13 @@ def summarize(per_seed: Any) -> Any:
     return pd.DataFrame(rows).set_index("level")
 
 
-def closest_seed(per_seed: Any) -> int:
-    """The seed whose per-level metrics lie closest to the across-seed means (each metric
-    over its across-seed standard deviation): a typical seed, not the best one."""
+def closest_seed(per_seed: Any, metrics: Sequence[str] = tuple(AGGREGATED)) -> int:
+    """The seed whose per-level *metrics* (columns of *per_seed*, beside ``seed`` and
+    ``level``) lie closest to the across-seed means (each metric over its across-seed
+    standard deviation): a typical seed, not the best one."""
     distance: dict[int, float] = {}
     for _, group in per_seed.groupby("level"):
-        for metric in AGGREGATED:
+        for metric in metrics:
             values = group[metric].to_numpy(dtype=float)
             finite = values[np.isfinite(values)]
             if not finite.size:
