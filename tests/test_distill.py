@@ -294,6 +294,12 @@ def test_shipped_student_loads_and_acts(env_exo, tmp_path):
         card = Path(myoexo.__file__).parent / "policies" / "MODEL_CARD_student_exo.md"
         assert "has not been re-distilled" in " ".join(card.read_text().split())
     assert int(student.metadata.get("selection_root_seed")) == 1
+    # one of at least three distillation seeds, chosen by the seed rule
+    from myoexo.studies.distill import SHIP_RULE
+
+    assert len(student.metadata["distill_seeds"]) >= 3
+    assert student.metadata["ship_seed"] in student.metadata["distill_seeds"]
+    assert student.metadata["ship_rule"] == SHIP_RULE
     for o in _episode_obs(env_exo, seed=0, steps=10):
         a = student.act(o, {})
         assert a.shape == (1,) and np.isfinite(a).all() and -1 <= a[0] <= 1

@@ -34,9 +34,17 @@ finished round)::
 Examples::
 
     myoexo distill --run-dir runs/distill --rounds 8 --episodes 96 --robust-fraction 0.5
-    myoexo distill --run-dir runs/distill_fine --fine-gain 20 --fine-width 0.02   # shipped
+    myoexo distill --run-dir runs/distill_s0 --fine-gain 20 --fine-width 0.02 \
+        --teacher-guard --seed 0                                # the shipped recipe, seed 0
     myoexo distill --resume runs/distill
     myoexo distill --resume runs/distill --rounds 12            # more rounds
+    myoexo distill --ship runs/distill_s0 runs/distill_s1 runs/distill_s2 \
+        --name student_exo --seed-copies runs/student_seeds      # the seed rule picks one
+
+Several seeds: each is its own run folder (``--seed``); ``--ship`` chooses one by the seed
+rule (:data:`SHIP_RULE`, a typical seed on the selection subjects, not the best) and writes
+every seed's student beside it so that ``myoexo evaluate`` reports them as one controller,
+with intervals over seeds and subjects.
 """
 
 from __future__ import annotations
