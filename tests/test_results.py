@@ -118,3 +118,36 @@ def test_the_command_names_a_seeds_folder_once():
     assert command_of(config) == (
         "myoexo evaluate --controllers pid --seeds-dir runs/s5 --levels 0 --subjects 5"
     )
+
+
+def test_the_goals_table_judges_by_the_intervals_and_the_tails(tmp_path):
+    """The deployable controller's goals table: verdicts follow the files (an interval moved
+    under the goal turns a miss into met, a catastrophic subject turns met into missed)."""
+    from myoexo.evaluation.results import goals_table
+
+    nominal, perturbed = tmp_path / "nom", tmp_path / "per"
+    shutil.copytree(REPO / RESULTS_DIR / "eval_500", nominal)
+    shutil.copytree(REPO / RESULTS_DIR / "eval_200_perturbed", perturbed)
+
+    def row(text: str, goal: str) -> str:
+        return next(line for line in text.splitlines() if line.startswith(f"| {goal}"))
+
+    args = ("student_exo", "guard:sac", "pid:tuned=exo")
+    red = pd.read_csv(nominal / "reductions.csv")
+    at = (red.controller == "student_exo") & (red.level == 3)
+    red.loc[at, ["abs_final_error_diff_deg", "abs_final_error_diff_deg_low"]] = [1.0, 0.9]
+    red.loc[at, "abs_final_error_diff_deg_high"] = 1.6  # straddles 1.5: a tie
+    red.to_csv(nominal / "reductions.csv", index=False)
+    assert "**tie**" in row(goals_table(nominal, perturbed, *args), "level 3").split("|")[2]
+    red.loc[at, "abs_final_error_diff_deg_high"] = 1.4
+    red.to_csv(nominal / "reductions.csv", index=False)
+    text = goals_table(nominal, perturbed, *args)
+    assert "+1.00 [+0.90, +1.40] deg vs `pid`: **met**" in row(text, "level 3")
+    risk = pd.read_csv(nominal / "tail_risk.csv")
+    assert "**met**" in row(text, "no catastrophic").split("|")[2]
+    risk.loc[(risk.controller == "student_exo") & (risk.level == 0), "catastrophic"] = 2
+    risk.to_csv(nominal / "tail_risk.csv", index=False)
+    text = goals_table(nominal, perturbed, *args)
+    assert "2 / 0 / 0 / 0" in row(text, "no catastrophic") and "**missed**" in text
+    with pytest.raises(ValueError, match="has no"):
+        goals_table(nominal, perturbed, "student_exo", "nobody", "pid:tuned=exo")

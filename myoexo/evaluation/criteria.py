@@ -53,6 +53,32 @@ class Criteria:
     peak_levels: tuple[int, ...] = VALID_LEVELS
 
 
+@dataclass(frozen=True)
+class DeployableGoals:
+    """What a deployable controller (one that reads only the device's own sensors) must
+    reach on held-out subjects, against the paper's PID, which reads the human knee.
+
+    Attributes:
+        easy_levels: Levels held to an absolute accuracy.
+        easy_mean_deg: Bound on their mean absolute final error, nominal twin (deg).
+        easy_p95_deg: Bound on their 95th-percentile absolute final error, nominal (deg).
+        easy_mean_perturbed_deg: :attr:`easy_mean_deg` on perturbed twins (deg).
+        easy_p95_perturbed_deg: :attr:`easy_p95_deg` on perturbed twins (deg).
+        hard_levels: Levels held relative to the PID (the motor stalls against the reflex
+            there, so no controller reaches the target).
+        within_pid_deg: Bound on the mean absolute final error's excess over the PID's at
+            those levels, on the same subjects (deg).
+    """
+
+    easy_levels: tuple[int, ...] = (0, 1)
+    easy_mean_deg: float = 0.5
+    easy_p95_deg: float = 1.0
+    easy_mean_perturbed_deg: float = 1.0
+    easy_p95_perturbed_deg: float = 2.0
+    hard_levels: tuple[int, ...] = (2, 3)
+    within_pid_deg: float = 1.5
+
+
 def level_means(table: Any) -> Any:
     """Per-level means of :data:`CRITERIA_METRICS` from an evaluation table (pandas)."""
     return table.groupby("level")[list(CRITERIA_METRICS)].mean()
