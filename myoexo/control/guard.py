@@ -79,41 +79,35 @@ class StallGuardConfig:
                 )
 
 
-class StallGuard:
-    """*controller* with the stall guard on top (see the module docstring).
+class StallIntegrator:
+    """The guard's integral action on its own, fed the error each control step: what
+    :class:`StallGuard` adds to a controller, and what a labelling expert adds to its labels
+    (:class:`myoexo.studies.distill.Expert`, on the true knee error).
 
     Attributes:
         engaged_at_s: Episode time (s) the guard engaged, ``None`` while it has not.
         integral: The integral term (command units) of the last step.
     """
 
-    def __init__(self, controller: Controller, config: StallGuardConfig | None = None) -> None:
-        self.controller = controller
+    def __init__(self, config: StallGuardConfig | None = None) -> None:
         self.config = config or StallGuardConfig()
         self.engaged_at_s: float | None = None
         self.integral = 0.0
         self._steps = 0
 
     def reset(self, seed: int | None = None) -> None:
-        """Reset the wrapped controller and disengage."""
-        self.controller.reset(seed)
+        """Disengage (an episode starts)."""
         self.engaged_at_s = None
         self.integral = 0.0
         self._steps = 0
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
-        """The wrapped controller's command, plus the integral term once engaged."""
-        u = np.asarray(self.controller.act(obs, info), dtype=np.float32).reshape(1)
+    def correct(self, u: np.ndarray, error_rad: float) -> np.ndarray:
+        """Command *u* of this control step plus the integral term once engaged, given the
+        knee error (knee minus target, rad); advances the guard's clock by one step."""
+        u = np.asarray(u, dtype=np.float32).reshape(1)
         c = self.config
         t_s = self._steps * c.control_period_s
         self._steps += 1
-        try:
-            angle_deg = sensed_angle_deg(info, c.feedback)
-            error_rad = math.radians(angle_deg - float(info["target_angle_deg"]))
-        except KeyError as exc:
-            raise ValueError(
-                f"StallGuard.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict)"
-            ) from None
         if self.engaged_at_s is None:
             if t_s < c.engage_after_s or abs(math.degrees(error_rad)) <= c.engage_error_deg:
                 return u
@@ -123,6 +117,32 @@ class StallGuard:
         if not ((total >= 1.0 and step > 0.0) or (total <= -1.0 and step < 0.0)):
             self.integral += step
         return np.array([np.clip(float(u[0]) + self.integral, -1.0, 1.0)], dtype=np.float32)
+
+
+class StallGuard(StallIntegrator):
+    """*controller* with the stall guard on top (see the module docstring): its
+    :class:`StallIntegrator` fed the error of the angle it reads from ``info``."""
+
+    def __init__(self, controller: Controller, config: StallGuardConfig | None = None) -> None:
+        super().__init__(config)
+        self.controller = controller
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the wrapped controller and disengage."""
+        self.controller.reset(seed)
+        super().reset(seed)
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        """The wrapped controller's command, plus the integral term once engaged."""
+        u = self.controller.act(obs, info)
+        try:
+            angle_deg = sensed_angle_deg(info, self.config.feedback)
+            error_rad = math.radians(angle_deg - float(info["target_angle_deg"]))
+        except KeyError as exc:
+            raise ValueError(
+                f"StallGuard.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict)"
+            ) from None
+        return self.correct(u, error_rad)
 
     def __repr__(self) -> str:
         return f"StallGuard({self.controller!r}, {self.config})"

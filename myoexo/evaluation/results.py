@@ -424,18 +424,31 @@ def _goal_cell(cells: list[str], calls: list[str]) -> str:
     return f"{'; '.join(cells)}: **{call}**"
 
 
+def _missed_at(levels: Sequence[int]) -> str:
+    """``"met"`` when no level misses, else ``"missed at level(s) ..."``."""
+    if not levels:
+        return "met"
+    return f"missed at level{'s' if len(levels) > 1 else ''} {', '.join(map(str, levels))}"
+
+
 def _twin_goals(
-    folder: Path, controller: str, teacher: str, goals: DeployableGoals, perturbed: bool
+    result_set: tuple[Any, Any, Any, Any, dict[str, Any]],
+    name: str,
+    controller: str,
+    teacher: str,
+    goals: DeployableGoals,
+    perturbed: bool,
 ) -> list[str]:
-    """The goal cells of one result set, in the order of :func:`goals_table`'s rows."""
-    summary, risk, red, _, meta = _read(folder)
+    """The goal cells of one result set (:func:`_read`'s tables, *name* for the messages),
+    in the order of :func:`goals_table`'s rows."""
+    summary, risk, red, _, meta = result_set
     ref = meta["reference"]
     r = red[red.controller == controller].set_index("level")
     k = risk.set_index(["controller", "level"])
     s = summary.set_index(["controller", "level"])
     missing = [c for c in (controller, teacher) if c not in set(summary.controller)]
     if missing:
-        raise ValueError(f"the result set {folder.name!r} has no {missing}")
+        raise ValueError(f"the result set {name!r} has no {missing}")
     mean_bound = goals.easy_mean_perturbed_deg if perturbed else goals.easy_mean_deg
     p95_bound = goals.easy_p95_perturbed_deg if perturbed else goals.easy_p95_deg
     cells, calls = [], []
@@ -450,22 +463,15 @@ def _twin_goals(
     out = [_goal_cell(cells, calls)]
     for level in goals.hard_levels:
         row = r.loc[level]
-        call = verdict(
-            row.abs_final_error_diff_deg_low,
-            row.abs_final_error_diff_deg_high,
-            goals.within_pid_deg,
-            higher_is_better=False,
-        )
         diff, low, high = (
             row.abs_final_error_diff_deg,
             row.abs_final_error_diff_deg_low,
             row.abs_final_error_diff_deg_high,
         )
+        call = verdict(low, high, goals.within_pid_deg, higher_is_better=False)
         cell = f"{diff:+.2f} [{low:+.2f}, {high:+.2f}] deg vs `{ref}`"
         if call != "met":
-            cell += (
-                f", {row.abs_final_error_diff_deg - goals.within_pid_deg:+.2f} deg beyond the goal"
-            )
+            cell += f", {diff - goals.within_pid_deg:+.2f} deg beyond the goal"
         out.append(f"{cell}: **{call}**")
     levels = sorted(r.index)
     counts = [int(k.loc[(controller, lv), "catastrophic"]) for lv in levels]
@@ -478,14 +484,9 @@ def _twin_goals(
     mine = [float(s.loc[(controller, lv), tv]) for lv in levels]
     theirs = [float(s.loc[(teacher, lv), tv]) for lv in levels]
     rough = [lv for lv, a, b in zip(levels, mine, theirs, strict=True) if a > b]
-    verdict_tv = (
-        "met"
-        if not rough
-        else f"missed at level{'s' if len(rough) > 1 else ''} " + (", ".join(map(str, rough)))
-    )
     out.append(
         f"{' / '.join(fmt_num(v, 1) for v in mine)} vs `{teacher}`'s "
-        f"{' / '.join(fmt_num(v, 1) for v in theirs)}: **{verdict_tv}**"
+        f"{' / '.join(fmt_num(v, 1) for v in theirs)}: **{_missed_at(rough)}**"
     )
     return out
 
@@ -503,9 +504,10 @@ def goals_table(
     result set: each cell the measured values with their 95 % intervals and the verdict (met
     when the whole interval is on the goal's side, missed when wholly on the other)."""
     goals = goals or DeployableGoals()
-    nom = _twin_goals(Path(nominal), controller, teacher, goals, perturbed=False)
-    per = _twin_goals(Path(perturbed), controller, teacher, goals, perturbed=True)
-    _, _, red, _, meta = _read(Path(nominal))
+    nom_set, per_set = _read(Path(nominal)), _read(Path(perturbed))
+    nom = _twin_goals(nom_set, Path(nominal).name, controller, teacher, goals, perturbed=False)
+    per = _twin_goals(per_set, Path(perturbed).name, controller, teacher, goals, perturbed=True)
+    _, _, red, _, meta = nom_set
     easy = ", ".join(map(str, goals.easy_levels))
     rows = [
         [
@@ -545,9 +547,7 @@ def goals_table(
             )
             if not a.abs_final_error_deg_high < b.abs_final_error_deg_low:
                 worse.append(level)
-        plural = "s" if len(worse) > 1 else ""
-        call = "met" if not worse else f"missed at level{plural} {', '.join(map(str, worse))}"
-        device = f"{' / '.join(cells)} deg: **{call}**"
+        device = f"{' / '.join(cells)} deg: **{_missed_at(worse)}**"
     else:
         device = f"`{device_baseline}` is not in this set"
     rows.append(
@@ -559,7 +559,7 @@ def goals_table(
         ]
     )
     n_nom = meta["subjects_per_level"]
-    n_per = _read(Path(perturbed))[4]["subjects_per_level"]
+    n_per = per_set[4]["subjects_per_level"]
     return _md(
         [
             "goal",

@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.control.guard import StallGuard, StallGuardConfig
+from myoexo.control.guard import StallGuardConfig, StallIntegrator
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root, subject_seed
 from myoexo.policies.actor import MLPActor
@@ -235,8 +235,7 @@ class Expert:
             "target_rad", "error_rad",
         ]:  # fmt: skip
             raise ValueError(f"the teacher's observation has no error_rad at index 5: {keys}")
-        self._label = np.zeros(1, np.float32)
-        self.guard = None if guard is None else StallGuard(_LastLabel(self), guard)
+        self.guard = None if guard is None else StallIntegrator(guard)
 
     def reset(self, seed: int | None = None) -> None:
         """Start an episode (disengages the guard)."""
@@ -249,24 +248,7 @@ class Expert:
         if self.fine_gain:
             a = a - self.fine_gain * e * math.exp(-((e / self.fine_width_rad) ** 2))
         a = np.clip(np.asarray(a, np.float32).reshape(1), -1.0, 1.0)
-        if self.guard is None:
-            return a
-        self._label = a
-        # the guard reads knee minus target: the true error, as an angle from a zero target
-        return self.guard.act(x_full, {"knee_angle_deg": math.degrees(e), "target_angle_deg": 0.0})
-
-
-class _LastLabel:
-    """The expert's unguarded label of the current step, as the controller the guard wraps."""
-
-    def __init__(self, expert: Expert) -> None:
-        self.expert = expert
-
-    def reset(self, seed: int | None = None) -> None:
-        pass
-
-    def act(self, obs: np.ndarray, info: Any) -> np.ndarray:
-        return self.expert._label
+        return a if self.guard is None else self.guard.correct(a, e)
 
 
 def load_teacher(name: str = "sac") -> MLPActor:
