@@ -4,6 +4,7 @@ committed table differs from what its files give."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from myoexo.evaluation.results import (
     Block,
     collect,
     command_of,
+    render,
     write_tables,
 )
 
@@ -50,6 +52,49 @@ def test_a_result_set_holds_the_tables_inputs_and_its_provenance(evaluation, tmp
     heads = pd.read_csv(dest / "headline.csv", dtype={"levels": str})
     assert list(heads.scope) == ["study", "all"] and heads.levels.iloc[0] == "1, 2"
     assert command_of(load_config(evaluation)).endswith("--set episode_duration_s=0.5")
+
+
+def _evaluation(out: Path, controllers: tuple[str, ...], subjects: int = 3) -> Path:
+    config = EvaluationConfig(
+        controllers=controllers,
+        levels=(1, 2),
+        subjects=subjects,
+        twin=TwinOptions().replace(episode_duration_s=0.5),
+    )
+    evaluate(config, out, workers=1, progress=False, log=lambda m: None)
+    return out
+
+
+def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, tmp_path):
+    """collect --update: the new controller's rows join the set, the others stay, the
+    provenance lists both commands; a run on other subjects is refused."""
+    dest = collect(evaluation, tmp_path / "set")
+    before = pd.read_csv(dest / "summary.csv")
+    later = _evaluation(tmp_path / "later", ("pid", "pid:ramp_s=0.2"))
+    collect(later, dest, update=True)
+    summary = pd.read_csv(dest / "summary.csv")
+    assert list(dict.fromkeys(summary.controller)) == ["pid", "sac", "pid:ramp_s=0.2"]
+    kept = summary[summary.controller != "pid:ramp_s=0.2"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept, before)
+    red = pd.read_csv(dest / "reductions.csv")
+    assert list(red.controller) == ["sac", "sac", "pid:ramp_s=0.2", "pid:ramp_s=0.2"]
+    meta = json.loads((dest / "meta.json").read_text())
+    assert len(meta["commands"]) == 2 and meta["commands"][1].endswith(
+        "pid:ramp_s=0.2 --levels 1 2 --subjects 3 --set episode_duration_s=0.5"
+    )
+    assert meta["episodes"] == 18
+    assert "Commands: `myoexo evaluate --controllers pid sac" in render(dest)
+    collect(later, dest, update=True)  # again: replaced, not repeated
+    assert len(pd.read_csv(dest / "summary.csv")) == len(summary)
+    with pytest.raises(ValueError, match="subjects_per_level"):
+        collect(_evaluation(tmp_path / "fewer", ("pid", "sac"), subjects=2), dest, update=True)
+    other = tmp_path / "other"
+    shutil.copytree(dest, other)
+    frame = pd.read_csv(other / "summary.csv")
+    frame.loc[frame.controller == "pid", "final_error_deg_mean"] += 0.1
+    frame.to_csv(other / "summary.csv", index=False)
+    with pytest.raises(ValueError, match="did not run on the set's subjects"):
+        collect(later, other, update=True)
 
 
 def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):

@@ -200,11 +200,21 @@ def command_of(config: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
-def collect(eval_dir: str | Path, dest: str | Path) -> Path:
+def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Path:
     """Write the result set of the evaluation folder *eval_dir* into *dest* (created).
 
+    With *update*, *dest* is an existing set and *eval_dir* an evaluation of more (or
+    retrained) controllers on the same subjects: its controllers' rows are added to the set,
+    replacing rows of the same name, and the other controllers' rows are kept. "The same
+    subjects" is checked, not assumed: the two must agree on the root seed, the subjects per
+    level, the levels and the twin, and *eval_dir* must hold the set's reference controller
+    with the same summary and tail rows (an episode depends only on controller, level,
+    subject and root seed, so the reference's rows repeat to the last digit). The set's
+    ``meta.json`` lists every command it was built from.
+
     Raises:
-        ValueError: *eval_dir* is no evaluation folder, holds no episodes, or no PID.
+        ValueError: *eval_dir* is no evaluation folder, holds no episodes, or no PID; with
+            *update*, *dest* is no result set or *eval_dir* is not on its subjects.
     """
     import pandas as pd
 
@@ -224,13 +234,7 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
     reference = reference_controller(labels)
     if reference is None:
         raise ValueError(f"{str(eval_dir)!r} has no PID to compare with")
-    dest = Path(dest)
-    dest.mkdir(parents=True, exist_ok=True)
-    summarize(table).to_csv(dest / "summary.csv", index=False)
-    tail_risk(table, reference).to_csv(dest / "tail_risk.csv", index=False)
     others = [c for c in labels if c != reference]
-    red = [reductions(table, reference, c).assign(controller=c) for c in others]
-    pd.concat(red, ignore_index=True).to_csv(dest / "reductions.csv", index=False)
     levels = sorted(int(v) for v in set(table.level))
     heads = []
     for c in others:
@@ -241,9 +245,17 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
             h = headline(table, reference, c, scope_levels)
             h["levels"] = ", ".join(map(str, scope_levels))
             heads.append({"controller": c, "scope": scope, **h})
-    pd.DataFrame(heads).to_csv(dest / "headline.csv", index=False)
+    files = {
+        "summary.csv": summarize(table),
+        "tail_risk.csv": tail_risk(table, reference),
+        "reductions.csv": pd.concat(
+            [reductions(table, reference, c).assign(controller=c) for c in others],
+            ignore_index=True,
+        ),
+        "headline.csv": pd.DataFrame(heads),
+    }
     meta = {
-        "command": command_of(config),
+        "commands": [command_of(config)],
         "reference": reference,
         "subjects_per_level": int(cfg.get("subjects", 0)),
         "root_seed": int(cfg.get("root_seed", 0)),
@@ -251,14 +263,86 @@ def collect(eval_dir: str | Path, dest: str | Path) -> Path:
         "episodes": len(table),
         "versions": config.get("versions", {}),
     }
+    dest = Path(dest)
+    if update:
+        files, meta = _updated(dest, files, meta, others)
+    dest.mkdir(parents=True, exist_ok=True)
+    for name, frame in files.items():
+        frame.to_csv(dest / name, index=False)
     write_json_atomic(dest / "meta.json", meta, indent=2)
     return dest
+
+
+def _same_rows(old: Any, new: Any, controller: str) -> bool:
+    """Whether *old* and *new* hold the same numbers for *controller* (a CSV round trip
+    may change the last digit)."""
+    import numpy as np
+
+    a = old[old.controller == controller].reset_index(drop=True)
+    b = new[new.controller == controller].reset_index(drop=True)
+    if a.shape != b.shape or list(a.columns) != list(b.columns):
+        return False
+    num = a.select_dtypes("number").columns
+    return bool(
+        np.allclose(a[num].to_numpy(float), b[num].to_numpy(float), rtol=1e-9, equal_nan=True)
+        and (a.drop(columns=num).astype(str) == b.drop(columns=num).astype(str)).all().all()
+    )
+
+
+def _updated(
+    dest: Path, files: dict[str, Any], meta: dict[str, Any], added: list[str]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The set *dest* with the controllers *added* of a new evaluation (*files*, *meta*)
+    put in; see :func:`collect`."""
+    import pandas as pd
+
+    summary, risk, red, heads, old = _read(dest)
+    for key in ("reference", "root_seed", "subjects_per_level", "twin"):
+        if old.get(key) != meta.get(key):
+            raise ValueError(
+                f"the evaluation's {key} ({meta.get(key)!r}) is not the set's ({old.get(key)!r}):"
+                f" {str(dest)!r} can only take controllers run on its own subjects"
+            )
+    if set(summary.level) != set(files["summary.csv"].level):
+        raise ValueError(
+            f"the evaluation's levels {sorted(set(files['summary.csv'].level))} are not the "
+            f"set's {sorted(set(summary.level))}"
+        )
+    ref = meta["reference"]
+    for name, frame in (("summary.csv", summary), ("tail_risk.csv", risk)):
+        if not _same_rows(frame, files[name], ref):
+            raise ValueError(
+                f"the reference {ref!r} has other {name} rows in the evaluation than in "
+                f"{str(dest)!r}: it did not run on the set's subjects and twin"
+            )
+    merged = {}
+    for (name, new), frame in zip(files.items(), (summary, risk, red, heads), strict=True):
+        kept = frame[~frame.controller.isin(added)]
+        merged[name] = pd.concat([kept, new[new.controller.isin(added)]], ignore_index=True)
+    meta = {
+        **meta,
+        "commands": [*old["commands"], *meta["commands"]],
+        "episodes": int(merged["summary.csv"].n.sum()),
+    }
+    return merged, meta
 
 
 # ----------------------------------------------------------------------------- rendering
 def _ci_of(row: Any, name: str, digits: int = 1) -> str:
     """:func:`_ci` of the columns ``name``, ``name_low`` and ``name_high`` of *row*."""
     return fmt_ci(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
+
+
+def _commands(meta: dict[str, Any]) -> str:
+    """How a set's provenance names the evaluation command(s) it was built from."""
+    commands = meta["commands"]
+    if len(commands) == 1:
+        return f"Command: `{commands[0]}`"
+    later = ", then ".join(f"`{c}`" for c in commands[1:])
+    return (
+        f"Commands: `{commands[0]}`, then {later} (controllers added on the same subjects, "
+        "checked by the reference's identical rows: `myoexo results collect --update`)"
+    )
 
 
 def _md(headers: list[str], rows: list[list[str]]) -> str:
@@ -368,7 +452,7 @@ def render(folder: str | Path, label: str | None = None) -> str:
     parts = [
         f"<!-- generated by `myoexo results tables` from {label or folder.as_posix()}: do not "
         "edit -->",
-        f"Command: `{meta['command']}` ({meta['subjects_per_level']} subjects per level, root "
+        f"{_commands(meta)} ({meta['subjects_per_level']} subjects per level, root "
         f"seed {meta['root_seed']}, {meta['episodes']} episodes; {versions}). A `myoexo "
         "seeds` folder's checkpoints are one controller named after the folder: its numbers "
         "are over the seeds and the subjects. Intervals: "
@@ -641,6 +725,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("eval_dir", type=Path, help="a myoexo evaluate output folder")
     c.add_argument("name", help=f"the set's name: its folder under {RESULTS_DIR}")
     c.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
+    c.add_argument(
+        "--update",
+        action="store_true",
+        help="add the evaluation's controllers to the existing set NAME (replacing rows of the "
+        "same name) instead of writing a new one; it must hold the set's reference on the "
+        "same subjects",
+    )
     t = sub.add_parser("tables", help="render every result set's tables and the front page's")
     t.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
     t.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table is stale")
@@ -649,7 +740,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo results``."""
     if args.action == "collect":
-        dest = collect(args.eval_dir, args.root / RESULTS_DIR / args.name)
+        dest = collect(args.eval_dir, args.root / RESULTS_DIR / args.name, update=args.update)
         print(f"result set: {dest}")
         return 0
     stale = write_tables(args.root, check=args.check)
