@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from myoexo.control.guard import StallGuard, StallGuardConfig
+from myoexo.control.guard import EXO_STRAP_LAG_DEG_PER_COMMAND, StallGuard, StallGuardConfig
 from myoexo.control.policy import as_controller
 from myoexo.control.specs import build_controller, parse_controller_spec
 
@@ -115,4 +115,49 @@ def test_a_device_controller_gets_a_guard_on_the_encoder():
 
     pid_guard = build_controller(parse_controller_spec("guard:pid:feedback=exo"), _Env())
     assert pid_guard.config.feedback == "exo"
+    assert pid_guard.config.strap_lag_deg_per_command == EXO_STRAP_LAG_DEG_PER_COMMAND
     assert build_controller(parse_controller_spec("guard:pid"), _Env()).config.feedback == "knee"
+
+
+def test_an_encoder_guard_adds_the_strap_lag_of_its_last_command():
+    """The knee lags the encoder by lag * command: pushing at -0.8 with the encoder 12 deg
+    short, the knee is about 18 deg short, which is beyond the 17 deg the guard waits for."""
+    lag = 7.5
+    config = StallGuardConfig(feedback="exo", engage_after_s=0.0, strap_lag_deg_per_command=lag)
+    guard = StallGuard(_frozen(-0.8), config)
+    guard.reset()
+    obs = np.zeros(3, dtype=np.float32)
+    info = {"knee_angle_deg": 25.0, "exo_angle_deg": 19.0, "target_angle_deg": 7.0}
+    assert guard.act(obs, info)[0] == pytest.approx(-0.8)  # no command yet: no lag
+    assert guard.engaged_at_s is None
+    out = guard.act(obs, info)  # 12 + 7.5 * 0.8 = 18 deg
+    assert guard.engaged_at_s is not None
+    assert out[0] - (-0.8) == pytest.approx(-4.0 * np.radians(18.0) * 0.01, rel=1e-4)
+    plain = StallGuard(_frozen(-0.8), StallGuardConfig(feedback="exo", engage_after_s=0.0))
+    plain.reset()
+    for _ in range(3):
+        plain.act(obs, info)
+    assert plain.engaged_at_s is None  # the raw encoder error (12 deg) keeps it silent
+    with pytest.raises(ValueError, match="strap_lag_deg_per_command"):
+        StallGuardConfig(strap_lag_deg_per_command=-1.0)
+
+
+@pytest.mark.parametrize(("level", "command"), [(2, -0.8), (3, -0.5)])
+def test_the_strap_lag_is_the_twins(level, command):
+    """Held at a constant command until the knee rests against the spastic muscles, the
+    twin's knee is more flexed than its encoder by the lag the encoder guard assumes."""
+    import gymnasium as gym
+
+    import myoexo  # noqa: F401  (registers the ids)
+    from myoexo.evaluation.config import subject_seed
+
+    env = gym.make(f"MyoExoKnee-v{level}")
+    try:
+        env.reset(seed=subject_seed(level, 5, 7))
+        for _ in range(400):  # 4 s
+            _, _, _, _, info = env.step(np.array([command], dtype=np.float32))
+    finally:
+        env.close()
+    assert abs(info["knee_vel_rad_s"]) < 0.01
+    lag_deg = info["knee_angle_deg"] - info["exo_angle_deg"]
+    assert lag_deg == pytest.approx(-EXO_STRAP_LAG_DEG_PER_COMMAND * command, abs=0.6)
