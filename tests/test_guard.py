@@ -161,3 +161,12 @@ def test_the_strap_lag_is_the_twins(level, command):
     assert abs(info["knee_vel_rad_s"]) < 0.01
     lag_deg = info["knee_angle_deg"] - info["exo_angle_deg"]
     assert lag_deg == pytest.approx(-EXO_STRAP_LAG_DEG_PER_COMMAND * command, abs=0.6)
+
+
+def test_a_guarded_policy_runs_on_its_policys_observation():
+    """evaluate_controller(StallGuard(student)) builds the env the student reads."""
+    from myoexo.control.specs import controller_env_kwargs, load_shipped_policy
+
+    student = load_shipped_policy("student_exo")
+    assert controller_env_kwargs(StallGuard(student)) == controller_env_kwargs(student)
+    assert controller_env_kwargs(StallGuard(student))["obs_preset"] == "exo"

@@ -404,7 +404,11 @@ def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
 
 def controller_env_kwargs(controller: Any) -> dict[str, Any]:
     """:func:`spec_env_kwargs` of a controller object: the observation its metadata records
-    (a policy, or the policy behind a callable adapter's ``fn``), else its ``obs_preset``."""
+    (a policy, the policy behind a callable adapter's ``fn`` or the controller a wrapper such
+    as the stall guard holds as ``controller``), else its ``obs_preset``."""
+    inner = getattr(controller, "controller", None)
+    if inner is not None:
+        return controller_env_kwargs(inner)
     for obj in (controller, getattr(controller, "fn", None)):
         meta = getattr(obj, "metadata", None)
         twin = twin_of_metadata(meta) if isinstance(meta, Mapping) else None
