@@ -5,9 +5,9 @@ exoskeleton can run) with the paper's gains (``pid:feedback=exo``) and with gain
 encoder by Ziegler-Nichols (``pid:tuned=exo``, :mod:`myoexo.control.tuned`), the paper's PID
 with its setpoint ramped over 1 s (``pid:ramp_s=1``), the full-state ``sac`` alone and with
 its stall guard as deployed (``guard:sac``, :mod:`myoexo.control.guard`), and the
-deployable ``student_exo`` (the exoskeleton's own sensors with memory) on 20 subjects per
-spasticity level (paper: 1000), and the
-achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
+deployable ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its
+guard on the encoder (``guard:student_exo``) on 20 subjects per spasticity level (paper: 1000),
+and the achievable bound (the oracle MPC, :mod:`myoexo.control.oracle`) on the first 2 of them;
 then writes the figures and the Markdown report (with each controller's distance to the
 bound) and prints where they are. About 5 minutes on 2 cores, most of it the oracle.
 Re-running continues or reuses the finished episodes in the output folder (default
@@ -33,6 +33,7 @@ DEMO_CONTROLLERS = (
     "sac",
     "guard:sac",
     "student_exo",
+    "guard:student_exo",
 )
 #: Subjects per level of the oracle (the bound); it costs ~15 s of a quiet core per episode.
 DEMO_BOUND_SUBJECTS = 2
