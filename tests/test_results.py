@@ -196,3 +196,15 @@ def test_the_goals_table_judges_by_the_intervals_and_the_tails(tmp_path):
     assert "2 / 0 / 0 / 0" in row(text, "no catastrophic") and "**missed**" in text
     with pytest.raises(ValueError, match="has no"):
         goals_table(nominal, perturbed, "student_exo", "nobody", "pid:tuned=exo")
+    # the device baseline: beaten where the intervals part, a tie where they overlap
+    cols = ["abs_final_error_deg", "abs_final_error_deg_low", "abs_final_error_deg_high"]
+    for level, (ours, theirs) in enumerate(
+        [((1.0, 0.9, 1.1), (2.0, 1.9, 2.1)), ((1.0, 0.9, 1.1), (1.05, 1.0, 1.2))]
+        + [((1.0, 0.9, 1.1), (0.5, 0.4, 0.6))] * 2
+    ):
+        red.loc[(red.controller == "student_exo") & (red.level == level), cols] = ours
+        red.loc[(red.controller == "pid:tuned=exo") & (red.level == level), cols] = theirs
+    red.to_csv(nominal / "reductions.csv", index=False)
+    device = row(goals_table(nominal, perturbed, *args), "beats the device PID")
+    assert "1.00 [0.90, 1.10] vs 2.00 [1.90, 2.10]" in device
+    assert "**missed at levels 2, 3, tie at level 1**" in device
