@@ -583,6 +583,26 @@ def _twin_goals(
     return out
 
 
+def _beats(red: Any, controller: str, baseline: str) -> str:
+    """The goals table's cell of *controller* against *baseline* (reductions rows): each
+    level's mean abs final error with its interval, met where the intervals part in its
+    favour, a tie where they overlap, missed where they part against it."""
+    if baseline not in set(red.controller):
+        return f"`{baseline}` is not in this set"
+    r = red.set_index(["controller", "level"])
+    worse, ties, cells = [], [], []
+    for level in sorted(red[red.controller == controller].level):
+        a, b = r.loc[(controller, level)], r.loc[(baseline, level)]
+        cells.append(
+            f"{_ci_of(a, 'abs_final_error_deg', 2)} vs {_ci_of(b, 'abs_final_error_deg', 2)}"
+        )
+        if a.abs_final_error_deg_low > b.abs_final_error_deg_high:
+            worse.append(level)
+        elif not a.abs_final_error_deg_high < b.abs_final_error_deg_low:
+            ties.append(level)
+    return f"{' / '.join(cells)} deg: **{_missed_at(worse, ties)}**"
+
+
 def goals_table(
     nominal: Path,
     perturbed: Path,
@@ -628,27 +648,12 @@ def goals_table(
             per[n + 1],
         ]
     )
-    r = red.set_index(["controller", "level"])
-    if device_baseline in set(red.controller):
-        worse, ties, cells = [], [], []
-        for level in sorted(red[red.controller == controller].level):
-            a, b = r.loc[(controller, level)], r.loc[(device_baseline, level)]
-            cells.append(
-                f"{_ci_of(a, 'abs_final_error_deg', 2)} vs {_ci_of(b, 'abs_final_error_deg', 2)}"
-            )
-            if a.abs_final_error_deg_low > b.abs_final_error_deg_high:
-                worse.append(level)
-            elif not a.abs_final_error_deg_high < b.abs_final_error_deg_low:
-                ties.append(level)  # the 95 % intervals overlap
-        device = f"{' / '.join(cells)} deg: **{_missed_at(worse, ties)}**"
-    else:
-        device = f"`{device_baseline}` is not in this set"
     rows.append(
         [
             f"beats the device PID tuned on the encoder (`{device_baseline}`): mean abs "
             "final error per level [95 % CI] (a tie where the intervals overlap)",
-            device,
-            "-",
+            _beats(red, controller, device_baseline),
+            _beats(per_set[2], controller, device_baseline),
         ]
     )
     n_nom = meta["subjects_per_level"]
