@@ -196,6 +196,18 @@ def test_the_goals_table_judges_by_the_intervals_and_the_tails(tmp_path):
     assert "2 / 0 / 0 / 0" in row(text, "no catastrophic") and "**missed**" in text
     with pytest.raises(ValueError, match="has no"):
         goals_table(nominal, perturbed, "student_exo", "nobody", "pid:tuned=exo")
+    # smoothness: judged by the intervals of the means (missed, tie, met)
+    summary = pd.read_csv(nominal / "summary.csv")
+    tv = ["command_total_variation_mean", "command_total_variation_std"]
+    for controller, values in (("student_exo", (5.0, 1.0)), ("guard:sac", (5.05, 1.0))):
+        summary.loc[summary.controller == controller, tv] = values
+    summary.to_csv(nominal / "summary.csv", index=False)
+    smooth = row(goals_table(nominal, perturbed, *args), "command total").split("|")[2]
+    assert "5.0 [4.9, 5.1] / " in smooth and "**tie at levels 0, 1, 2, 3**" in smooth
+    summary.loc[summary.controller == "student_exo", tv] = (6.0, 1.0)
+    summary.to_csv(nominal / "summary.csv", index=False)
+    smooth = row(goals_table(nominal, perturbed, *args), "command total").split("|")[2]
+    assert "**missed at levels 0, 1, 2, 3**" in smooth
     # the device baseline: beaten where the intervals part, a tie where they overlap
     cols = ["abs_final_error_deg", "abs_final_error_deg_low", "abs_final_error_deg_high"]
     for level, (ours, theirs) in enumerate(

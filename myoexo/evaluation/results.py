@@ -572,15 +572,33 @@ def _twin_goals(
         f"{' / '.join(map(str, counts))} (worst {' / '.join(fmt_num(w, 1) for w in worst)} "
         f"deg): **{'met' if not any(counts) else 'missed'}**"
     )
-    tv = "command_total_variation_mean"
-    mine = [float(s.loc[(controller, lv), tv]) for lv in levels]
-    theirs = [float(s.loc[(teacher, lv), tv]) for lv in levels]
-    rough = [lv for lv, a, b in zip(levels, mine, theirs, strict=True) if a > b]
+    mine = [_mean_ci(s.loc[(controller, lv)], "command_total_variation") for lv in levels]
+    theirs = [_mean_ci(s.loc[(teacher, lv)], "command_total_variation") for lv in levels]
+    rough, ties = [], []
+    for lv, a, b in zip(levels, mine, theirs, strict=True):
+        if a[1] > b[2]:
+            rough.append(lv)
+        elif a[2] >= b[1]:
+            ties.append(lv)  # the intervals overlap
     out.append(
-        f"{' / '.join(fmt_num(v, 1) for v in mine)} vs `{teacher}`'s "
-        f"{' / '.join(fmt_num(v, 1) for v in theirs)}: **{_missed_at(rough)}**"
+        f"{' / '.join(fmt_ci(*v, 1) for v in mine)} vs `{teacher}`'s "
+        f"{' / '.join(fmt_ci(*v, 1) for v in theirs)}: **{_missed_at(rough, ties)}**"
     )
     return out
+
+
+def _mean_ci(row: Any, name: str) -> tuple[float, float, float]:
+    """``(mean, low, high)`` of a summary row's ``name``: the Student-t 95 % interval of the
+    mean over its ``n`` episodes, from ``name_mean`` and ``name_std`` (subjects only)."""
+    import math
+
+    from scipy import stats
+
+    mean, std, n = float(row[f"{name}_mean"]), float(row[f"{name}_std"]), int(row["n"])
+    if n < 2:
+        return mean, float("nan"), float("nan")
+    half = float(stats.t.ppf(0.975, n - 1)) * std / math.sqrt(n)
+    return mean, mean - half, mean + half
 
 
 def _beats(red: Any, controller: str, baseline: str) -> str:
@@ -643,7 +661,8 @@ def goals_table(
     rows.append(["no catastrophic subject (per level)", nom[n], per[n]])
     rows.append(
         [
-            "command total variation no larger than the teacher's (per level)",
+            "command total variation no larger than the teacher's (per level, mean [95 % CI]; "
+            "a tie where the intervals overlap)",
             nom[n + 1],
             per[n + 1],
         ]
