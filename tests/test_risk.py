@@ -16,6 +16,7 @@ from myoexo.evaluation.risk import (
     reduction_pct,
     tail_risk,
     verdict,
+    verdict_against,
 )
 
 
@@ -62,6 +63,14 @@ def test_verdicts_follow_the_whole_interval():
     assert verdict(0.5, 0.9, 1.0, higher_is_better=False) == "met"  # an error below 1 deg
     assert verdict(1.1, 2.0, 1.0, higher_is_better=False) == "missed"
     assert verdict(math.nan, 1.0, 1.0) == "n/a"
+
+
+def test_an_interval_against_another_is_a_tie_where_they_overlap():
+    assert verdict_against(0.9, 1.1, 1.9, 2.1) == "met"  # lower is better by default
+    assert verdict_against(1.9, 2.1, 0.9, 1.1) == "missed"
+    assert verdict_against(0.9, 1.1, 1.0, 1.2) == "tie"
+    assert verdict_against(1.9, 2.1, 0.9, 1.1, higher_is_better=True) == "met"
+    assert verdict_against(0.9, 1.1, math.nan, 1.2) == "n/a"
 
 
 def test_a_paired_interval_keeps_the_pairs_together():

@@ -43,7 +43,13 @@ from myoexo.evaluation.report import (
     seed_groups,
     summarize,
 )
-from myoexo.evaluation.risk import FAILURE_DEG, INTERVAL_METHOD, tail_risk, verdict
+from myoexo.evaluation.risk import (
+    FAILURE_DEG,
+    INTERVAL_METHOD,
+    tail_risk,
+    verdict,
+    verdict_against,
+)
 from myoexo.evaluation.storage import load_table
 from myoexo.runtime.files import write_json_atomic
 
@@ -97,7 +103,8 @@ class GoalsBlock:
         nominal: The nominal result set's folder name under :data:`RESULTS_DIR`.
         perturbed: The perturbed result set's.
         teacher: The controller whose command smoothness it must match (in both sets).
-        device_baseline: The device's own tuned baseline it must beat (nominal set).
+        device_baseline: The device's own tuned baseline it must beat (in either set that
+            holds it).
     """
 
     path: str
@@ -574,17 +581,20 @@ def _twin_goals(
     )
     mine = [_mean_ci(s.loc[(controller, lv)], "command_total_variation") for lv in levels]
     theirs = [_mean_ci(s.loc[(teacher, lv)], "command_total_variation") for lv in levels]
-    rough, ties = [], []
-    for lv, a, b in zip(levels, mine, theirs, strict=True):
-        if a[1] > b[2]:
-            rough.append(lv)
-        elif a[2] >= b[1]:
-            ties.append(lv)  # the intervals overlap
+    calls = [verdict_against(*a[1:], *b[1:]) for a, b in zip(mine, theirs, strict=True)]
     out.append(
         f"{' / '.join(fmt_ci(*v, 1) for v in mine)} vs `{teacher}`'s "
-        f"{' / '.join(fmt_ci(*v, 1) for v in theirs)}: **{_missed_at(rough, ties)}**"
+        f"{' / '.join(fmt_ci(*v, 1) for v in theirs)}: **{_by_level(levels, calls)}**"
     )
     return out
+
+
+def _by_level(levels: Sequence[int], calls: Sequence[str]) -> str:
+    """One verdict over levels from each level's :func:`verdict_against` (a level without
+    intervals counts as a tie)."""
+    missed = [lv for lv, c in zip(levels, calls, strict=True) if c == "missed"]
+    ties = [lv for lv, c in zip(levels, calls, strict=True) if c in ("tie", "n/a")]
+    return _missed_at(missed, ties)
 
 
 def _mean_ci(row: Any, name: str) -> tuple[float, float, float]:
@@ -608,17 +618,18 @@ def _beats(red: Any, controller: str, baseline: str) -> str:
     if baseline not in set(red.controller):
         return f"`{baseline}` is not in this set"
     r = red.set_index(["controller", "level"])
-    worse, ties, cells = [], [], []
-    for level in sorted(red[red.controller == controller].level):
+    levels = sorted(red[red.controller == controller].level)
+    cells, calls = [], []
+    for level in levels:
         a, b = r.loc[(controller, level)], r.loc[(baseline, level)]
-        cells.append(
-            f"{_ci_of(a, 'abs_final_error_deg', 2)} vs {_ci_of(b, 'abs_final_error_deg', 2)}"
+        name = "abs_final_error_deg"
+        cells.append(f"{_ci_of(a, name, 2)} vs {_ci_of(b, name, 2)}")
+        calls.append(
+            verdict_against(
+                a[f"{name}_low"], a[f"{name}_high"], b[f"{name}_low"], b[f"{name}_high"]
+            )
         )
-        if a.abs_final_error_deg_low > b.abs_final_error_deg_high:
-            worse.append(level)
-        elif not a.abs_final_error_deg_high < b.abs_final_error_deg_low:
-            ties.append(level)
-    return f"{' / '.join(cells)} deg: **{_missed_at(worse, ties)}**"
+    return f"{' / '.join(cells)} deg: **{_by_level(levels, calls)}**"
 
 
 def goals_table(

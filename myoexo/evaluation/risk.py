@@ -199,6 +199,23 @@ def verdict(low: float, high: float, target: float, higher_is_better: bool = Tru
     return "tie"
 
 
+def verdict_against(
+    low: float, high: float, other_low: float, other_high: float, higher_is_better: bool = False
+) -> str:
+    """:func:`verdict` of an interval against another's instead of a number: ``"met"`` if
+    ``[low, high]`` lies wholly on the good side of ``[other_low, other_high]``, ``"missed"``
+    if wholly on the other, ``"tie"`` where they overlap (``"n/a"`` without both)."""
+    if not all(math.isfinite(v) for v in (low, high, other_low, other_high)):
+        return "n/a"
+    if higher_is_better:
+        low, high, other_low, other_high = -high, -low, -other_high, -other_low
+    if high < other_low:
+        return "met"
+    if low > other_high:
+        return "missed"
+    return "tie"
+
+
 def mean_reduction_pct(*pairs: np.ndarray, axis: int = -1) -> Any:
     """The mean over levels of :func:`reduction_pct`: *pairs* is ``reference_1, other_1,
     reference_2, other_2, ...``, one reference and one other array per level."""
