@@ -139,7 +139,9 @@ def test_an_encoder_guard_adds_the_strap_lag_of_its_last_command():
         plain.act(obs, info)
     assert plain.engaged_at_s is None  # the raw encoder error (12 deg) keeps it silent
     with pytest.raises(ValueError, match="strap_lag_deg_per_command"):
-        StallGuardConfig(strap_lag_deg_per_command=-1.0)
+        StallGuardConfig(feedback="exo", strap_lag_deg_per_command=-1.0)
+    with pytest.raises(ValueError, match="needs feedback='exo'"):
+        StallGuardConfig(strap_lag_deg_per_command=7.5)  # the knee guard reads the knee
 
 
 @pytest.mark.parametrize(("level", "command"), [(2, -0.8), (3, -0.5)])

@@ -80,6 +80,11 @@ class StallGuardConfig:
     def __post_init__(self) -> None:
         if self.feedback not in FEEDBACK_KEYS:
             raise ValueError(f"feedback = {self.feedback!r}; accepted: {sorted(FEEDBACK_KEYS)}")
+        if self.feedback != "exo" and self.strap_lag_deg_per_command != 0.0:
+            raise ValueError(
+                f"strap_lag_deg_per_command = {self.strap_lag_deg_per_command!r} needs "
+                f"feedback='exo' (the knee itself does not lag), got {self.feedback!r}"
+            )
         for name, low, high in (
             ("engage_error_deg", 0.0, 180.0),
             ("engage_after_s", 0.0, 1e4),
