@@ -220,3 +220,26 @@ def test_the_goals_table_judges_by_the_intervals_and_the_tails(tmp_path):
     device = row(goals_table(nominal, perturbed, *args), "beats the device PID")
     assert "1.00 [0.90, 1.10] vs 2.00 [1.90, 2.10]" in device
     assert "**missed at levels 2, 3, tie at level 1**" in device
+
+
+def test_a_set_of_an_earlier_twin_says_so(tmp_path):
+    """A result set records the twin version it was measured on; one that records none, or
+    another than today's, is labelled in its generated tables; today's is not."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from myoexo.evaluation.results import earlier_twin_note, render
+    from myoexo.model import TWIN_VERSION
+
+    src = Path(__file__).resolve().parents[1] / "docs" / "results" / "eval_seeds_100"
+    folder = tmp_path / "set"
+    shutil.copytree(src, folder)
+    meta = json.loads((folder / "meta.json").read_text())
+    assert "twin_version" not in meta  # measured before the twin had versions
+    assert "Measured on an earlier twin" in render(folder)
+    meta["twin_version"] = TWIN_VERSION
+    (folder / "meta.json").write_text(json.dumps(meta))
+    assert "Measured on an earlier twin" not in render(folder)
+    assert earlier_twin_note({"twin_version": TWIN_VERSION}) is None
+    assert f"version {TWIN_VERSION - 1}" in earlier_twin_note({"twin_version": TWIN_VERSION - 1})

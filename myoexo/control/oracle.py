@@ -8,9 +8,10 @@ is), rolls out ``samples`` torque plans over ``horizon_s`` (the best plan so far
 plus Gaussian perturbations of it and the two saturated constants), and keeps the cheapest.
 A plan is piecewise linear between ``knots`` values; the cost per control step is
 ``(e / 1 rad)^2 + torque_weight * u^2 + interaction_weight * (tau / 100 Nm)^2`` with ``e``
-the human knee error and ``tau`` the interaction torque (``|exo| + |muscle knee torque|``, as
-the env reports it); the last step of the horizon counts ``terminal_weight`` times and adds
-``velocity_weight * (knee velocity)^2`` (end at rest). With ``peak_weight``, a plan whose
+the human knee error and ``tau`` the interaction torque (the magnitude of the strap's torque
+on the knee, ``interaction_torque_nm`` as the env reports it); the last step of the horizon
+counts ``terminal_weight`` times and adds ``velocity_weight * (knee velocity)^2`` (end at
+rest). With ``peak_weight``, a plan whose
 interaction torque rises above the episode's peak so far pays ``peak_weight * (new peak^2 -
 old peak^2) / (100 Nm)^2`` once: the planner trades the peak and the RMS of the interaction
 torque against the error term, whose integral is what settling costs. With ``ramp_s``, the

@@ -574,6 +574,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             knee_angle_deg=knee_deg,
             knee_vel_rad_s=values[at["knee_vel_rad_s"]],
             exo_angle_deg=exo_deg,
+            misalignment_deg=knee_deg - exo_deg,
             measured_knee_angle_deg=measured_knee_deg,
             measured_exo_angle_deg=measured_exo_deg,
             target_angle_deg=target_deg,

@@ -49,7 +49,8 @@ REWARD_TERMS: tuple[RewardTerm, ...] = (
     RewardTerm(
         "inter",
         "(d tau / {torque_scale_nm:g} Nm)^2, plus (tau / {torque_scale_nm:g} Nm)^2 while "
-        "tau > {torque_threshold_nm:g} Nm; tau = |exo torque| + |muscle knee torque|",
+        "tau > {torque_threshold_nm:g} Nm; tau = |strap torque on the knee| "
+        "(the env's interaction_torque_nm)",
     ),
     RewardTerm("vel", "|d knee vel| (rad/s)"),
     RewardTerm("act", "(d u)^2"),

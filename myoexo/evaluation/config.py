@@ -263,7 +263,10 @@ def write_config(
                 f"{spec.slug!r} ({old}); choose another --out folder"
             )
         controllers[spec.slug] = entry
+    from myoexo.model import TWIN_VERSION
+
     doc = {
+        "twin_version": TWIN_VERSION,
         "run_key": config.run_key(),
         "config": {**dataclasses.asdict(config), "twin": config.twin.to_dict()},
         "controllers": controllers,

@@ -31,6 +31,8 @@ paper's "sum of the torques applied at the knee: exo + spastic reflexes"):
 * **RMS of the interaction torque up to the settling time** (Nm): ``sqrt(mean(tau^2))`` over
   the samples with ``t <= settling time`` (the whole episode if it did not settle).
 * **peak interaction torque** (Nm): ``max |tau|`` over the episode.
+* **peak misalignment** (deg): ``max |knee - exo hinge|`` over the episode, how far the
+  straps let the exo sit from the knee (NaN without the ``exo_angle_deg`` signal).
 * **control effort**: RMS of the normalized command ``u``.
 * **smoothness**: the total variation of the command ``sum |u[k+1] - u[k]|`` and the
   spectral smoothness ``Sm = 2 / (n fs) sum_i M_i f_i`` of Mysore et al., "Regularizing
@@ -187,6 +189,7 @@ class EpisodeMetrics:
     rms_interaction_torque_nm: float
     peak_interaction_torque_nm: float
     peak_exo_torque_nm: float
+    peak_misalignment_deg: float
     command_rms: float
     command_total_variation: float
     command_smoothness: float
@@ -216,7 +219,8 @@ def episode_metrics(
 
     Args:
         signals: Arrays over the episode's samples (reset included) for every key of
-            :data:`REQUIRED_SIGNALS`, in the env's units (s, deg, Nm, normalized command).
+            :data:`REQUIRED_SIGNALS`, in the env's units (s, deg, Nm, normalized command);
+            ``exo_angle_deg`` too for the peak misalignment.
         threshold: Settling band (fraction of the step).
         final_window_s: Window of the final value (s).
     """
@@ -229,6 +233,12 @@ def episode_metrics(
     u = _as_1d("command", signals["command"])
     tau = _as_1d("interaction_torque_nm", signals["interaction_torque_nm"])
     exo = _as_1d("exo_torque_nm", signals["exo_torque_nm"])
+    exo_angle = signals.get("exo_angle_deg")
+    misalignment = (
+        float(np.nanmax(np.abs(knee - _as_1d("exo_angle_deg", exo_angle))))
+        if exo_angle is not None
+        else math.nan
+    )
 
     y0 = float(knee[0])
     yf = final_value(t, knee, final_window_s)
@@ -246,6 +256,7 @@ def episode_metrics(
         rms_interaction_torque_nm=rms(tau[upto]),
         peak_interaction_torque_nm=float(np.max(np.abs(tau))),
         peak_exo_torque_nm=float(np.max(np.abs(exo))),
+        peak_misalignment_deg=misalignment,
         command_rms=rms(u),
         command_total_variation=total_variation(u),
         command_smoothness=spectral_smoothness(u, 1.0 / dt) if math.isfinite(dt) else math.nan,

@@ -53,6 +53,7 @@ SUMMARY_METRICS: dict[str, str] = {
     "settling_time_s": "settling time (s)",
     "rms_interaction_torque_nm": "RMS torque to settling (Nm)",
     "peak_interaction_torque_nm": "peak torque (Nm)",
+    "peak_misalignment_deg": "peak misalignment (deg)",
     "command_rms": "command RMS (-)",
     "command_total_variation": "command total variation (-)",
 }
@@ -60,7 +61,8 @@ SUMMARY_METRICS: dict[str, str] = {
 
 def summarize(table: Any) -> Any:
     """Per (controller, level): count, unstable episodes, and mean / std / median / q25 /
-    q75 of every metric of :data:`SUMMARY_METRICS` (NaN settling times ignored)."""
+    q75 of every metric of :data:`SUMMARY_METRICS` (NaN settling times ignored; NaN for a
+    metric an older table lacks)."""
     import pandas as pd
 
     rows = []
@@ -73,7 +75,10 @@ def summarize(table: Any) -> Any:
             "not_settled": int(episodes["settling_time_s"].isna().sum()),
         }
         for col in SUMMARY_METRICS:
-            values = episodes[col].to_numpy(dtype=float)
+            if col not in episodes:
+                values = np.empty(0)
+            else:
+                values = episodes[col].to_numpy(dtype=float)
             values = values[np.isfinite(values)]
             stats = (
                 (
@@ -259,11 +264,14 @@ def _md_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
 
 
 def _summary_section(summary: Any) -> str:
-    headers = ["controller", "level", "n", *SUMMARY_METRICS.values(), "unstable", "not settled"]
+    """The summary table; a metric no episode has (an older table's) is left out."""
+    metrics = [c for c in SUMMARY_METRICS if np.isfinite(summary[f"{c}_mean"]).any()]
+    headers = ["controller", "level", "n", *(SUMMARY_METRICS[c] for c in metrics)]
+    headers += ["unstable", "not settled"]
     rows = []
     for _, stats in summary.iterrows():
         cells = [stats.controller, stats.level, stats.n]
-        for col in SUMMARY_METRICS:
+        for col in metrics:
             digits = 3 if col.startswith("command") else 2
             cells.append(_pm(stats[f"{col}_mean"], stats[f"{col}_std"], digits))
         cells += [stats.unstable, stats.not_settled]

@@ -34,7 +34,7 @@ from myoexo.model.exo import (
     strap_knee_torque,
 )
 from myoexo.model.leg import HIP_JOINTS, KNEE_JOINT
-from myoexo.model.params import TwinParams
+from myoexo.model.params import TWIN_VERSION, TwinParams
 from myoexo.model.posing import pose_twin, strap_violation
 
 __all__ = [
@@ -49,6 +49,7 @@ __all__ = [
     "HOME_KNEE_ANGLE_DEG",
     "KNEE_JOINT",
     "STRAP_EQUALITY",
+    "TWIN_VERSION",
     "TwinParams",
     "build_leg_model",
     "build_model",

@@ -157,7 +157,7 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     slide.frictionloss = params.slide_frictionloss_n
     slide.damping = np.array([params.thigh_slide_damping_n_s_m, 0.0, 0.0])
     slide.stiffness = np.array([params.thigh_slide_stiffness_n_m, 0.0, 0.0])
-    pin_spring = (params.pin_stiffness_nm_rad, params.coupling_damping_nm_s_rad)
+    pin_spring = (params.pin_stiffness_nm_rad, params.pin_damping_nm_s_rad)
     _soft_joint(
         spec, "exo_thigh_pin", g.knee_axis, _range_rad(params.thigh_pin_range_deg), *pin_spring
     )

@@ -33,7 +33,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-__all__ = ["TwinParams"]
+__all__ = ["TWIN_VERSION", "TwinParams"]
+
+#: Version of the default twin's physics, recorded in every evaluation folder and result set
+#: (``twin_version``); results without it were measured on version 1. CHANGELOG.md says what
+#: each version changed. 2: the sagittal cuff pins are damped (``pin_damping_nm_s_rad``).
+TWIN_VERSION = 2
 
 
 def _check_range(name: str, value: tuple[float, float], *, contains_zero: bool) -> None:
@@ -94,7 +99,15 @@ class TwinParams:
         shank_rotation_stiffness_nm_rad: Rotational stiffness of the shank cuff's axial and
             ab/adduction pins (Nm/rad); small, so the tibia's coupled axial rotation and
             ab/adduction stay nearly free.
-        coupling_damping_nm_s_rad: Viscous damping of the cuff pins (Nm s/rad).
+        pin_damping_nm_s_rad: Viscous damping of each sagittal cuff pin (Nm s/rad): the
+            soft tissue under a cuff is viscoelastic. 20 Nm s/rad damps the pins' mode
+            (``pin_stiffness_nm_rad`` against the lower exo's inertia about its hinge, about
+            0.030 kg m^2 with the drive's armature) at a damping ratio of about 1.3, so the
+            strap passes the motor's torque on without ringing (docs/twin.md, "Straps").
+            With 1 Nm s/rad (ratio 0.06) a stiff encoder-feedback PID drove the pins into
+            their stops and the strap torque to 900 Nm with a 100 Nm motor.
+        coupling_damping_nm_s_rad: Viscous damping of the shank cuff's axial and
+            ab/adduction pins (Nm s/rad).
         strap_solref: ``solref`` (time constant s, damping ratio) of the strap equality
             (weld) that closes the exo loop on the shank: soft tissue under the strap.
         strap_solimp: ``solimp`` (dmin, dmax, width m, midpoint, power) of the strap weld.
@@ -145,6 +158,7 @@ class TwinParams:
     thigh_slide_stiffness_n_m: float = 50_000.0
     pin_stiffness_nm_rad: float = 2_000.0
     shank_rotation_stiffness_nm_rad: float = 1.0
+    pin_damping_nm_s_rad: float = 20.0
     coupling_damping_nm_s_rad: float = 1.0
     strap_solref: tuple[float, float] = (0.005, 1.0)
     strap_solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
@@ -213,6 +227,7 @@ class TwinParams:
             "thigh_slide_damping_n_s_m",
             "thigh_slide_stiffness_n_m",
             "pin_stiffness_nm_rad",
+            "pin_damping_nm_s_rad",
             "shank_rotation_stiffness_nm_rad",
             "coupling_damping_nm_s_rad",
             "exo_knee_damping_nm_s_rad",

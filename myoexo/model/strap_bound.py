@@ -1,0 +1,210 @@
+"""What the straps can physically pass on: the bound of the strap torque and of the
+misalignment between the exo hinge and the human knee.
+
+The strap torque on the knee (the interaction torque) is the torque the shank strap passes
+from the lower exo to the shank. Newton's law for the lower exo (its shank link and shank
+cuff, inertia ``I_exo`` about the hinge, the drive's armature included) and for the shank
+and foot (inertia ``I_knee`` about the knee), moving together through a strap that does not
+ring (the pins' damping, :class:`~myoexo.model.params.TwinParams`), shares every torque
+between the two segments in proportion to their inertia::
+
+    |tau_strap| <= tau_motor * I_knee / (I_exo + I_knee)
+                 + tau_human * I_exo / (I_exo + I_knee)
+                 + m_exo g r_exo
+                 + (S(zeta) - 1) * 2 tau_motor * I_knee / (I_exo + I_knee)
+
+where ``tau_motor`` is the motor's limit, ``tau_human`` the largest torque the leg's own
+muscles can put on the knee (every muscle crossing the knee fully active, flexors or
+extensors, at the knee angle where they are strongest: far more than a spastic reflex
+drives) and ``m_exo g r_exo`` the lower exo's weight about the hinge. The last term is the
+strap's own dynamics: the strap is a spring and damper (the two cuff pins in series) between
+the lower exo and the shank, so a step of the motor torque reaches the shank with an
+overshoot ``S(zeta)``, the peak of the force a Kelvin-Voigt element passes on when a step
+force pushes a mass through it (``zeta`` its damping ratio against ``I_exo``; ``S`` is 1.83
+at zeta 0.06, 1.15 at 0.9 and 1.05 at 2), and the largest step is a full reversal of the
+motor, ``2 tau_motor``. No controller can make the strap pass more than that while the exo
+moves inside its range: the motor cannot push harder, the leg's torques reach the exo only
+in the share of the exo's inertia, and the strap rings no more than its damping allows.
+
+The bound does not hold through an impact on the exo's own end stops
+(``exo_knee_range_deg``): the stop halts the lower exo and the strap must stop the shank's
+momentum, a torque of about ``omega * sqrt(k_strap * I_knee)`` at knee speed ``omega``
+(``impact_torque_nm``). A controller that slams the exo into its stop meets that physics,
+not a modelling artefact.
+
+The misalignment (knee angle minus exo hinge angle, ``info["misalignment_deg"]``) is bounded
+by the coupling's design: each sagittal cuff pin absorbs misalignment within its range
+(``thigh_pin_range_deg``, ``shank_pin_range_deg``: +-15 deg), so a misalignment beyond one
+pin's range means the coupling has left what it was built to absorb
+(:attr:`StrapBound.misalignment_deg`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
+from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model.leg import KNEE_JOINT
+from myoexo.model.params import TwinParams
+from myoexo.model.posing import pose_twin
+
+__all__ = ["StrapBound", "kelvin_voigt_step_peak", "strap_bound"]
+
+#: Knee angles (deg) over which the leg's strongest knee torque is searched.
+_KNEE_ANGLES_DEG = tuple(range(0, 100, 5))
+
+#: Standard gravity, m/s^2.
+_G_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class StrapBound:
+    """The strap-torque bound of one twin and its parts (module docstring).
+
+    Attributes:
+        motor_limit_nm: The motor's peak torque.
+        exo_inertia_kg_m2: Lower exo (shank link, shank cuff, drive armature) about the hinge.
+        knee_inertia_kg_m2: Shank and foot about the knee, along its coupled motion.
+        human_torque_nm: The largest knee torque of the leg's muscles, all fully active.
+        exo_weight_nm: The lower exo's largest weight moment about the hinge.
+        pin_stiffness_nm_rad: Stiffness of the two sagittal cuff pins in series (the strap's
+            rotational stiffness about the knee).
+        pin_damping_nm_s_rad: Damping of the two sagittal cuff pins in series.
+        misalignment_deg: The misalignment bound: one cuff pin's range.
+    """
+
+    motor_limit_nm: float
+    exo_inertia_kg_m2: float
+    knee_inertia_kg_m2: float
+    human_torque_nm: float
+    exo_weight_nm: float
+    pin_stiffness_nm_rad: float
+    pin_damping_nm_s_rad: float
+    misalignment_deg: float
+
+    @property
+    def exo_share(self) -> float:
+        """``I_exo / (I_exo + I_knee)``: the share of a torque the strap passes from the
+        segment it acts on to the other."""
+        return self.exo_inertia_kg_m2 / (self.exo_inertia_kg_m2 + self.knee_inertia_kg_m2)
+
+    @property
+    def damping_ratio(self) -> float:
+        """The strap's damping ratio against the lower exo's inertia."""
+        return self.pin_damping_nm_s_rad / (
+            2.0 * math.sqrt(self.pin_stiffness_nm_rad * self.exo_inertia_kg_m2)
+        )
+
+    @property
+    def step_overshoot(self) -> float:
+        """``S(zeta)``: the peak ratio of passed-on to applied force after a force step."""
+        return kelvin_voigt_step_peak(self.damping_ratio)
+
+    @property
+    def torque_nm(self) -> float:
+        """The bound of ``|strap torque|`` while the exo moves inside its range, Nm."""
+        motor_share_nm = self.motor_limit_nm * (1.0 - self.exo_share)
+        return (
+            motor_share_nm
+            + self.human_torque_nm * self.exo_share
+            + self.exo_weight_nm
+            + (self.step_overshoot - 1.0) * 2.0 * motor_share_nm
+        )
+
+    def impact_torque_nm(self, knee_speed_rad_s: float) -> float:
+        """The strap torque that stops a shank moving at *knee_speed_rad_s* against the exo's
+        end stop through the strap's stiffness, Nm (added to :attr:`torque_nm`)."""
+        return abs(knee_speed_rad_s) * math.sqrt(
+            self.pin_stiffness_nm_rad * self.knee_inertia_kg_m2
+        )
+
+
+def kelvin_voigt_step_peak(damping_ratio: float, periods: float = 6.0, steps: int = 6000) -> float:
+    """The peak of ``k x + c v`` over a unit step force on a unit mass held by a spring ``k``
+    and a damper ``c`` in parallel (``m = k = 1``, ``c = 2 zeta``), from rest: how much of a
+    force step a damped strap passes on at its worst (exact discretisation of the linear ODE
+    over *periods* undamped periods)."""
+    from scipy.linalg import expm
+
+    if not (math.isfinite(damping_ratio) and damping_ratio >= 0.0):
+        raise ValueError(f"damping_ratio = {damping_ratio!r} must be a finite value >= 0")
+    a = np.array([[0.0, 1.0], [-1.0, -2.0 * damping_ratio]])
+    dt = periods * 2.0 * math.pi / steps
+    phi = expm(a * dt)
+    gamma = np.linalg.solve(a, (phi - np.eye(2)) @ np.array([0.0, 1.0]))
+    state = np.zeros(2)
+    peak = 0.0
+    for _ in range(steps):
+        state = phi @ state + gamma
+        peak = max(peak, float(state[0] + 2.0 * damping_ratio * state[1]))
+    return peak
+
+
+def _diagonal_inertia(model: mujoco.MjModel, data: mujoco.MjData, joint: str) -> float:
+    dense = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, dense)
+    dof = int(model.jnt_dofadr[model.joint(joint).id])
+    return float(dense[dof, dof])
+
+
+def _muscle_knee_torque(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """The larger of the flexors' and the extensors' knee torque, all fully active, at the
+    current pose (Nm; along the knee's coupled motion)."""
+    muscles = np.flatnonzero(model.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE)
+    knee = CoupledJointTorque(model, KNEE_JOINT)
+    data.act[:] = 0.0
+    mujoco.mj_forward(model, data)
+    rest = knee(data)
+    torques = []
+    for i in muscles:
+        data.act[:] = 0.0
+        data.act[model.actuator_actadr[i]] = 1.0
+        mujoco.mj_forward(model, data)
+        torques.append(knee(data) - rest)
+    data.act[:] = 0.0
+    t = np.asarray(torques)
+    return float(max(t[t > 0].sum(initial=0.0), -t[t < 0].sum(initial=0.0)))
+
+
+def strap_bound(model: mujoco.MjModel, params: TwinParams | None = None) -> StrapBound:
+    """The strap bound of a twin built from *params* (default ``TwinParams()``), measured on
+    *model* (its inertias at 90 deg flexion, its muscles over 0-95 deg)."""
+    params = params or TwinParams()
+    data = mujoco.MjData(model)
+    pose_twin(model, data, knee_angle_deg=90.0)
+    mujoco.mj_forward(model, data)
+    exo_inertia = _diagonal_inertia(model, data, EXO_JOINT)
+    knee_inertia = _diagonal_inertia(model, data, KNEE_JOINT)
+    human = 0.0
+    for angle in _KNEE_ANGLES_DEG:
+        pose_twin(model, data, knee_angle_deg=float(angle))
+        human = max(human, _muscle_knee_torque(model, data))
+    # the lower exo's weight about the hinge: its subtree's mass times its centre's lever
+    hinge = model.joint(EXO_JOINT)
+    body = int(hinge.bodyid[0])
+    mass = float(model.body_subtreemass[body])
+    pose_twin(model, data, knee_angle_deg=0.0)  # the lever is largest with the shank level
+    mujoco.mj_forward(model, data)
+    lever = float(np.linalg.norm(data.subtree_com[body] - data.xanchor[hinge.id]))
+    motor = model.actuator(EXO_ACTUATOR)
+    k_pin = params.pin_stiffness_nm_rad
+    return StrapBound(
+        motor_limit_nm=float(np.max(np.abs(motor.forcerange))),
+        exo_inertia_kg_m2=exo_inertia,
+        knee_inertia_kg_m2=knee_inertia,
+        human_torque_nm=human,
+        exo_weight_nm=mass * _G_M_S2 * lever,
+        pin_stiffness_nm_rad=k_pin / 2.0,
+        pin_damping_nm_s_rad=params.pin_damping_nm_s_rad / 2.0,
+        misalignment_deg=float(
+            min(
+                max(abs(v) for v in params.thigh_pin_range_deg),
+                max(abs(v) for v in params.shank_pin_range_deg),
+            )
+        ),
+    )

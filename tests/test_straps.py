@@ -1,0 +1,149 @@
+"""The straps stay physical: the strap torque within the bound the motor, the leg and the
+strap's own dynamics allow (myoexo.model.strap_bound), under every controller family the
+evaluation offers and under bang-bang commands; the misalignment reported and bounded."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from myoexo.control.rollout import rollout
+from myoexo.control.specs import build_controller, parse_controller_spec, spec_env_kwargs
+from myoexo.envs import make_env
+from myoexo.evaluation.metrics import episode_metrics
+from myoexo.model import TwinParams, build_model
+from myoexo.model.strap_bound import kelvin_voigt_step_peak, strap_bound
+
+CHANNELS = (
+    "time_s",
+    "knee_angle_deg",
+    "knee_vel_rad_s",
+    "exo_angle_deg",
+    "misalignment_deg",
+    "target_angle_deg",
+    "command",
+    "exo_torque_nm",
+    "interaction_torque_nm",
+)
+
+
+class BangBang:
+    """Full motor command, reversed every *period_steps* control steps (10 ms each)."""
+
+    def __init__(self, period_steps: int) -> None:
+        self.period_steps = period_steps
+        self._n = 0
+
+    def reset(self, seed: int | None = None) -> None:
+        self._n = 0
+
+    def act(self, obs, info):
+        self._n += 1
+        sign = 1.0 if (self._n // self.period_steps) % 2 else -1.0
+        return np.array([sign], dtype=np.float32)
+
+
+@pytest.fixture(scope="module")
+def bound():
+    model, _ = build_model(TwinParams(scene=False))
+    return strap_bound(model)
+
+
+def test_the_bound_is_built_from_the_twins_own_parts(bound):
+    assert bound.motor_limit_nm == TwinParams().motor_limit_nm
+    # the lower exo is a small fraction of the shank's inertia; the leg's muscles are strong
+    assert 0.01 < bound.exo_inertia_kg_m2 < 0.1
+    assert 0.2 < bound.knee_inertia_kg_m2 < 1.0
+    assert 0.02 < bound.exo_share < 0.2
+    assert 150.0 < bound.human_torque_nm < 1000.0
+    assert 0.0 < bound.exo_weight_nm < 5.0
+    # the pins' damping keeps the strap from ringing: damping ratio near 1, small overshoot
+    assert 0.7 < bound.damping_ratio < 1.5
+    assert 1.0 < bound.step_overshoot < 1.25
+    assert bound.motor_limit_nm < bound.torque_nm < 1.6 * bound.motor_limit_nm
+    assert bound.misalignment_deg == 15.0
+
+
+def test_kelvin_voigt_overshoot_falls_with_damping():
+    peaks = [kelvin_voigt_step_peak(z) for z in (0.0, 0.1, 0.5, 1.0, 3.0)]
+    assert peaks[0] == pytest.approx(2.0, abs=0.01)  # an undamped spring doubles a step
+    assert all(a > b for a, b in itertools.pairwise(peaks))
+    assert peaks[-1] > 1.0  # the damper itself passes force on
+    with pytest.raises(ValueError, match="damping_ratio"):
+        kelvin_voigt_step_peak(-1.0)
+
+
+def test_the_old_undamped_pins_had_a_bound_far_above_the_motor():
+    """With the pins' former 1 Nm s/rad the strap rang: its own bound was twice the motor's."""
+    model, _ = build_model(TwinParams(scene=False, pin_damping_nm_s_rad=1.0))
+    assert strap_bound(model, TwinParams(pin_damping_nm_s_rad=1.0)).torque_nm > 250.0
+
+
+def _episode(controller, level: int, seed: int, **env_kwargs):
+    env = make_env(level, **env_kwargs)
+    try:
+        return rollout(env, controller, seed, channels=CHANNELS).signals
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    "spec",
+    ["pid", "pid:tuned=exo", "pid:tuned=latency", "pid:ramp_s=1", "guard:sac", "bang:1"],
+)
+@pytest.mark.parametrize("level", [0, 1, 2, 3])
+def test_strap_torque_stays_within_the_bound(bound, spec, level):
+    """Every controller family of ``myoexo evaluate``, the encoder-feedback PIDs that drove
+    the strap to 900 Nm before the pins were damped among them, and a bang-bang command at
+    100 Hz."""
+    if spec.startswith("bang:"):
+        controller, kwargs = BangBang(int(spec.split(":")[1])), {}
+    else:
+        parsed = parse_controller_spec(spec)
+        kwargs = spec_env_kwargs(parsed)
+        env = make_env(level, **kwargs)
+        controller = build_controller(parsed, env)
+        env.close()
+    s = _episode(controller, level, seed=5, **kwargs)
+    assert np.max(s["interaction_torque_nm"]) <= bound.torque_nm
+    # the misalignment the env reports is the knee's angle less the exo hinge's
+    np.testing.assert_allclose(s["misalignment_deg"], s["knee_angle_deg"] - s["exo_angle_deg"])
+    assert np.max(np.abs(s["misalignment_deg"])) <= bound.misalignment_deg
+
+
+@pytest.mark.parametrize("level", [0, 1, 2, 3])
+def test_bang_bang_at_10_hz_stays_within_the_bound_but_for_end_stop_impacts(bound, level):
+    """Reversing the full command every 0.1 s swings the free shank at up to ~14 rad/s. Away
+    from the exo's end stops the strap stays within the bound; when the exo hits its flexion
+    stop the strap must stop the shank's momentum, and its torque is then within the bound
+    plus the impact's ``omega * sqrt(k I)`` at the knee speed of the impact."""
+    lo, hi = TwinParams().exo_knee_range_deg
+    for seed in (0, 2):
+        s = _episode(BangBang(10), level, seed=seed)
+        exo, tau = s["exo_angle_deg"], s["interaction_torque_nm"]
+        at_stop = (exo >= hi - 0.5) | (exo <= lo + 0.5)
+        # an impact's load lasts a few control steps after the contact begins
+        near_stop = np.convolve(at_stop, np.ones(4), mode="full")[: at_stop.size] > 0
+        assert np.max(tau[~near_stop]) <= bound.torque_nm
+        if near_stop.any():
+            speed = np.max(np.abs(s["knee_vel_rad_s"][near_stop]))
+            assert np.max(tau[near_stop]) <= bound.torque_nm + bound.impact_torque_nm(speed)
+
+
+def test_peak_misalignment_is_an_episode_metric():
+    s = _episode(BangBang(1), 0, seed=0)
+    m = episode_metrics(s)
+    assert m.peak_misalignment_deg == pytest.approx(np.max(np.abs(s["misalignment_deg"])))
+    without = episode_metrics({k: v for k, v in s.items() if k != "exo_angle_deg"})
+    assert math.isnan(without.peak_misalignment_deg)
+
+
+def test_the_twin_page_states_the_bound_the_code_derives(bound):
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "twin.md").read_text()
+    assert f"{bound.torque_nm:.1f} Nm" in text
+    assert f"{bound.misalignment_deg:g} deg" in text
