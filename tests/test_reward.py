@@ -125,7 +125,7 @@ def test_torque_penalty_switches_on_above_75_nm():
     shank's inertia takes the rest); 0.70-0.77 put it within 10 Nm of the threshold, below
     and above."""
     env = gym.make("MyoExoKnee-v0")
-    actions = (1.0, 1.0, -1.0, -0.70, -0.70, -0.74, -0.74, -0.72, -0.72, -0.70)
+    actions = (1.0, 1.0, -1.0, -0.70, -0.70, -0.77, -0.77, -0.74, -0.74, -0.72)
     reset_info, steps = _run(env, actions, seed=0)
     env.close()
     expected = _expected_terms(actions, reset_info, steps, TaskParams().target_angle_deg)

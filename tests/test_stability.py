@@ -67,18 +67,7 @@ def test_extreme_draw_survives_bang_bang(k, c):
         env.close()
 
 
-#: Twin version 2 damps the cuff pins 20x more: at the soft, doubly damped corner one fast
-#: mode near rest has a finite-difference transition radius of 1.023 (0.65 in a fast
-#: extension); the bang-bang episodes of that corner stay stable (the test above). Open.
-_GROWING_AT_REST = pytest.mark.xfail(
-    reason="twin v2: radius 1.023 near rest at strap stiffness x0.5, damping x2", strict=True
-)
-
-
-@pytest.mark.parametrize(
-    "k, c",
-    [pytest.param(*kc, marks=_GROWING_AT_REST) if kc == (0.5, 2.0) else kc for kc in CORNERS],
-)
+@pytest.mark.parametrize("k, c", CORNERS)
 def test_extreme_draw_has_no_growing_fast_mode(k, c):
     """Near rest and in a fast extension, every fast mode decays at least as fast as the
     nominal twin's slowest-decaying one (0.986 per step). (Not at the reset state itself: the

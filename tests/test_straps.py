@@ -147,3 +147,26 @@ def test_the_twin_page_states_the_bound_the_code_derives(bound):
     text = (Path(__file__).resolve().parents[1] / "docs" / "twin.md").read_text()
     assert f"{bound.torque_nm:.1f} Nm" in text
     assert f"{bound.misalignment_deg:g} deg" in text
+
+
+def test_an_earlier_twin_version_is_rebuilt_from_its_fields():
+    from myoexo.model.params import EARLIER_TWINS, TWIN_VERSION
+
+    assert TwinParams.of_version(TWIN_VERSION) == TwinParams()
+    old = TwinParams.of_version(1, scene=False)
+    assert old.pin_damping_nm_s_rad == EARLIER_TWINS[1]["pin_damping_nm_s_rad"]
+    assert old.scene is False
+    model, _ = build_model(old)
+    dof = model.joint("exo_shank_pin").dofadr[0]
+    assert model.dof_damping[dof] == 1.0 and model.dof_armature[dof] == 0.001
+    with pytest.raises(ValueError, match="twin version 0 is unknown"):
+        TwinParams.of_version(0)
+
+
+def test_a_policy_of_an_earlier_twin_is_evaluated_with_a_warning():
+    """The shipped policies record no twin version: they were trained on version 1."""
+    from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
+    from myoexo.envs.options import TwinOptions
+
+    with pytest.warns(TwinMismatchWarning, match="trained on twin version 1"):
+        resolve_controllers(["sac"], log=lambda _: None, twin=TwinOptions())

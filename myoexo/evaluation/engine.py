@@ -264,6 +264,21 @@ def _parameter_mismatch(spec: ControllerSpec, twin: TwinOptions) -> str | None:
     )
 
 
+def _version_mismatch(spec: ControllerSpec) -> str | None:
+    """A warning if the policy was trained on another twin version than today's
+    (:data:`~myoexo.model.TWIN_VERSION`; a policy that records none was trained on version 1),
+    else ``None``."""
+    from myoexo.model import TWIN_VERSION
+
+    version = int(policy_metadata(spec).get("twin_version", 1))
+    if version == TWIN_VERSION:
+        return None
+    return (
+        f"trained on twin version {version}, evaluated on version {TWIN_VERSION} "
+        "(CHANGELOG.md says what changed)"
+    )
+
+
 def resolve_controllers(
     specs_text: Iterable[str],
     log: Callable[[str], None] = print,
@@ -300,7 +315,7 @@ def resolve_controllers(
         trained = policy_twin(spec) if twin is not None else None
         mismatch = twin_mismatch(trained, twin) if trained is not None and twin else None
         if trained is not None and twin is not None and not mismatch:
-            mismatch = _parameter_mismatch(spec, twin)
+            mismatch = _parameter_mismatch(spec, twin) or _version_mismatch(spec)
         if mismatch:
             message = f"controller {text!r} was {mismatch}"
             log(f"myoexo evaluate: warning: {message}")

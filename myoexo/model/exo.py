@@ -93,14 +93,17 @@ def _soft_joint(
     joint_range: np.ndarray,
     stiffness: float,
     damping: float,
+    armature: float | None = None,
 ) -> mujoco.MjsJoint:
-    """Set a coupling joint's axis, range and soft-tissue spring/damper (SI units: N/m or
-    Nm/rad, N s/m or Nm s/rad) and return it."""
+    """Set a coupling joint's axis, range, soft-tissue spring/damper (SI units: N/m or
+    Nm/rad, N s/m or Nm s/rad) and, if given, armature (kg m^2), and return it."""
     joint = spec.joint(name)
     joint.axis = axis
     joint.range = joint_range
     joint.stiffness = np.array([stiffness, 0.0, 0.0])
     joint.damping = np.array([damping, 0.0, 0.0])
+    if armature is not None:
+        joint.armature = armature
     return joint
 
 
@@ -157,7 +160,11 @@ def exo_spec(params: TwinParams, geometry: ExoGeometry) -> mujoco.MjSpec:
     slide.frictionloss = params.slide_frictionloss_n
     slide.damping = np.array([params.thigh_slide_damping_n_s_m, 0.0, 0.0])
     slide.stiffness = np.array([params.thigh_slide_stiffness_n_m, 0.0, 0.0])
-    pin_spring = (params.pin_stiffness_nm_rad, params.pin_damping_nm_s_rad)
+    pin_spring = (
+        params.pin_stiffness_nm_rad,
+        params.pin_damping_nm_s_rad,
+        params.pin_armature_kg_m2,
+    )
     _soft_joint(
         spec, "exo_thigh_pin", g.knee_axis, _range_rad(params.thigh_pin_range_deg), *pin_spring
     )

@@ -33,12 +33,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-__all__ = ["TWIN_VERSION", "TwinParams"]
+__all__ = ["EARLIER_TWINS", "TWIN_VERSION", "TwinParams"]
 
 #: Version of the default twin's physics, recorded in every evaluation folder and result set
 #: (``twin_version``); results without it were measured on version 1. CHANGELOG.md says what
-#: each version changed. 2: the sagittal cuff pins are damped (``pin_damping_nm_s_rad``).
+#: each version changed. 2: the sagittal cuff pins are damped (``pin_damping_nm_s_rad``) and
+#: carry an armature (``pin_armature_kg_m2``).
 TWIN_VERSION = 2
+
+#: The fields that give an earlier twin version's physics (:meth:`TwinParams.of_version`), so
+#: that a result or a policy of that version can be reproduced on the twin it was made on.
+EARLIER_TWINS: dict[int, dict[str, float]] = {
+    1: {"pin_damping_nm_s_rad": 1.0, "pin_armature_kg_m2": 0.001},
+}
 
 
 def _check_range(name: str, value: tuple[float, float], *, contains_zero: bool) -> None:
@@ -106,6 +113,13 @@ class TwinParams:
             strap passes the motor's torque on without ringing (docs/twin.md, "Straps").
             With 1 Nm s/rad (ratio 0.06) a stiff encoder-feedback PID drove the pins into
             their stops and the strap torque to 900 Nm with a 100 Nm motor.
+        pin_armature_kg_m2: Armature (numerical rotor inertia) of each sagittal cuff pin
+            (kg m^2). The shank pin's spring on the 0.2 kg cuff alone (1.5e-3 kg m^2 about
+            the pin) has ``omega h`` = 2.3 at the 2 ms timestep, past the explicit limit 2;
+            with the pins damped, the strap weld and the pins then chattered at some
+            perturbed twins (``tests/test_stability.py``). 4e-3 brings ``omega h`` to 1.3
+            (1.0 at the perturbed twin's stiffest straps, whose armature scales with them):
+            13 % of the lower exo's inertia about its hinge.
         coupling_damping_nm_s_rad: Viscous damping of the shank cuff's axial and
             ab/adduction pins (Nm s/rad).
         strap_solref: ``solref`` (time constant s, damping ratio) of the strap equality
@@ -159,6 +173,7 @@ class TwinParams:
     pin_stiffness_nm_rad: float = 2_000.0
     shank_rotation_stiffness_nm_rad: float = 1.0
     pin_damping_nm_s_rad: float = 20.0
+    pin_armature_kg_m2: float = 0.004
     coupling_damping_nm_s_rad: float = 1.0
     strap_solref: tuple[float, float] = (0.005, 1.0)
     strap_solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
@@ -228,6 +243,7 @@ class TwinParams:
             "thigh_slide_stiffness_n_m",
             "pin_stiffness_nm_rad",
             "pin_damping_nm_s_rad",
+            "pin_armature_kg_m2",
             "shank_rotation_stiffness_nm_rad",
             "coupling_damping_nm_s_rad",
             "exo_knee_damping_nm_s_rad",
@@ -272,6 +288,23 @@ class TwinParams:
         """Coulomb friction of the thigh slider (N): ``(1 - eta) * nominal strap force``."""
         nominal_strap_force_n = self.motor_limit_nm / self.thigh_cuff_distance_m
         return (1.0 - self.slide_efficiency) * nominal_strap_force_n
+
+    @classmethod
+    def of_version(cls, version: int, **overrides: object) -> TwinParams:
+        """The default parameters of twin *version* (:data:`TWIN_VERSION` or one of
+        :data:`EARLIER_TWINS`), with *overrides* on top.
+
+        Raises:
+            ValueError: If *version* is neither.
+        """
+        if version == TWIN_VERSION:
+            return cls(**overrides)  # type: ignore[arg-type]
+        if version not in EARLIER_TWINS:
+            raise ValueError(
+                f"twin version {version!r} is unknown; known: "
+                f"{sorted([*EARLIER_TWINS, TWIN_VERSION])}"
+            )
+        return cls(**{**EARLIER_TWINS[version], **overrides})  # type: ignore[arg-type]
 
     def as_dict(self) -> dict[str, object]:
         """Return the parameters as a plain ``dict`` (for logs and reports)."""

@@ -65,6 +65,7 @@ import numpy as np
 from myoexo.control.guard import StallGuardConfig, StallIntegrator
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root, subject_seed
+from myoexo.model import TWIN_VERSION
 from myoexo.policies.actor import MLPActor
 from myoexo.policies.student import (
     FRAME_DIM,
@@ -727,6 +728,7 @@ def _provenance(
         "distill_config": config.to_json(),
         "env_id": f"MyoExoKnee-v{{level}} (levels {list(config.levels)})",
         "twin": config.twin.replace(obs_preset=StudentController.obs_preset).to_dict(),
+        "twin_version": TWIN_VERSION,
     }
 
 

@@ -188,6 +188,7 @@ def _checkpoint_parts(
         "obs_preset": twin.obs_preset,
         "reward_weights": [list(p) for p in twin.reward_weights],
         "twin": twin.to_dict(),
+        "twin_version": int(state.get("twin_version", 1)),
         "selection_root_seed": (
             selection_root_seed
             if selection_root_seed is not None

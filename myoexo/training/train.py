@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import TwinOptions
+from myoexo.model import TWIN_VERSION
 from myoexo.policies.algorithms import algorithm_class, get_algorithm
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
@@ -307,6 +308,7 @@ def _run_callbacks(
         max_wall_time_s=preset.max_wall_time_s,
         provenance={
             "twin": preset.twin.to_dict(),
+            "twin_version": TWIN_VERSION,
             "env_id": preset.env_id,
             "algorithm": preset.algorithm,
         },
