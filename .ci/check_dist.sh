@@ -3,8 +3,9 @@
 #
 # 1. build the sdist and, from it, the wheel (`python -m build`, the declared build backend in
 #    an isolated environment); `twine check --strict` both;
-# 2. the wheel holds every module of the package, the MJCF assets, the shipped policies and
-#    their model cards, the licence, and nothing of the repository around the package;
+# 2. the wheel holds every module of the package, the MJCF assets, the fitted values
+#    (assets/fits), the shipped policies and their model cards, the licence, and nothing of
+#    the repository around the package;
 # 3. install the wheel alone (--no-deps) into a fresh venv that sees .venv's site-packages
 #    through a .pth line (the dependencies, torch included, are not downloaded again; .pth
 #    files of .venv, such as its editable install of myoexo, are not run), and from outside
@@ -37,11 +38,12 @@ expected = {
     for p in package.rglob("*")
     if p.is_file()
     and "__pycache__" not in p.parts
-    and (p.suffix == ".py" or p.parent.name in ("assets", "policies"))
+    and (p.suffix == ".py" or p.parent.name in ("assets", "fits", "policies"))
 }
 missing = sorted(expected - names)
 assert not missing, f"the wheel lacks {missing}"
-for required in ("myoexo/assets/exo_knee.xml", "myoexo/policies/sac_knee_exo.npz",
+for required in ("myoexo/assets/exo_knee.xml", "myoexo/assets/fits/pid_tuned_exo.json",
+                 "myoexo/policies/sac_knee_exo.npz",
                  "myoexo/policies/student_exo.npz", "myoexo/policies/MODEL_CARD.md"):
     assert required in names, f"the wheel lacks {required}"
 stray = sorted(n for n in names if not n.startswith(("myoexo/", "myoexo-")))
@@ -80,6 +82,8 @@ gym.make("MyoExoKnee-v1").reset(seed=0)
 from myoexo.policies import SHIPPED_POLICIES
 for name in SHIPPED_POLICIES:
     myoexo.load_policy(name)
-print("  import, env reset and shipped policies from", os.path.dirname(myoexo.__file__))
+from myoexo.control.tuned import TUNED_PIDS
+assert {"exo", "latency"} <= set(TUNED_PIDS), TUNED_PIDS
+print("  import, env reset, shipped policies and tuned PIDs from", os.path.dirname(myoexo.__file__))
 '
 echo "dist-check: passed in $(($(date +%s) - start)) s"

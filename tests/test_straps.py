@@ -15,7 +15,11 @@ from myoexo.control.specs import build_controller, parse_controller_spec, spec_e
 from myoexo.envs import make_env
 from myoexo.evaluation.metrics import episode_metrics
 from myoexo.model import TwinParams, build_model
-from myoexo.model.strap_bound import kelvin_voigt_step_peak, strap_bound
+from myoexo.model.strap_bound import (
+    kelvin_voigt_impact_peak,
+    kelvin_voigt_step_peak,
+    strap_bound,
+)
 
 CHANNELS = (
     "time_s",
@@ -74,6 +78,10 @@ def test_kelvin_voigt_overshoot_falls_with_damping():
     assert peaks[-1] > 1.0  # the damper itself passes force on
     with pytest.raises(ValueError, match="damping_ratio"):
         kelvin_voigt_step_peak(-1.0)
+    # an impact on an undamped spring peaks at v sqrt(k m); a stiff damper at contact, 2 zeta
+    assert kelvin_voigt_impact_peak(0.0) == pytest.approx(1.0, abs=1e-3)
+    assert kelvin_voigt_impact_peak(0.3) < 1.0
+    assert kelvin_voigt_impact_peak(2.0) == pytest.approx(4.0, rel=1e-6)
 
 
 def test_the_old_undamped_pins_had_a_bound_far_above_the_motor():
@@ -165,8 +173,8 @@ def test_an_earlier_twin_version_is_rebuilt_from_its_fields():
 
 def test_a_policy_of_an_earlier_twin_is_evaluated_with_a_warning():
     """The shipped policies record no twin version: they were trained on version 1."""
-    from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
     from myoexo.envs.options import TwinOptions
+    from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
 
     with pytest.warns(TwinMismatchWarning, match="trained on twin version 1"):
         resolve_controllers(["sac"], log=lambda _: None, twin=TwinOptions())

@@ -1,5 +1,6 @@
-"""The PIDs tuned for their sensors and latency: each entry is its tuner's record, and the
-spec ``pid:tuned=NAME`` runs it."""
+"""The PIDs tuned for their sensors and latency: each entry is the file its tuner wrote into
+the package (data with provenance, not a literal in code), and the spec ``pid:tuned=NAME``
+runs it."""
 
 from __future__ import annotations
 
@@ -8,23 +9,42 @@ from pathlib import Path
 
 import pytest
 
+from myoexo import cli
+from myoexo.control import tuned
 from myoexo.control import ziegler_nichols as zn
 from myoexo.control.specs import parse_controller_spec, pid_config
 from myoexo.control.tuned import TUNED_PIDS, tuned_pid, tuned_pids_markdown
+from myoexo.model import TWIN_VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("name", sorted(TUNED_PIDS))
-def test_each_tuned_pid_is_its_committed_tuner_record(name):
+def test_each_tuned_pid_is_its_file_with_provenance(name):
     t = TUNED_PIDS[name]
-    record = json.loads((ROOT / t.record).read_text())
+    doc = json.loads((ROOT / "myoexo" / t.record).read_text())
+    record, provenance = doc["result"], doc["provenance"]
     assert record["zn_gains"] == {"kp": t.gains.kp, "ki": t.gains.ki, "kd": t.gains.kd}
     assert record["ultimate_gain_per_rad"] == t.ultimate_gain_per_rad
     assert record["ultimate_period_s"] == t.ultimate_period_s
     assert record["settings"]["feedback"] == t.feedback
     assert record["settings"].get("latency_s", 0.0) == t.latency_s
-    assert t.record in t.command
+    assert provenance["command"] == t.command and f"--write {name}" in t.command
+    assert set(provenance) >= {"subject", "twin_version", "versions", "date"}
+    # tuned on today's twin: a tuning of another twin version is not today's fair baseline
+    assert t.twin_version == TWIN_VERSION
+
+
+def test_tune_pid_write_records_its_provenance(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(tuned, "fits_dir", lambda: tmp_path)
+    argv = ["tune-pid", "--feedback", "exo", "--rel-tol", "0.3", "--quiet", "--write", "mine"]
+    assert cli.main(argv) == 0
+    entry = tuned.TunedPID.from_file(tmp_path / "pid_tuned_mine.json")
+    assert entry.name == "mine" and entry.feedback == "exo"
+    assert entry.command == "myoexo tune-pid --feedback exo --rel-tol 0.3 --write mine"
+    assert entry.twin_version == TWIN_VERSION
+    assert cli.main(["tune-pid", "--rel-tol", "0.3", "--quiet", "--write", "no good"]) == 2
+    assert "must be a word" in capsys.readouterr().err
 
 
 def test_the_latency_tuning_reruns_to_its_record():

@@ -3,11 +3,13 @@
 The paper's gains (Kp = 7, Ki = 40, Kd = 0.05) were tuned on the human knee, read exactly.
 A device reads its own encoder, behind the compliant straps, and a perturbed twin reads its
 sensors 10 ms late; running the paper's gains there compares a controller with a PID tuned
-for another plant. Each entry below is the classic Ziegler-Nichols table applied to the
-ultimate gain and period that ``myoexo tune-pid`` measured on the twin (level 1, nominal
-subject, as the paper tuned), with that setting's feedback and latency. The tuner's output is
-committed under ``docs/studies/pid_tuning/`` and ``tests/test_tuned_pid.py`` ties each entry
-to its record.
+for another plant. Each entry is the classic Ziegler-Nichols table applied to the ultimate
+gain and period that ``myoexo tune-pid`` measured on the twin (level 1, nominal subject, as
+the paper tuned), with that setting's feedback and latency.
+
+The entries are data, not code: ``myoexo tune-pid ... --write NAME`` writes the tuner's
+record with its provenance (the command, the twin version, the package versions, the date)
+to ``myoexo/assets/fits/pid_tuned_NAME.json``, and :data:`TUNED_PIDS` reads every such file.
 
 A controller spec selects one with ``pid:tuned=NAME`` (``myoexo evaluate --controllers
 pid:tuned=exo``); the entry sets the gains and the feedback, and any other PID option
@@ -16,14 +18,28 @@ pid:tuned=exo``); the entry sets the gains and the feedback, and any other PID o
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
 
 from myoexo.control.pid import PIDGains
+
+#: Where the tuned PIDs live in the package: ``pid_tuned_<name>.json``.
+FITS_PACKAGE_DIR = ("assets", "fits")
+_PREFIX = "pid_tuned_"
+
+#: What each tuning is the fair baseline of (documentation; the numbers are in the files).
+TUNED_PID_USES: dict[str, str] = {
+    "exo": "the device PID: what the exoskeleton measures, its encoder",
+    "latency": "the perturbed twins: the human knee read 10 ms late",
+}
 
 
 @dataclass(frozen=True)
 class TunedPID:
-    """One Ziegler-Nichols tuning of the knee PID.
+    """One Ziegler-Nichols tuning of the knee PID, as its file records it.
 
     Attributes:
         name: The spec's ``tuned=`` value.
@@ -33,8 +49,9 @@ class TunedPID:
         ultimate_gain_per_rad: ``Ku`` measured by the P-only search (1/rad).
         ultimate_period_s: ``Tu`` at ``Ku`` (s).
         gains: The classic table's gains for ``Ku, Tu``.
-        record: The tuner's JSON output, relative to the repository.
-        command: The command that wrote ``record``.
+        record: The file, relative to the package (``assets/fits/pid_tuned_NAME.json``).
+        command: The command that wrote it.
+        twin_version: The twin version it was tuned on.
         use: The setting it is the fair baseline of.
     """
 
@@ -46,37 +63,61 @@ class TunedPID:
     gains: PIDGains
     record: str
     command: str
+    twin_version: int
     use: str
 
+    @classmethod
+    def from_file(cls, path: Path) -> TunedPID:
+        """The entry a ``--write`` file holds (its name from the file's)."""
+        doc = json.loads(path.read_text())
+        result, provenance = doc["result"], doc["provenance"]
+        name = path.stem[len(_PREFIX) :]
+        return cls(
+            name=name,
+            feedback=str(result["settings"]["feedback"]),
+            latency_s=float(result["settings"].get("latency_s", 0.0)),
+            ultimate_gain_per_rad=float(result["ultimate_gain_per_rad"]),
+            ultimate_period_s=float(result["ultimate_period_s"]),
+            gains=PIDGains(**result["zn_gains"]),
+            record="/".join((*FITS_PACKAGE_DIR, path.name)),
+            command=str(provenance["command"]),
+            twin_version=int(provenance["twin_version"]),
+            use=TUNED_PID_USES.get(name, ""),
+        )
 
-#: The tuned PIDs by name (``pid:tuned=NAME``).
-TUNED_PIDS: dict[str, TunedPID] = {
-    t.name: t
-    for t in (
-        TunedPID(
-            name="exo",
-            feedback="exo",
-            latency_s=0.0,
-            ultimate_gain_per_rad=14.67206469127474,
-            ultimate_period_s=0.171670454031595,
-            gains=PIDGains(kp=8.803238814764843, ki=102.55974290304673, kd=0.1889070005349051),
-            record="docs/studies/pid_tuning/exo.json",
-            command="myoexo tune-pid --feedback exo --out docs/studies/pid_tuning/exo.json",
-            use="the device PID: what the exoskeleton measures, its encoder",
-        ),
-        TunedPID(
-            name="latency",
-            feedback="knee",
-            latency_s=0.010,
-            ultimate_gain_per_rad=3.018328855186846,
-            ultimate_period_s=0.19734358900140975,
-            gains=PIDGains(kp=1.8109973131121075, ki=18.353748629748196, kd=0.04467358868018164),
-            record="docs/studies/pid_tuning/latency.json",
-            command="myoexo tune-pid --latency-ms 10 --out docs/studies/pid_tuning/latency.json",
-            use="the perturbed twins: the human knee read 10 ms late",
-        ),
-    )
-}
+
+def fits_dir() -> Path:
+    """The package's folder of fitted values."""
+    return Path(str(resources.files("myoexo").joinpath(*FITS_PACKAGE_DIR)))
+
+
+def tuned_pid_path(name: str) -> Path:
+    """Where the tuned PID *name* is written and read."""
+    return fits_dir() / f"{_PREFIX}{name}.json"
+
+
+def write_tuned_pid(name: str, result: dict[str, Any], provenance: dict[str, Any]) -> Path:
+    """Write a tuner's *result* (``TuningResult.to_dict()``) with its *provenance* as the
+    tuned PID *name*; returns the file."""
+    from myoexo.runtime.files import write_json_atomic
+
+    if not name.isidentifier():
+        raise ValueError(f"tuned PID name {name!r} must be a word (letters, digits, _)")
+    path = tuned_pid_path(name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, {"result": result, "provenance": provenance}, indent=2)
+    return path
+
+
+def _load() -> dict[str, TunedPID]:
+    return {
+        t.name: t
+        for t in (TunedPID.from_file(p) for p in sorted(fits_dir().glob(f"{_PREFIX}*.json")))
+    }
+
+
+#: The tuned PIDs by name (``pid:tuned=NAME``), read from the package's files.
+TUNED_PIDS: dict[str, TunedPID] = _load()
 
 
 def tuned_pid(name: str) -> TunedPID:

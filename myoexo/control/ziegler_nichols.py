@@ -389,6 +389,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--rel-tol", type=float, default=d.rel_tol, help="bisection tolerance")
     parser.add_argument("--out", type=Path, default=None, help="write the result as JSON here")
+    parser.add_argument(
+        "--write",
+        metavar="NAME",
+        default=None,
+        help="write the result with its provenance as the package's tuned PID NAME "
+        "(myoexo/assets/fits/pid_tuned_NAME.json), which pid:tuned=NAME then runs",
+    )
     parser.add_argument("--quiet", action="store_true", help="no line per trial")
 
 
@@ -415,4 +422,52 @@ def run(args: argparse.Namespace) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(result.to_dict(), indent=2))
         print(f"written: {args.out}")
+    if args.write is not None:
+        from myoexo.control.tuned import write_tuned_pid
+
+        try:
+            path = write_tuned_pid(args.write, result.to_dict(), _provenance(args))
+        except ValueError as exc:
+            print(f"myoexo tune-pid: error: {exc}", file=sys.stderr)
+            return 2
+        print(f"written: {path}")
     return 0
+
+
+def _provenance(args: argparse.Namespace) -> dict[str, Any]:
+    """What a ``--write`` file records of how it was made: the command (its options as
+    given, ``--out`` and ``--quiet`` left out), the twin version, the package versions and
+    the date."""
+    import datetime
+
+    from myoexo.model import TWIN_VERSION
+    from myoexo.runtime.files import package_versions
+
+    d = ZieglerNicholsSettings()
+    parts = ["myoexo tune-pid"]
+    if args.level != d.level:
+        parts.append(f"--level {args.level}")
+    if args.individual_subject:
+        parts.append("--individual-subject")
+    if args.seed != d.seed:
+        parts.append(f"--seed {args.seed}")
+    if args.feedback != d.feedback:
+        parts.append(f"--feedback {args.feedback}")
+    if args.latency_ms:
+        parts.append(f"--latency-ms {args.latency_ms:g}")
+    if args.target is not None:
+        parts.append(f"--target {args.target:g}")
+    if args.rel_tol != d.rel_tol:
+        parts.append(f"--rel-tol {args.rel_tol:g}")
+    parts.append(f"--write {args.write}")
+    return {
+        "command": " ".join(parts),
+        "subject": (
+            f"an individual subject of level {args.level}, seed {args.seed}"
+            if args.individual_subject
+            else f"the nominal (Table I) subject of level {args.level}"
+        ),
+        "twin_version": TWIN_VERSION,
+        "versions": package_versions(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
+    }

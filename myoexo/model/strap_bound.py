@@ -28,9 +28,9 @@ in the share of the exo's inertia, and the strap rings no more than its damping 
 
 The bound does not hold through an impact on the exo's own end stops
 (``exo_knee_range_deg``): the stop halts the lower exo and the strap must stop the shank's
-momentum, a torque of about ``omega * sqrt(k_strap * I_knee)`` at knee speed ``omega``
-(``impact_torque_nm``). A controller that slams the exo into its stop meets that physics,
-not a modelling artefact.
+momentum, a torque of about ``omega * sqrt(k_strap * I_knee)`` at knee speed ``omega``,
+scaled by the strap's damping (``impact_torque_nm``). A controller that slams the exo into
+its stop meets that physics, not a modelling artefact.
 
 The misalignment (knee angle minus exo hinge angle, ``info["misalignment_deg"]``) is bounded
 by the coupling's design: each sagittal cuff pin absorbs misalignment within its range
@@ -53,7 +53,12 @@ from myoexo.model.leg import KNEE_JOINT
 from myoexo.model.params import TwinParams
 from myoexo.model.posing import pose_twin
 
-__all__ = ["StrapBound", "kelvin_voigt_step_peak", "strap_bound"]
+__all__ = [
+    "StrapBound",
+    "kelvin_voigt_impact_peak",
+    "kelvin_voigt_step_peak",
+    "strap_bound",
+]
 
 #: Knee angles (deg) over which the leg's strongest knee torque is searched.
 _KNEE_ANGLES_DEG = tuple(range(0, 100, 5))
@@ -118,17 +123,20 @@ class StrapBound:
 
     def impact_torque_nm(self, knee_speed_rad_s: float) -> float:
         """The strap torque that stops a shank moving at *knee_speed_rad_s* against the exo's
-        end stop through the strap's stiffness, Nm (added to :attr:`torque_nm`)."""
-        return abs(knee_speed_rad_s) * math.sqrt(
-            self.pin_stiffness_nm_rad * self.knee_inertia_kg_m2
-        )
+        end stop through the strap's stiffness and damping, Nm (added to :attr:`torque_nm`):
+        ``omega sqrt(k I_knee)`` times the peak of a Kelvin-Voigt element's response to the
+        shank's impact at its damping ratio against ``I_knee``."""
+        k, inertia = self.pin_stiffness_nm_rad, self.knee_inertia_kg_m2
+        zeta = self.pin_damping_nm_s_rad / (2.0 * math.sqrt(k * inertia))
+        return abs(knee_speed_rad_s) * math.sqrt(k * inertia) * kelvin_voigt_impact_peak(zeta)
 
 
-def kelvin_voigt_step_peak(damping_ratio: float, periods: float = 6.0, steps: int = 6000) -> float:
-    """The peak of ``k x + c v`` over a unit step force on a unit mass held by a spring ``k``
-    and a damper ``c`` in parallel (``m = k = 1``, ``c = 2 zeta``), from rest: how much of a
-    force step a damped strap passes on at its worst (exact discretisation of the linear ODE
-    over *periods* undamped periods)."""
+def _kelvin_voigt_peak(
+    damping_ratio: float, force: float, speed: float, periods: float = 6.0, steps: int = 6000
+) -> float:
+    """The peak of ``k x + c v`` of a unit mass on a spring ``k = 1`` and a damper
+    ``c = 2 zeta`` in parallel, from ``x = 0``, ``v = speed``, pushed by a constant *force*
+    (exact discretisation of the linear ODE over *periods* undamped periods)."""
     from scipy.linalg import expm
 
     if not (math.isfinite(damping_ratio) and damping_ratio >= 0.0):
@@ -136,13 +144,26 @@ def kelvin_voigt_step_peak(damping_ratio: float, periods: float = 6.0, steps: in
     a = np.array([[0.0, 1.0], [-1.0, -2.0 * damping_ratio]])
     dt = periods * 2.0 * math.pi / steps
     phi = expm(a * dt)
-    gamma = np.linalg.solve(a, (phi - np.eye(2)) @ np.array([0.0, 1.0]))
-    state = np.zeros(2)
-    peak = 0.0
+    gamma = np.linalg.solve(a, (phi - np.eye(2)) @ np.array([0.0, force]))
+    state = np.array([0.0, speed])
+    peak = 2.0 * damping_ratio * speed
     for _ in range(steps):
         state = phi @ state + gamma
         peak = max(peak, float(state[0] + 2.0 * damping_ratio * state[1]))
     return peak
+
+
+def kelvin_voigt_step_peak(damping_ratio: float) -> float:
+    """The peak force a spring and a damper in parallel pass on when a unit step force pushes
+    a mass through them from rest, per unit of the step: how much of a force step a damped
+    strap passes on at its worst (2 undamped, falling towards 1 with damping)."""
+    return _kelvin_voigt_peak(damping_ratio, force=1.0, speed=0.0)
+
+
+def kelvin_voigt_impact_peak(damping_ratio: float) -> float:
+    """The peak force a spring ``k`` and a damper in parallel pass on when a mass ``m`` hits
+    them at speed ``v``, per unit of ``v sqrt(k m)`` (1 undamped)."""
+    return _kelvin_voigt_peak(damping_ratio, force=0.0, speed=1.0)
 
 
 def _diagonal_inertia(model: mujoco.MjModel, data: mujoco.MjData, joint: str) -> float:
