@@ -177,3 +177,44 @@ def test_delay_line_history_can_be_taken_and_restored():
     assert [line.push(10.0 + k, 0.0) for k in range(4)] == ahead
     with pytest.raises(ValueError, match="does not fit"):
         DelayLine(1).set_state(saved)
+
+
+def test_the_stage_installs_through_myosuite_3s_env_config() -> None:
+    """MyoSuite 3's own way to add a condition to one of its envs: ``make_env`` of an
+    ``EnvConfig`` whose ``features`` name the wrapper. The stage then drives the spastic
+    muscles of MyoSuite's walking leg exactly as the wrapper built by hand does."""
+    from myosuite.core.config import EnvConfig
+    from myosuite.core.registry import make_env
+    from myosuite.utils import gym
+
+    from myoexo.spasticity.wrapper import SpasticityWrapper
+
+    config = EnvConfig(
+        "myoLegWalk-v0", features=((SpasticityWrapper, {"level": 3, "reflex": "stretch"}),)
+    )
+    env = make_env(config)
+    by_hand = SpasticityWrapper(gym.make("myoLegWalk-v0"), level=3, reflex="stretch")
+    try:
+        assert isinstance(env, SpasticityWrapper) or any(
+            isinstance(w, SpasticityWrapper) for w in _wrappers(env)
+        )
+        model = env.unwrapped.model
+        ids = [model.actuator(n).id for n in (*SPASTIC_FLEXORS, *SPASTIC_EXTENSORS)]
+        env.reset(seed=0)
+        by_hand.reset(seed=0)
+        action = np.zeros(model.nu, np.float32)
+        for _ in range(5):
+            env.step(action)
+            by_hand.step(action)
+        ctrl = env.unwrapped.data.ctrl
+        np.testing.assert_array_equal(ctrl, by_hand.unwrapped.data.ctrl)
+        assert ctrl[ids].max() > 0.0  # the reflex drives the spastic muscles on its own
+    finally:
+        env.close()
+        by_hand.close()
+
+
+def _wrappers(env):
+    while hasattr(env, "env"):
+        yield env
+        env = env.env
