@@ -68,6 +68,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "torque vs settling per level: shaped PIDs, policies, the study's point, the frontier",
     ),
     "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
+    "strap-lag": (
+        "myoexo.studies.strap_lag",
+        "fit the knee's lag behind the exo encoder per unit of command (the encoder guard's)",
+    ),
     "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
     "seeds": (
         "myoexo.training.seeds",

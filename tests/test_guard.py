@@ -3,10 +3,12 @@ integral action toward it, within the motor's range."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from myoexo.control.guard import EXO_STRAP_LAG_DEG_PER_COMMAND, StallGuard, StallGuardConfig
+from myoexo.control.guard import StallGuard, StallGuardConfig, exo_strap_lag_deg_per_command
 from myoexo.control.policy import as_controller
 from myoexo.control.specs import build_controller, parse_controller_spec
 
@@ -115,7 +117,7 @@ def test_a_device_controller_gets_a_guard_on_the_encoder():
 
     pid_guard = build_controller(parse_controller_spec("guard:pid:feedback=exo"), _Env())
     assert pid_guard.config.feedback == "exo"
-    assert pid_guard.config.strap_lag_deg_per_command == EXO_STRAP_LAG_DEG_PER_COMMAND
+    assert pid_guard.config.strap_lag_deg_per_command == exo_strap_lag_deg_per_command()
     assert build_controller(parse_controller_spec("guard:pid"), _Env()).config.feedback == "knee"
 
 
@@ -162,7 +164,7 @@ def test_the_strap_lag_is_the_twins(level, command):
         env.close()
     assert abs(info["knee_vel_rad_s"]) < 0.01
     lag_deg = info["knee_angle_deg"] - info["exo_angle_deg"]
-    assert lag_deg == pytest.approx(-EXO_STRAP_LAG_DEG_PER_COMMAND * command, abs=0.6)
+    assert lag_deg == pytest.approx(-exo_strap_lag_deg_per_command() * command, abs=0.6)
 
 
 def test_a_guarded_policy_runs_on_its_policys_observation():
@@ -172,3 +174,28 @@ def test_a_guarded_policy_runs_on_its_policys_observation():
     student = load_shipped_policy("student_exo")
     assert controller_env_kwargs(StallGuard(student)) == controller_env_kwargs(student)
     assert controller_env_kwargs(StallGuard(student))["obs_preset"] == "exo"
+
+
+def test_the_strap_lag_is_fitted_data_with_provenance(tmp_path, monkeypatch, capsys):
+    """``myoexo strap-lag --write`` writes the fit the encoder guard reads; without the
+    file the guard names the command that writes it."""
+    from myoexo import cli
+    from myoexo.control.guard import STRAP_LAG_FIT, exo_guard
+    from myoexo.model import TWIN_VERSION
+    from myoexo.runtime import fits
+
+    shipped = fits.read_fit(STRAP_LAG_FIT)
+    assert shipped["provenance"]["twin_version"] == TWIN_VERSION
+    assert shipped["provenance"]["command"].startswith("myoexo strap-lag")
+    assert exo_guard().strap_lag_deg_per_command == shipped["result"]["lag_deg_per_command"]
+
+    monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
+    with pytest.raises(FileNotFoundError, match="--write"):
+        exo_guard()
+    assert cli.main(["strap-lag", "--subjects", "1", "--write"]) == 0
+    doc = json.loads((tmp_path / f"{STRAP_LAG_FIT}.json").read_text())
+    assert doc["provenance"]["root_seed"] == 3
+    assert 4.0 < doc["result"]["lag_deg_per_command"] < 10.0  # the straps' give, deg
+    assert exo_guard().strap_lag_deg_per_command == doc["result"]["lag_deg_per_command"]
+    assert cli.main(["strap-lag", "--seed", "0", "--subjects", "1"]) == 2  # the evaluation root
+    assert "evaluation root" in capsys.readouterr().err

@@ -15,6 +15,7 @@ from myoexo.control import ziegler_nichols as zn
 from myoexo.control.specs import parse_controller_spec, pid_config
 from myoexo.control.tuned import TUNED_PIDS, tuned_pid, tuned_pids_markdown
 from myoexo.model import TWIN_VERSION
+from myoexo.runtime import fits
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,7 +37,7 @@ def test_each_tuned_pid_is_its_file_with_provenance(name):
 
 
 def test_tune_pid_write_records_its_provenance(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(tuned, "fits_dir", lambda: tmp_path)
+    monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
     argv = ["tune-pid", "--feedback", "exo", "--rel-tol", "0.3", "--quiet", "--write", "mine"]
     assert cli.main(argv) == 0
     entry = tuned.TunedPID.from_file(tmp_path / "pid_tuned_mine.json")

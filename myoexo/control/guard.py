@@ -21,7 +21,7 @@ in the same direction) and the sum clipped to the motor's range. It reads the kn
 PID does (``info["measured_knee_angle_deg"]``, noisy and late on a perturbed twin, else
 ``info["knee_angle_deg"]``), so it needs what the wrapped full-state policy already needs; a
 controller that reads only the exoskeleton's sensors gets a guard on the exo encoder
-(``feedback="exo"``, :data:`EXO_GUARD`), the one angle it has. The encoder is not the knee:
+(``feedback="exo"``, :func:`exo_guard`), the one angle it has. The encoder is not the knee:
 the straps and cuffs give under the motor's torque, and a knee held by spastic muscles
 against 70-100 Nm stays 5-8 deg more flexed than the encoder reads, in proportion to the
 command (:data:`EXO_STRAP_LAG_DEG_PER_COMMAND`). An encoder guard that took the encoder's error
@@ -41,6 +41,7 @@ import numpy as np
 
 from myoexo.control.pid import FEEDBACK_KEYS, sensed_angle_deg
 from myoexo.control.protocol import Controller
+from myoexo.runtime.fits import read_fit
 
 
 @dataclass(frozen=True)
@@ -99,28 +100,42 @@ class StallGuardConfig:
                 )
 
 
-#: The twin's knee lag behind the exo encoder per unit of command at rest (deg): a least-
-#: squares line through the origin of (knee - encoder) against the applied command over
-#: 342,500 control steps after 3 s of ``guard:student_exo`` on subjects 0-999 of levels 2-3
-#: of root seed 3 (a root of its own: not the evaluation root 0); residual sd 0.019 deg, at
-#: most 0.21 deg, for commands from -0.67 to -1. On a perturbed twin the straps are 0.5-2x
-#: as stiff, so the lag is up to twice (or half) this.
-EXO_STRAP_LAG_DEG_PER_COMMAND = 7.535
+#: The package's fit of the straps' lag (:mod:`myoexo.runtime.fits`), written by
+#: ``myoexo strap-lag --write`` (:mod:`myoexo.studies.strap_lag`).
+STRAP_LAG_FIT = "strap_lag"
 
-#: The guard of a controller that reads only the exoskeleton's sensors (``guard:student_exo``):
-#: on the encoder, with the twin's strap lag, engaging at 12 deg of estimated knee error.
-#: Chosen on root seed 3 (levels 2-3, nominal; the subjects where the earlier encoder guard
-#: left ``student_exo`` more than 12 deg short, 75 at level 2 and 377 at level 3 of 1000,
-#: and 92 others): engaging at 17 deg their mean error was 13.4 / 13.6 deg (worst 16.8 /
-#: 16.8), at 12 deg 11.6 / 11.1 deg (worst 16.8 / 15.0) for an RMS interaction torque of
-#: 89.3 / 93.3 Nm instead of 90.5 / 89.9; on the other subjects the two ran alike. The student
-#: stops short of the PID more often than the full-state policy does, so its guard waits for
-#: less than the 17 deg that suits ``guard:sac``.
-EXO_GUARD = StallGuardConfig(
-    engage_error_deg=12.0,
-    feedback="exo",
-    strap_lag_deg_per_command=EXO_STRAP_LAG_DEG_PER_COMMAND,
-)
+#: The guard of a controller that reads only the exoskeleton's sensors (``guard:student_exo``),
+#: but for its strap lag (:func:`exo_guard` adds the fitted one): on the encoder, engaging at
+#: 12 deg of estimated knee error. Chosen on root seed 3 (levels 2-3, nominal; the subjects
+#: where the earlier encoder guard left ``student_exo`` more than 12 deg short, 75 at level 2
+#: and 377 at level 3 of 1000, and 92 others): engaging at 17 deg their mean error was 13.4 /
+#: 13.6 deg (worst 16.8 / 16.8), at 12 deg 11.6 / 11.1 deg (worst 16.8 / 15.0) for an RMS
+#: interaction torque of 89.3 / 93.3 Nm instead of 90.5 / 89.9; on the other subjects the two
+#: ran alike. The student stops short of the PID more often than the full-state policy does,
+#: so its guard waits for less than the 17 deg that suits ``guard:sac``.
+_EXO_GUARD_ENGAGE_DEG = 12.0
+
+
+def exo_strap_lag_deg_per_command() -> float:
+    """The twin's knee lag behind the exo encoder per unit of command at rest (deg): the
+    package's fit (``myoexo strap-lag``: a line through the origin of knee minus encoder
+    against constant commands held on subjects of levels 2-3 of a root of its own). On a
+    perturbed twin the straps are 0.5-2x as stiff, so the lag is up to twice (or half) this.
+
+    Raises:
+        FileNotFoundError: If the package holds no such fit.
+    """
+    return float(read_fit(STRAP_LAG_FIT)["result"]["lag_deg_per_command"])
+
+
+def exo_guard() -> StallGuardConfig:
+    """The guard of a controller that reads only the exoskeleton's sensors: on the encoder,
+    with the fitted strap lag (:func:`exo_strap_lag_deg_per_command`), engaging at 12 deg."""
+    return StallGuardConfig(
+        engage_error_deg=_EXO_GUARD_ENGAGE_DEG,
+        feedback="exo",
+        strap_lag_deg_per_command=exo_strap_lag_deg_per_command(),
+    )
 
 
 class StallIntegrator:

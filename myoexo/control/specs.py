@@ -318,14 +318,14 @@ def load_actor_file(path: str) -> Any:
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
     if spec.guard:
-        from myoexo.control.guard import EXO_GUARD, StallGuard, StallGuardConfig
+        from myoexo.control.guard import StallGuard, StallGuardConfig, exo_guard
 
         inner = build_controller(dataclasses.replace(spec, guard=False), env)
         reads_exo = getattr(inner, "obs_preset", None) == "exo" or (
             isinstance(inner, PID) and inner.config.feedback == "exo"
         )
         config = dataclasses.replace(
-            EXO_GUARD if reads_exo else StallGuardConfig(),
+            exo_guard() if reads_exo else StallGuardConfig(),
             control_period_s=float(env.unwrapped.dt),
         )
         return StallGuard(inner, config)

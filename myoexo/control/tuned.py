@@ -20,14 +20,13 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from myoexo.control.pid import PIDGains
+from myoexo.runtime import fits
 
-#: Where the tuned PIDs live in the package: ``pid_tuned_<name>.json``.
-FITS_PACKAGE_DIR = ("assets", "fits")
+#: The tuned PIDs are the package's fits ``pid_tuned_<name>`` (:mod:`myoexo.runtime.fits`).
 _PREFIX = "pid_tuned_"
 
 #: What each tuning is the fair baseline of (documentation; the numbers are in the files).
@@ -79,41 +78,22 @@ class TunedPID:
             ultimate_gain_per_rad=float(result["ultimate_gain_per_rad"]),
             ultimate_period_s=float(result["ultimate_period_s"]),
             gains=PIDGains(**result["zn_gains"]),
-            record="/".join((*FITS_PACKAGE_DIR, path.name)),
+            record="/".join((*fits.FITS_PACKAGE_DIR, path.name)),
             command=str(provenance["command"]),
             twin_version=int(provenance["twin_version"]),
             use=TUNED_PID_USES.get(name, ""),
         )
 
 
-def fits_dir() -> Path:
-    """The package's folder of fitted values."""
-    return Path(str(resources.files("myoexo").joinpath(*FITS_PACKAGE_DIR)))
-
-
-def tuned_pid_path(name: str) -> Path:
-    """Where the tuned PID *name* is written and read."""
-    return fits_dir() / f"{_PREFIX}{name}.json"
-
-
 def write_tuned_pid(name: str, result: dict[str, Any], provenance: dict[str, Any]) -> Path:
     """Write a tuner's *result* (``TuningResult.to_dict()``) with its *provenance* as the
     tuned PID *name*; returns the file."""
-    from myoexo.runtime.files import write_json_atomic
-
-    if not name.isidentifier():
-        raise ValueError(f"tuned PID name {name!r} must be a word (letters, digits, _)")
-    path = tuned_pid_path(name)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, {"result": result, "provenance": provenance}, indent=2)
-    return path
+    return fits.write_fit(f"{_PREFIX}{name}", result, provenance)
 
 
 def _load() -> dict[str, TunedPID]:
-    return {
-        t.name: t
-        for t in (TunedPID.from_file(p) for p in sorted(fits_dir().glob(f"{_PREFIX}*.json")))
-    }
+    files = sorted(fits.fits_dir().glob(f"{_PREFIX}*.json"))
+    return {t.name: t for t in (TunedPID.from_file(p) for p in files)}
 
 
 #: The tuned PIDs by name (``pid:tuned=NAME``), read from the package's files.

@@ -435,13 +435,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _provenance(args: argparse.Namespace) -> dict[str, Any]:
-    """What a ``--write`` file records of how it was made: the command (its options as
-    given, ``--out`` and ``--quiet`` left out), the twin version, the package versions and
-    the date."""
-    import datetime
-
+    """What a ``--write`` file records of how it was made (:func:`myoexo.runtime.fits
+    .provenance`): the command (its options as given, ``--out`` and ``--quiet`` left out),
+    the subject, the twin version, the package versions and the date."""
     from myoexo.model import TWIN_VERSION
-    from myoexo.runtime.files import package_versions
+    from myoexo.runtime.fits import provenance
 
     d = ZieglerNicholsSettings()
     parts = ["myoexo tune-pid"]
@@ -460,14 +458,9 @@ def _provenance(args: argparse.Namespace) -> dict[str, Any]:
     if args.rel_tol != d.rel_tol:
         parts.append(f"--rel-tol {args.rel_tol:g}")
     parts.append(f"--write {args.write}")
-    return {
-        "command": " ".join(parts),
-        "subject": (
-            f"an individual subject of level {args.level}, seed {args.seed}"
-            if args.individual_subject
-            else f"the nominal (Table I) subject of level {args.level}"
-        ),
-        "twin_version": TWIN_VERSION,
-        "versions": package_versions(),
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-    }
+    subject = (
+        f"an individual subject of level {args.level}, seed {args.seed}"
+        if args.individual_subject
+        else f"the nominal (Table I) subject of level {args.level}"
+    )
+    return provenance(" ".join(parts), TWIN_VERSION, subject=subject)
