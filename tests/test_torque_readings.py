@@ -61,6 +61,10 @@ def test_the_committed_comparison_is_its_episodes_table() -> None:
     for _, rec in table.iterrows():
         assert f"| {rec['reading']} | {rec['PID peak L0-3 (Nm)']} |" in text
     cuff = table.set_index("reading").loc["cuff"]
-    # the chosen reading meets the study's scale and its reduction in Nm
+    # the chosen reading is on the study's scale; on twin version 2 no reading matches the
+    # study's reductions with the policy trained on version 1 (docs/reference.md, section 5)
     assert cuff["PID peak on the study's scale"]
-    assert cuff["reduction in Nm within the study's ± SD"]
+    matches = table["reduction in Nm within the study's ± SD"].astype(bool) & table[
+        "levels 1-2 within 3 points of 10.6 %"
+    ].astype(bool)
+    assert not matches.any()

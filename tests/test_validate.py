@@ -45,15 +45,18 @@ def _measures(**overrides: dict[int, float]) -> dict:
         {
             "relaxation_index": [1.7, 1.4, 1.2, 1.0],
             "peak_velocity_rad_s": [3.9, 3.5, 3.0, 2.5],
+            "peak_velocity_deg_s": np.degrees([3.9, 3.5, 3.0, 2.5]),
+            "second_peak_velocity_rad_s": [3.1, 2.0, 1.0, 0.5],
+            "time_to_peak_velocity_s": [0.34, 0.3, 0.25, 0.22],
             "release_deg": [1.0, 2.0, 3.0, 4.0],
         },
         index=levels,
     )
     pid = {
-        0: PIDOutcome(0, 5, 0.0, 0.0, 12.0, 1.0),
-        1: PIDOutcome(1, 5, 0.1, 0.1, 3.0, 1.0),
-        2: PIDOutcome(2, 5, 6.0, 2.0, 0.0, 1.0),
-        3: PIDOutcome(3, 5, 9.5, 2.0, 0.0, 1.0),
+        0: PIDOutcome(0, 5, 0.0, 0.0, 12.0, 1.0, peak_misalignment_deg=7.0),
+        1: PIDOutcome(1, 5, 0.1, 0.1, 3.0, 1.0, peak_misalignment_deg=7.0),
+        2: PIDOutcome(2, 5, 6.0, 2.0, 0.0, 1.0, peak_misalignment_deg=7.0),
+        3: PIDOutcome(3, 5, 9.5, 2.0, 0.0, 1.0, peak_misalignment_deg=7.0),
     }
     out = {"tardieu": tardieu, "mas": mas, "pendulum": pendulum, "pid": pid}
     for key, values in overrides.items():
@@ -83,6 +86,8 @@ def test_every_row_passes_a_twin_that_behaves_as_published() -> None:
         ("pendulum_v_healthy", {"pendulum.peak_velocity_rad_s": {0: 5.28}}),
         ("pendulum_v_falls", {"pendulum.peak_velocity_rad_s": {2: 6.4}}),
         ("pendulum_release", {"pendulum.release_deg": {3: 12.8}}),
+        ("pendulum_v2_healthy", {"pendulum.second_peak_velocity_rad_s": {0: 0.91}}),
+        ("pendulum_t_white", {"pendulum.time_to_peak_velocity_s": {2: 0.4}}),
     ],
 )
 def test_each_row_misses_what_contradicts_its_observation(row: str, overrides: dict) -> None:
@@ -98,6 +103,8 @@ def test_pid_rows_hold_the_studys_table() -> None:
     scores = score(m)
     assert not scores["pid_l2"][1] and not scores["pid_l1"][1] and scores["pid_l3"][1]
     assert scores["pid_settles"][1]
+    m["pid"][3] = PIDOutcome(3, 5, 9.5, 2.0, 0.0, 1.0, peak_misalignment_deg=37.0)
+    assert not score(m)["pid_misalignment"][1]  # the exo 37 deg from the knee
     m["pid"][3] = PIDOutcome(3, 5, 9.5, 2.0, 0.0, 0.38)  # a sustained oscillation (clonus)
     assert not score(m)["pid_settles"][1] and score(m)["pid_l3"][1]
 
@@ -108,7 +115,7 @@ def test_the_joint_fits_objective_counts_rows_and_breaks_ties_towards_the_study(
     value, passed = objective(_measures())
     assert passed == len(ROWS) and len(ROWS) - 0.3 < value < len(ROWS) + 0.3
     off = _measures()
-    off["pid"][2] = PIDOutcome(2, 5, 7.5, 2.0, 0.0, 1.0)  # still within 1.5 deg: passes
+    off["pid"][2] = PIDOutcome(2, 5, 7.5, 2.0, 0.0, 1.0, peak_misalignment_deg=7.0)  # passes
     off_value, off_passed = objective(off)
     assert off_passed == passed and off_value < value  # but further from 6.3 deg
     with pytest.raises(ValueError, match="root"):

@@ -34,10 +34,11 @@ spastic reflexes"): the magnitude of the torque the shank strap transmits to the
 along its coupled motion (the strap weld's constraint force, :func:`myoexo.model
 .strap_knee_torque`). Of four readings compared on the paper's PID and the shipped policy
 (docs/reference.md section 5: also ``|exo| + |muscle|``, the signed sum of exo and muscle
-torques, and the exo torque alone), it is the one on the study's scale (PID peaks about
-105-120 Nm with a 100 Nm motor, mean reduction about 11 Nm against the study's 10.8). The
-others stay in ``info``: ``cuff_knee_torque_nm`` (signed), ``torque_abs_sum_nm``,
-``torque_signed_sum_nm``, ``exo_torque_nm``.
+torques, and the exo torque alone), it is what the exo applies to the leg, on the study's
+scale (the PID peaks at about 102 Nm with a 100 Nm motor; the torque the straps can pass on
+is bounded, :mod:`myoexo.model.strap_bound`). The others stay in ``info``:
+``cuff_knee_torque_nm`` (signed), ``torque_abs_sum_nm``, ``torque_signed_sum_nm``,
+``exo_torque_nm``; ``misalignment_deg`` is the knee angle less the exo hinge angle.
 """
 
 from __future__ import annotations

@@ -35,6 +35,8 @@ class PIDOutcome:
         settled_fraction: Fraction of subjects whose knee settled (2 % band).
         peak_exo_torque_nm: Mean over the subjects of the peak exo torque, Nm.
         settling_time_s: Median settling time of the settled subjects, s (NaN if none).
+        peak_misalignment_deg: The largest misalignment of the exo hinge from the knee over
+            the subjects' episodes, deg.
     """
 
     level: int
@@ -45,6 +47,7 @@ class PIDOutcome:
     settled_fraction: float
     peak_exo_torque_nm: float = math.nan
     settling_time_s: float = math.nan
+    peak_misalignment_deg: float = math.nan
 
 
 def pid_outcome(
@@ -84,6 +87,7 @@ def pid_outcome(
         settled_fraction=float(settled.mean()),
         peak_exo_torque_nm=float(np.mean([m.peak_exo_torque_nm for m in rows])),
         settling_time_s=float(np.median(settling[settled])) if settled.any() else math.nan,
+        peak_misalignment_deg=float(max(m.peak_misalignment_deg for m in rows)),
     )
 
 
