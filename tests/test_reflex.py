@@ -218,3 +218,43 @@ def _wrappers(env):
     while hasattr(env, "env"):
         yield env
         env = env.env
+
+
+@pytest.mark.parametrize("model", ["stretch", "tsrt"])
+def test_the_reflex_calibrations_are_fitted_data_with_provenance(model: str) -> None:
+    """The stretch and tsrt reflexes read their calibrations from the package's fits, which
+    record how they were fitted; the twin version they were fitted on (1) is stated."""
+    from myoexo.runtime.fits import read_fit
+    from myoexo.spasticity.reflex import STRETCH_FIT
+    from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRT_FIT
+
+    name, calibration = {
+        "stretch": (STRETCH_FIT, CALIBRATION),
+        "tsrt": (TSRT_FIT, TSRT_CALIBRATION),
+    }[model]
+    doc = read_fit(name)
+    assert type(calibration).from_dict(doc["result"]) == calibration
+    assert type(calibration).from_dict(calibration.to_dict()) == calibration
+    assert doc["provenance"]["command"].startswith(f"{calibration.note.split(':')[0]}")
+    assert doc["provenance"]["root_seed"] == calibration.root_seed == 2
+    assert doc["provenance"]["twin_version"] == 1
+
+
+@pytest.mark.slow
+def test_calibrate_write_makes_the_fit_the_packages(tmp_path, monkeypatch, capsys) -> None:
+    from myoexo import cli
+    from myoexo.model import TWIN_VERSION
+    from myoexo.runtime import fits
+    from myoexo.spasticity.reflex import STRETCH_FIT, StretchCalibration
+
+    monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
+    argv = ["calibrate", "--subjects", "2", "--verify-subjects", "2", "--extensor-gain", "0.5"]
+    assert cli.main([*argv, "--write"]) == 0
+    doc = fits.read_fit(STRETCH_FIT)
+    fitted = StretchCalibration.from_dict(doc["result"])
+    assert fitted.root_seed == 2 and set(fitted.levels) == {1, 2, 3}
+    assert 0.0 < fitted[2].flexor_threshold_shift_deg < 150.0
+    assert doc["provenance"]["twin_version"] == TWIN_VERSION
+    assert doc["provenance"]["command"].endswith("--seed 2 --write")
+    assert cli.main([*argv, "--reflex", "persistent", "--write"]) == 2
+    assert "chosen, not fitted" in capsys.readouterr().err

@@ -76,12 +76,15 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from myoexo.runtime.fits import read_fit
 from myoexo.spasticity.coefficients import angle_term, as_tensor, tensor_getter, velocity_term
 from myoexo.spasticity.delay import STRETCH_DELAY_S
 from myoexo.spasticity.registry import (
     Memory,
     MemorylessGroupReflex,
     ReflexModel,
+    calibration_from_dict,
+    calibration_to_dict,
     check_parameter,
     register_reflex,
 )
@@ -147,41 +150,40 @@ class StretchCalibration:
     def __getitem__(self, level: int) -> LevelCalibration:
         return self.levels.get(int(level), LevelCalibration())
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"levels": {"1": {...}, ...}, "note": ..., "root_seed": ...}``."""
+        return calibration_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> StretchCalibration:
+        """The calibration :meth:`to_dict` wrote."""
+        result: StretchCalibration = calibration_from_dict(cls, LevelCalibration, doc)
+        return result
+
 
 #: The stretch reflex with Table I read literally: unit gains, Table I's thresholds.
 UNCALIBRATED = StretchCalibration(note="Table I read literally (no fit)")
 
-#: Fitted with ``myoexo calibrate --subjects 40 --verify-subjects 200 --extensor-gain 0.5``
-#: (20 ms delay) on 40 subjects per level of the **calibration root** (root seed 2,
-#: :data:`myoexo.evaluation.config.CALIBRATION_ROOT_SEED`; 252 s on 2 shared cores). Fitted:
+#: The package's fit of the stretch reflex (:mod:`myoexo.runtime.fits`), written by
+#: ``myoexo calibrate --write`` (:mod:`myoexo.studies.calibrate`).
+STRETCH_FIT = "reflex_stretch"
+
+#: The stretch reflex's calibration: the package's fit :data:`STRETCH_FIT`, with its
+#: provenance. Fitted with ``myoexo calibrate --subjects 40 --verify-subjects 200
+#: --extensor-gain 0.5`` (20 ms delay) on 40 subjects per level of the **calibration root**
+#: (root seed 2, :data:`myoexo.evaluation.config.CALIBRATION_ROOT_SEED`), on twin version 1:
 #: the flexors' threshold shift of levels 2 and 3 (their Table I thresholds become 13.8 and
-#: 11.4 deg of flexion). The fit: the paper's PID ends 6.27 +- 2.63 / 9.32 +- 2.06 deg short
-#: at levels 2-3 on those 40 subjects (targets 6.3 / 9.3). Chosen, not fitted: the extensors'
-#: gain 0.5 at levels 1-3. With gain 1 the extensors' Table I tone (their window opens at
-#: 80 / 75 / 60 deg of flexion, and k = 0.2 / 0.1 keeps the velocity term near half at rest)
-#: held the relaxed seated shank at 75 / 63 / 49 deg instead of hanging near 86 deg, and
-#: helped the exo so much through a fast extension that the Tardieu and MAS resistance did not
-#: grow with the level; at 0.5 they rest near 80 deg. That choice makes the growth of the
-#: clinical resistance with the level tuned, not validated.
-#: The check, on 200 subjects per level of the **evaluation root** (root seed 0, not used by
-#: the fit): the PID ends 0.00 +- 0.00 / -0.00 +- 0.05 / 6.45 +- 3.03 / 8.97 +- 2.24 deg short
-#: at levels 0-3 (paper: overshoot, overshoot, 6.3, 9.3) after overshooting by
-#: 12.8 / 4.4 / 0.9 / 0.01 deg; every subject settles (docs/results/calibration).
-CALIBRATION = StretchCalibration(
-    levels=MappingProxyType(
-        {
-            1: LevelCalibration(extensor_gain=0.5),
-            2: LevelCalibration(extensor_gain=0.5, flexor_threshold_shift_deg=43.85),
-            3: LevelCalibration(extensor_gain=0.5, flexor_threshold_shift_deg=26.37),
-        }
-    ),
-    note=(
-        "myoexo calibrate --subjects 40 --verify-subjects 200 --delay 0.02 --extensor-gain 0.5 "
-        "--seed 2: fitted on root 2; check on root 0, PID final error L0 0.00 +- 0.00 deg, "
-        "L1 -0.00 +- 0.05 deg, L2 6.45 +- 3.03 deg, L3 8.97 +- 2.24 deg"
-    ),
-    root_seed=2,
-)
+#: 11.4 deg of flexion; the PID ends 6.27 +- 2.63 / 9.32 +- 2.06 deg short at levels 2-3 on
+#: those subjects, targets 6.3 / 9.3). Chosen, not fitted: the extensors' gain 0.5 at levels
+#: 1-3. With gain 1 the extensors' Table I tone (their window opens at 80 / 75 / 60 deg of
+#: flexion, and k = 0.2 / 0.1 keeps the velocity term near half at rest) held the relaxed
+#: seated shank at 75 / 63 / 49 deg instead of hanging near 86 deg, and helped the exo so much
+#: through a fast extension that the Tardieu and MAS resistance did not grow with the level;
+#: at 0.5 they rest near 80 deg. That choice makes the growth of the clinical resistance with
+#: the level tuned, not validated. Its note holds the check on the evaluation root; the
+#: validation table (docs/studies/validation) holds it on twin version 2: the PID ends 6.46 /
+#: 9.41 deg short at levels 2-3 on 20 subjects of the calibration root.
+CALIBRATION = StretchCalibration.from_dict(read_fit(STRETCH_FIT)["result"])
 
 
 def _zero_level_gains() -> Mapping[int, float]:

@@ -349,6 +349,30 @@ def reflex_label(reflex: str | ReflexModel) -> str:
     return name if name is not None else f"{type(reflex).__name__} (custom)"
 
 
+def calibration_to_dict(calibration: Any) -> dict[str, Any]:
+    """A per-level calibration (``levels``: level -> a dataclass of the level's parameters,
+    ``note``, ``root_seed``) as JSON-ready data: what a fit file holds."""
+    return {
+        "levels": {
+            str(lv): dataclasses.asdict(value) for lv, value in sorted(calibration.levels.items())
+        },
+        "note": calibration.note,
+        "root_seed": calibration.root_seed,
+    }
+
+
+def calibration_from_dict(cls: type[Any], level_cls: type[Any], doc: Mapping[str, Any]) -> Any:
+    """The calibration of class *cls* (levels of *level_cls*) that :func:`calibration_to_dict`
+    wrote."""
+    levels = {int(lv): level_cls(**value) for lv, value in doc["levels"].items()}
+    root = doc.get("root_seed")
+    return cls(
+        levels=MappingProxyType(levels),
+        note=str(doc.get("note", "")),
+        root_seed=None if root is None else int(root),
+    )
+
+
 def reflex_parameters(reflex: str | ReflexModel) -> dict[str, Any]:
     """The model's parameters as JSON-able data: ``{"class": ..., **fields}`` (nested
     dataclasses and mappings become dicts; level keys become strings)."""

@@ -51,9 +51,15 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, NamedTuple
 
+from myoexo.runtime.fits import read_fit
 from myoexo.spasticity.coefficients import as_tensor, tensor_getter
 from myoexo.spasticity.delay import STRETCH_DELAY_S
-from myoexo.spasticity.registry import MemorylessGroupReflex, check_parameter
+from myoexo.spasticity.registry import (
+    MemorylessGroupReflex,
+    calibration_from_dict,
+    calibration_to_dict,
+    check_parameter,
+)
 
 if TYPE_CHECKING:  # torch is imported lazily
     import torch
@@ -141,48 +147,27 @@ class TSRTCalibration:
     def __getitem__(self, level: int) -> TSRTLevel:
         return self.levels.get(int(level), TSRTLevel())
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"levels": {"1": {...}, ...}, "note": ..., "root_seed": ...}``."""
+        return calibration_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> TSRTCalibration:
+        """The calibration :meth:`to_dict` wrote."""
+        result: TSRTCalibration = calibration_from_dict(cls, TSRTLevel, doc)
+        return result
+
+
+#: The package's fit of the ``"tsrt"`` reflex (:mod:`myoexo.runtime.fits`), written by
+#: ``myoexo calibrate --reflex tsrt --write`` (:mod:`myoexo.studies.joint_fit`).
+TSRT_FIT = "reflex_tsrt"
 
 #: The ``"tsrt"`` reflex's per-level parameters, fitted jointly to the study's PID table and
-#: the clinical rows of the validation table on the calibration root
+#: the clinical rows of the validation table on the calibration root, on twin version 1
 #: (``myoexo calibrate --reflex tsrt``, :mod:`myoexo.studies.joint_fit`; the record and its
-#: check: ``docs/studies/calibration_tsrt``).
-TSRT_CALIBRATION = TSRTCalibration(
-    levels=MappingProxyType(
-        {
-            1: TSRTLevel(
-                flexor_threshold_shift_deg=32.0,
-                extensor_threshold_shift_deg=4.66,
-                dynamic_shift_deg=22.0,
-                velocity_slope_per_rad_s=16.3,
-                flexor_gain=0.3,
-                extensor_gain=0.45,
-            ),
-            2: TSRTLevel(
-                flexor_threshold_shift_deg=41.19,
-                extensor_threshold_shift_deg=19.75,
-                dynamic_shift_deg=11.0,
-                velocity_slope_per_rad_s=16.3,
-                flexor_gain=0.82,
-                extensor_gain=0.385,
-            ),
-            3: TSRTLevel(
-                flexor_threshold_shift_deg=1.59,
-                extensor_threshold_shift_deg=36.0,
-                dynamic_shift_deg=6.0,
-                velocity_slope_per_rad_s=16.3,
-                flexor_gain=1.03,
-                extensor_gain=0.365,
-            ),
-        }
-    ),
-    note=(
-        "myoexo calibrate --reflex tsrt --subjects 8 --clinical-subjects 3 --sweeps 2 "
-        "--verify-subjects 50 --seed 2: fitted on root 2 (12 of 18 validation rows in-sample); "
-        "check on root 0, PID final error L0 0.00 +- 0.00 deg, L1 0.12 +- 0.57 deg, "
-        "L2 7.02 +- 3.19 deg, L3 9.86 +- 4.45 deg"
-    ),
-    root_seed=2,
-)
+#: check: ``docs/studies/calibration_tsrt``): the package's fit :data:`TSRT_FIT`, with its
+#: provenance.
+TSRT_CALIBRATION = TSRTCalibration.from_dict(read_fit(TSRT_FIT)["result"])
 
 
 class TSRTConstants(NamedTuple):

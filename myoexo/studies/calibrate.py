@@ -16,9 +16,11 @@ are not fitted; they are checked (overshoot, final error < 1 deg). Gains stay 1 
 
     myoexo calibrate --subjects 40 --verify-subjects 200 --out results/calibration
 
-prints the fitted :class:`~myoexo.spasticity.reflex.StretchCalibration` (to paste into
-:data:`myoexo.spasticity.reflex.CALIBRATION`) and the verification table: PID final error and
-overshoot per level next to the paper's, on ``--verify-subjects`` subjects per level.
+prints the fitted :class:`~myoexo.spasticity.reflex.StretchCalibration` and the verification
+table: PID final error and overshoot per level next to the paper's, on ``--verify-subjects``
+subjects per level. ``--write`` makes the fit the package's
+(``myoexo/assets/fits/reflex_stretch.json``, with its provenance), which
+:data:`myoexo.spasticity.reflex.CALIBRATION` reads.
 
 ``--reflex persistent`` fits the ``"persistent"`` model instead
 (:func:`calibrate_persistent`): the after-discharge gains ``G`` of levels 2 and 3 by the
@@ -537,6 +539,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, default=None, help="folder for calibration.md and .csv (optional)"
     )
+    parser.add_argument(
+        "--write",
+        action="store_true",
+        help="stretch, tsrt: make the fit the package's (myoexo/assets/fits/reflex_<model>.json, "
+        "with its provenance), which the reflex model then reads",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -544,9 +552,15 @@ def run(args: argparse.Namespace) -> int:
     for name in ("subjects", "verify_subjects"):
         if getattr(args, name) < 2:
             raise ValueError(f"--{name.replace('_', '-')} = {getattr(args, name)} must be >= 2")
-    if getattr(args, "reflex", "stretch") == "persistent":
+    reflex = getattr(args, "reflex", "stretch")
+    if getattr(args, "write", False) and reflex == "persistent":
+        raise ValueError(
+            "--write with --reflex persistent: the persistent reflex's gains are chosen, not "
+            "fitted (myoexo.spasticity.reflex.PERSISTENT); --write takes stretch or tsrt"
+        )
+    if reflex == "persistent":
         return _run_persistent(args)
-    if getattr(args, "reflex", "stretch") == "tsrt":
+    if reflex == "tsrt":
         return _run_tsrt(args)
     result = calibrate(
         args.subjects,
@@ -555,7 +569,27 @@ def run(args: argparse.Namespace) -> int:
         extensor_gain=args.extensor_gain,
         root_seed=args.seed,
     )
-    return _report("stretch", result.calibration.note, "CALIBRATION", result, args.out)
+    code = _report("stretch", result.calibration.note, "", result, args.out)
+    if getattr(args, "write", False):
+        from myoexo.spasticity.reflex import STRETCH_FIT
+
+        _write_calibration(STRETCH_FIT, result.calibration, result.fit_root_seed)
+    return code
+
+
+def _write_calibration(name: str, calibration: Any, root_seed: int) -> None:
+    """Make a reflex model's fitted *calibration* the package's fit *name*, with its
+    provenance (the command is the calibration note's, which names every option)."""
+    from myoexo.model import TWIN_VERSION
+    from myoexo.runtime.fits import provenance, write_fit
+
+    command = calibration.note.split(":")[0]
+    path = write_fit(
+        name,
+        calibration.to_dict(),
+        provenance(f"{command} --write", TWIN_VERSION, root_seed=root_seed),
+    )
+    print(f"written: {path}")
 
 
 def fit_table(result: Any) -> Any:
@@ -580,9 +614,14 @@ def _report(model: str, note: str, constant: str, result: Any, out: Path | None)
     fit's own numbers on the calibration root, labelled as the fit, then the check on the
     evaluation root."""
     table = result.table()
+    where = (
+        f"in myoexo.spasticity.reflex.{constant}"
+        if constant
+        else "the package's with --write: myoexo/assets/fits/reflex_stretch.json"
+    )
     text = (
         f"# Calibration of the {model} reflex\n\n{note}\n\n"
-        f"Fitted values (paste into myoexo.spasticity.reflex.{constant}):\n\n```python\n"
+        f"Fitted values ({where}):\n\n```python\n"
         f"{result.snippet()}\n```\n\n"
         f"**The fit** (in-sample: the subjects of root {result.fit_root_seed} the values were "
         f"fitted on):\n\n{fit_table(result).to_markdown(index=False)}\n\n"
@@ -631,4 +670,8 @@ def _run_tsrt(args: argparse.Namespace) -> int:
         from myoexo.runtime.files import write_study_files
 
         write_study_files(args.out, {"calibration.md": text})
+    if getattr(args, "write", False):
+        from myoexo.spasticity.tsrt import TSRT_FIT
+
+        _write_calibration(TSRT_FIT, result.calibration, result.fit_root_seed)
     return 0

@@ -97,7 +97,8 @@ class JointFitResult:
     check_root_seed: int = EVALUATION_ROOT_SEED
 
     def snippet(self) -> str:
-        """The fitted levels as Python, for :data:`myoexo.spasticity.tsrt.TSRT_CALIBRATION`."""
+        """The fitted levels as Python (what :data:`myoexo.spasticity.tsrt.TSRT_CALIBRATION`
+        reads from the package's fit once it is written with ``--write``)."""
         lines = ["{"]
         for level, c in sorted(self.calibration.levels.items()):
             fields = ", ".join(f"{f.name}={getattr(c, f.name):.4g}" for f in dataclasses.fields(c))
@@ -113,7 +114,7 @@ class JointFitResult:
             "",
             self.calibration.note,
             "",
-            "Fitted values (paste into myoexo.spasticity.tsrt.TSRT_CALIBRATION):",
+            "Fitted values (the package's with --write: myoexo/assets/fits/reflex_tsrt.json):",
             "",
             "```python",
             self.snippet(),
