@@ -88,13 +88,13 @@ def test_torch_twin_matches_and_differentiates() -> None:
 
 def test_delay_line_returns_the_state_delay_steps_ago() -> None:
     line = DelayLine(3)
-    out = [line.push(float(i), -float(i)) for i in range(8)]
+    out = [line.push((float(i), -float(i))) for i in range(8)]
     # held at the first sample until 3 steps of history exist, then 3 steps late
     assert [o[0] for o in out] == [0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0]
     assert out[-1] == (4.0, -4.0)
     line.clear()
-    assert line.push(9.0, 1.0) == (9.0, 1.0)
-    assert DelayLine(0).push(5.0, 2.0) == (5.0, 2.0)
+    assert line.push((9.0, 1.0)) == (9.0, 1.0)
+    assert DelayLine(0).push((5.0, 2.0)) == (5.0, 2.0)
     with pytest.raises(ValueError):
         DelayLine(-1)
 
@@ -170,11 +170,11 @@ def test_delay_line_history_can_be_taken_and_restored():
 
     line = DelayLine(2)
     for k in range(3):
-        line.push(float(k), -float(k))
+        line.push((float(k), -float(k)))
     saved = line.state()
-    ahead = [line.push(10.0 + k, 0.0) for k in range(4)]
+    ahead = [line.push((10.0 + k, 0.0)) for k in range(4)]
     line.set_state(saved)
-    assert [line.push(10.0 + k, 0.0) for k in range(4)] == ahead
+    assert [line.push((10.0 + k, 0.0)) for k in range(4)] == ahead
     with pytest.raises(ValueError, match="does not fit"):
         DelayLine(1).set_state(saved)
 

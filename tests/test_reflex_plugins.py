@@ -221,3 +221,81 @@ def test_a_user_model_reaches_the_training_and_distillation_envs(velocity_reflex
         stage = pool.get(2, perturbed).unwrapped.spasticity
         assert stage.reflex is get_reflex("velocity_example")
     pool.close()
+
+
+@pytest.fixture(scope="module")
+def spindle_reflex():
+    """The docs' example of a model on the muscles' own state (it registers itself)."""
+    sys.path.insert(0, str(EXAMPLES))
+    try:
+        import spindle_reflex
+
+        yield spindle_reflex
+    finally:
+        sys.path.remove(str(EXAMPLES))
+        _REGISTRY.pop("spindle_example", None)
+
+
+def test_the_sensory_record_is_mujocos_muscle_state():
+    """Normalised fibre length and lengthening speed by MuJoCo's own muscle normalisation;
+    knee extension lengthens the hamstrings and gastrocnemii and shortens the quadriceps."""
+    import gymnasium as gym
+
+    import myoexo  # noqa: F401
+
+    env = gym.make("MyoExoKnee-v0")
+    try:
+        base = env.unwrapped
+        stage = base.spasticity
+        env.reset(seed=0)
+        env.step(np.array([-1.0], np.float32))
+        records = []
+        for _ in range(10):  # a fast extension
+            env.step(np.array([-1.0], np.float32))
+            records.append(stage._sensors.read(base.data, 0.0, 0.0))
+    finally:
+        env.close()
+    r = records[-1]
+    nf = r.n_flexors
+    assert nf == len(stage.flexors) and len(r.fibre_length) == len(stage.muscles)
+    assert ((r.fibre_length > 0.3) & (r.fibre_length < 2.0)).all()
+    assert (r.lengthening_speed[:nf] > 0.0).all()  # the paper's flexors: stretched
+    quadriceps = [i for i, m in enumerate(stage.muscles) if m.startswith(("vas", "recfem"))]
+    assert len(quadriceps) == 4 and (r.lengthening_speed[quadriceps] < 0.0).all()
+    assert (r.force_n >= 0.0).all()
+    # MuJoCo's own normalisation: at a range's ends the normalised length is the range's
+    model = base.model
+    ids = stage.actuator_ids
+    lr, rng = model.actuator_lengthrange[ids], model.actuator_gainprm[ids, 0:2]
+    sensors = stage._sensors
+    np.testing.assert_allclose(lr[:, 0] / sensors.optimal_length_m + sensors._offset, rng[:, 0])
+    np.testing.assert_allclose(lr[:, 1] / sensors.optimal_length_m + sensors._offset, rng[:, 1])
+
+
+def test_a_model_on_the_muscles_own_state_runs_as_a_plug_in(spindle_reflex):
+    """Written on the sensory record: one excitation per muscle, from the delayed record."""
+    import gymnasium as gym
+
+    import myoexo  # noqa: F401
+
+    model = get_reflex("spindle_example")
+    env = gym.make("MyoExoKnee-v2", reflex="spindle_example")
+    try:
+        stage = env.unwrapped.spasticity
+        assert stage.reflex is model
+        env.reset(seed=0)
+        quadriceps = [i for i, m in enumerate(stage.muscles) if m.startswith(("vas", "recfem"))]
+        flex, quad = [], []
+        for _ in range(40):  # a fast extension: the stretched muscles answer, each its own
+            env.step(np.array([-1.0], np.float32))
+            flex.append(stage.last_flexor_excitation)
+            quad.append(stage.last_excitations[quadriceps].max())
+        assert stage.delay_steps == 3  # 30 ms at 100 Hz
+        assert max(flex) > 0.1 and max(quad) < 0.01
+        # the excitation is the model's of the record delay_steps old
+        record = stage.delay_line.state()[0]
+        assert all(r is not None for r in record)
+    finally:
+        env.close()
+    with pytest.raises(NotImplementedError, match="excite"):
+        model.step(None, (), 0.0, 0.0)

@@ -29,13 +29,16 @@ The package, one module per part (each name is re-exported here):
   :func:`sc_velocity`, :func:`sc_total` (numpy, vectorized) and their torch twins (autograd
   through the inputs and every parameter);
 * :mod:`~myoexo.spasticity.registry`: the plug-in protocol of a reflex model
-  (:class:`ReflexModel`: a frozen dataclass of its parameters, a numpy step, its torch twin
-  and its memory) and the registry (:func:`register_reflex`, :func:`get_reflex`,
-  :func:`reflex_names`);
+  (:class:`ReflexModel`: a frozen dataclass of its parameters, its step on a sensory record,
+  or on the knee state with its torch twin, and its memory) and the registry
+  (:func:`register_reflex`, :func:`get_reflex`, :func:`reflex_names`);
+* :mod:`~myoexo.spasticity.sensory`: :class:`SensoryRecord`, what a reflex senses (the knee
+  state and each spastic muscle's normalised fibre length, lengthening speed and force), and
+  :class:`MuscleSensors`, which reads it from MuJoCo's muscle state;
 * :mod:`~myoexo.spasticity.reflex`: the built-in models (``"stretch"``, ``"uniform"``,
   ``"persistent"``), their calibration data (:data:`CALIBRATION`, :data:`PERSISTENT`) and
   their torch twins;
-  :mod:`~myoexo.spasticity.delay`: the transmission delay line;
+* :mod:`~myoexo.spasticity.delay`: the transmission delay line (of sensory records);
 * :mod:`~myoexo.spasticity.stage`: :class:`SpasticityStage`, the reflex as a stage of
   MyoSuite's muscle-command pipeline (:mod:`myosuite.envs.muscle_stages`), and
   :class:`StageHost`, the smallest host it runs on;
@@ -110,6 +113,7 @@ from myoexo.spasticity.registry import (
     register_reflex,
     resolve_reflex,
 )
+from myoexo.spasticity.sensory import MuscleSensors, SensoryRecord
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
 from myoexo.spasticity.wrapper import SpasticityWrapper
 
@@ -132,9 +136,11 @@ __all__ = [
     "VALID_LEVELS",
     "DelayLine",
     "LevelCalibration",
+    "MuscleSensors",
     "PersistentParams",
     "PersistentReflex",
     "ReflexModel",
+    "SensoryRecord",
     "SpasticityParams",
     "SpasticityStage",
     "SpasticityWrapper",

@@ -1,6 +1,8 @@
-"""The reflex's transmission delay: a ring buffer of past knee states."""
+"""The reflex's transmission delay: a ring buffer of past sensory records."""
 
 from __future__ import annotations
+
+from typing import Any
 
 #: Transmission delay of the stretch reflex, s. 20 ms is SCONE's knee reflex delay; the
 #: 30 ms of Falisse et al. 2018 and SpasticMyoElbow drove the paper's PID at level 1
@@ -10,12 +12,12 @@ STRETCH_DELAY_S = 0.02
 
 
 class DelayLine:
-    """Fixed-size ring buffer of the knee state, read ``delay_steps`` samples late.
+    """Fixed-size ring buffer of what the reflex senses, read ``delay_steps`` samples late.
 
-    ``push(theta_deg, vel_rad_s)`` stores the present sample and returns the one
-    ``delay_steps`` pushes ago (before enough history exists: the oldest sample, i.e. the
-    state is held at its start value). Two preallocated lists of floats (scalar access is
-    faster on lists than on numpy arrays); no allocation per step.
+    ``push(sample)`` stores the present sample (a :class:`~myoexo.spasticity.sensory
+    .SensoryRecord`, or any value) and returns the one ``delay_steps`` pushes ago (before
+    enough history exists: the oldest sample, i.e. the state is held at its start value). One
+    preallocated list; no allocation per step.
     """
 
     def __init__(self, delay_steps: int) -> None:
@@ -23,35 +25,32 @@ class DelayLine:
             raise ValueError(f"delay_steps = {delay_steps} must be >= 0")
         self.delay_steps = int(delay_steps)
         self._size = self.delay_steps + 1
-        self._theta = [0.0] * self._size
-        self._vel = [0.0] * self._size
+        self._samples: list[Any] = [None] * self._size
         self._count = 0
 
     def clear(self) -> None:
         """Forget the history (start of an episode)."""
         self._count = 0
 
-    def state(self) -> tuple[tuple[float, ...], tuple[float, ...], int]:
-        """The whole history, for :meth:`set_state` (e.g. to replay from here in a planner)."""
-        return tuple(self._theta), tuple(self._vel), self._count
+    def state(self) -> tuple[tuple[Any, ...], int]:
+        """The whole history, for :meth:`set_state` (e.g. to replay from here in a planner).
+        The samples are not copied: a pushed sample is never changed in place."""
+        return tuple(self._samples), self._count
 
-    def set_state(self, state: tuple[tuple[float, ...], tuple[float, ...], int]) -> None:
+    def set_state(self, state: tuple[tuple[Any, ...], int]) -> None:
         """Restore a history taken by :meth:`state` of a line of the same delay."""
-        theta, vel, count = state
-        if len(theta) != self._size or len(vel) != self._size:
+        samples, count = state
+        if len(samples) != self._size:
             raise ValueError(
-                f"a history of {len(theta)} samples does not fit a line of {self._size}"
+                f"a history of {len(samples)} samples does not fit a line of {self._size}"
             )
-        self._theta[:], self._vel[:], self._count = theta, vel, int(count)
+        self._samples[:], self._count = samples, int(count)
 
-    def push(self, theta_deg: float, vel_rad_s: float) -> tuple[float, float]:
-        """Store the present state; return the delayed one ``(theta_deg, vel_rad_s)``."""
+    def push(self, sample: Any) -> Any:
+        """Store the present sample; return the delayed one."""
         n = self._size
         count = self._count
-        i = count % n
-        self._theta[i] = theta_deg
-        self._vel[i] = vel_rad_s
+        self._samples[count % n] = sample
         count += 1
         self._count = count
-        j = (count - n) % n if count >= n else 0
-        return self._theta[j], self._vel[j]
+        return self._samples[(count - n) % n if count >= n else 0]

@@ -5,9 +5,12 @@ subclasses :class:`ReflexModel` and answers four questions:
 
 * :meth:`~ReflexModel.subject_constants`: what the per-step maths needs of one subject
   (computed once per subject, at reset);
-* :meth:`~ReflexModel.step`: the numpy step, the excitation ``(flexors, extensors)`` added
-  to the two spastic muscle groups at one (delayed) knee state, and the model's next
-  memory;
+* :meth:`~ReflexModel.excite`: one excitation per spastic muscle from a (delayed)
+  :class:`~myoexo.spasticity.sensory.SensoryRecord` (the knee's state and each muscle's own
+  normalised fibre length, lengthening speed and force), and the model's next memory. A
+  model of two muscle groups driven by the knee state implements :meth:`~ReflexModel.step`
+  instead: the excitation ``(flexors, extensors)`` at one knee state, which the default
+  :meth:`~ReflexModel.excite` gives every muscle of each group;
 * :meth:`~ReflexModel.step_torch`: its torch twin, differentiable in the knee state and in
   the subject's parameters;
 * :meth:`~ReflexModel.initial_memory`: the memory a new motion starts with (a tuple of
@@ -16,8 +19,8 @@ subclasses :class:`ReflexModel` and answers four questions:
   model without memory).
 
 The :class:`~myoexo.spasticity.stage.SpasticityStage` only calls these: it holds the
-transmission delay line (``delay_s``, a field every model has) and the memory, and writes
-the excitations into MyoSuite's ``ctrl``. A model is registered under a name with
+transmission delay line of sensory records (``delay_s``, a field every model has) and the
+memory, and writes the excitations into MyoSuite's ``ctrl``. A model is registered under a name with
 :func:`register_reflex` and found with :func:`get_reflex`; every place that takes a reflex
 (``gymnasium.make(..., reflex=...)``, :class:`~myoexo.spasticity.SpasticityWrapper`, the
 CLI's ``--reflex``/``--set reflex=``, the clinical tests) takes a registered name or a model
@@ -36,7 +39,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
@@ -47,6 +50,7 @@ if TYPE_CHECKING:  # torch is imported lazily
     import torch
 
     from myoexo.spasticity.levels import SpasticityParams
+    from myoexo.spasticity.sensory import SensoryRecord
 
 #: The memory of a reflex model: a tuple of floats (``()``: none).
 Memory = tuple[float, ...]
@@ -69,10 +73,11 @@ class ReflexModel(abc.ABC):
     """Base of every reflex model: a frozen dataclass of the model's parameters.
 
     Subclasses add their parameters as dataclass fields (with defaults and units in their
-    names) and implement :meth:`subject_constants`, :meth:`step` and :meth:`step_torch`;
-    a model with a memory also overrides :meth:`initial_memory`, and one with an individual
-    draw of its own :meth:`draw_individual`. Instances are values: equal parameters, equal
-    models; ``dataclasses.replace(model, ...)`` gives a variant.
+    names) and implement :meth:`subject_constants` and either :meth:`excite` (a model on the
+    muscles' own state) or :meth:`step` and :meth:`step_torch` (a model of two groups on the
+    knee state); a model with a memory also overrides :meth:`initial_memory`, and one with
+    an individual draw of its own :meth:`draw_individual`. Instances are values: equal
+    parameters, equal models; ``dataclasses.replace(model, ...)`` gives a variant.
 
     Attributes:
         delay_s: Transmission delay of the knee state the reflex reads, s (rounded to whole
@@ -123,11 +128,33 @@ class ReflexModel(abc.ABC):
         """The memory a new motion starts with (default: none)."""
         return ()
 
-    @abc.abstractmethod
+    def excite(
+        self, constants: Any, memory: Memory, record: SensoryRecord
+    ) -> tuple[Sequence[float], Memory]:
+        """One control step: the excitation added to each spastic muscle (flexors first, the
+        record's order; fractions of the excitation range, before the clip to ``[0, 1]``)
+        and the memory after the step.
+
+        The default gives each group :meth:`step`'s excitation at the record's knee state;
+        a model on the muscles' own state overrides this (and need not implement
+        :meth:`step`).
+
+        Args:
+            constants: What :meth:`subject_constants` returned.
+            memory: The memory before the step.
+            record: What the reflex senses, delayed by the transmission delay.
+        """
+        flex, ext, memory = self.step(
+            constants, memory, record.knee_angle_deg, record.knee_vel_rad_s
+        )
+        n, nf = len(record.fibre_length), record.n_flexors
+        return (flex,) * nf + (ext,) * (n - nf), memory
+
     def step(
         self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
     ) -> tuple[float, float, Memory]:
-        """One control step: ``(flexor, extensor, next_memory)``.
+        """One control step of a two-group model on the knee state:
+        ``(flexor, extensor, next_memory)``.
 
         Args:
             constants: What :meth:`subject_constants` returned.
@@ -138,14 +165,19 @@ class ReflexModel(abc.ABC):
         Returns:
             The excitation added to each flexor and to each extensor (fractions of the
             excitation range, before the clip to ``[0, 1]``) and the memory after the step.
+
+        Raises:
+            NotImplementedError: For a model that implements :meth:`excite` only.
         """
+        raise NotImplementedError(
+            f"{type(self).__name__} reads the muscles' own state: call excite with a SensoryRecord"
+        )
 
     def sc_total(self, flexor: float, extensor: float) -> float:
         """The scalar the env reports as ``sc_total`` for one step's excitations (default:
         their sum; a model whose groups share one excitation reports that one)."""
         return flexor + extensor
 
-    @abc.abstractmethod
     def step_torch(
         self,
         level: int,
@@ -159,7 +191,13 @@ class ReflexModel(abc.ABC):
         """Torch twin of :meth:`step`: differentiable in the knee state, the memory and every
         subject parameter given as a tensor (*subject* maps
         :class:`~myoexo.spasticity.SpasticityParams` field names to tensors or floats; the
-        model's own parameters are its fields)."""
+        model's own parameters are its fields).
+
+        Raises:
+            NotImplementedError: For a model without a torch twin (the fits that need
+                gradients, ``myoexo calibrate``, cannot fit it).
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no torch twin of its step")
 
 
 class MemorylessGroupReflex(ReflexModel):

@@ -31,11 +31,12 @@ from myoexo.spasticity.levels import (
 )
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import Memory, ReflexModel, reflex_label, resolve_reflex
+from myoexo.spasticity.sensory import MuscleSensors
 
 #: What :meth:`SpasticityStage.history_state` returns: the delay line's state and the reflex
 #: model's memory (e.g. the after-discharge ``(r,)`` of ``"persistent"``; ``()`` for the
 #: models without one).
-HistoryState = tuple[tuple[tuple[float, ...], tuple[float, ...], int], Memory]
+HistoryState = tuple[tuple[tuple[Any, ...], int], Memory]
 
 #: Name of the stage in MyoSuite's muscle-command pipeline.
 STAGE_NAME = "spasticity"
@@ -189,6 +190,8 @@ class SpasticityStage:
         new motion starts)."""
         self._delay.clear()
         self.memory = self.reflex.initial_memory()
+        if self._model is not None:
+            self._exc[:] = 0.0
         self.last_sc_total = 0.0
         self.last_flexor_excitation = 0.0
         self.last_extensor_excitation = 0.0
@@ -223,6 +226,9 @@ class SpasticityStage:
         self._dof_adr = int(model.jnt_dofadr[jid])
         self._act_ids = np.asarray(ids, dtype=np.intp)
         self._n_flex = len(self.flexors)
+        self._sensors = MuscleSensors(model, self._act_ids, self._n_flex)
+        # a two-group model on the knee state: its step, written into each group directly
+        self._groups = type(self.reflex).excite is ReflexModel.excite
         self._nu = int(model.nu)
         self._exc = np.empty(len(ids))  # the excitation added to each driven muscle
         self._ones = np.ones(len(ids))
@@ -260,6 +266,14 @@ class SpasticityStage:
         delay, memory = state
         self._delay.set_state(delay)
         self.memory = tuple(memory)
+
+    @property
+    def last_excitations(self) -> np.ndarray:
+        """The reflex excitation added to each driven muscle at the last step (a copy;
+        :attr:`muscles`' order, before the clip to ``[0, 1]``; zeros before any step)."""
+        if self._model is None:
+            return np.zeros(len(self.muscles))
+        return self._exc.copy()
 
     @property
     def delay_line(self) -> DelayLine:
@@ -310,20 +324,27 @@ class SpasticityStage:
         views = self._data_views
         if views is None or views[0] is not data:  # its qpos/qvel views, looked up once
             views = self._data_views = (data, data.qpos, data.qvel)
-        theta_deg, vel_rad_s = self._delay.push(
-            views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
+        record = self._delay.push(
+            self._sensors.read(
+                data, views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
+            )
         )
+        theta_deg, vel_rad_s = record.knee_angle_deg, record.knee_vel_rad_s
         if not (math.isfinite(theta_deg) and math.isfinite(vel_rad_s)):
             raise ValueError(
                 f"Knee state must be finite, got theta_deg={theta_deg!r}, vel_rad_s={vel_rad_s!r}."
             )
         reflex = self.reflex
-        flex, ext, self.memory = reflex.step(self.constants, self.memory, theta_deg, vel_rad_s)
         ids = self._act_ids
         exc = self._exc  # preallocated: array-array operations, no scalar broadcasting
         nf = self._n_flex
-        exc[:nf] = flex
-        exc[nf:] = ext
+        if self._groups:
+            flex, ext, self.memory = reflex.step(self.constants, self.memory, theta_deg, vel_rad_s)
+            exc[:nf] = flex
+            exc[nf:] = ext
+        else:
+            exc[:], self.memory = reflex.excite(self.constants, self.memory, record)
+            flex, ext = float(exc[:nf].mean()), float(exc[nf:].mean())
         u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
         u += exc
         np.minimum(u, self._ones, out=u)
@@ -350,6 +371,8 @@ class SpasticityStage:
             "_act_ids",
             "_nu",
             "_n_flex",
+            "_sensors",
+            "_groups",
             "_data_views",
         ):
             state.pop(key, None)
