@@ -125,20 +125,21 @@ class EqualityJointTorque:
             raise ValueError(f"equality {equality!r} has an unsupported type")
         self._start = sum(self._ROWS.get(int(model.eq_type[e]), 0) for e in range(eid))
         self._dofs = joint.dofs
+        # a plain int: comparing a numpy value with MuJoCo's enum costs ~9 us per call
+        self._equality_type = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
 
     def rows(self, data: mujoco.MjData) -> slice:
         """The equality's constraint rows in *data* (an empty slice if it is inactive)."""
         start, stop = self._start, self._start + self._rows
         if (
             stop <= data.nefc
-            and data.efc_id[start] == self.equality_id
-            and data.efc_type[start] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+            and data.efc_id.item(start) == self.equality_id
+            and data.efc_type.item(start) == self._equality_type
         ):
             return slice(start, stop)
         n = data.nefc
         found = np.flatnonzero(
-            (data.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-            & (data.efc_id[:n] == self.equality_id)
+            (data.efc_type[:n] == self._equality_type) & (data.efc_id[:n] == self.equality_id)
         )
         return slice(int(found[0]), int(found[-1]) + 1) if found.size else slice(0, 0)
 
