@@ -200,7 +200,5 @@ def test_env_state_is_created_in_init(kwargs):
     assert set(vars(env)) - {"_np_random", "_np_random_seed"} == before
     assert env.obs_layout.obs_keys == tuple(env.obs_keys)
     assert env.coupling_joints == env.obs_layout.coupling_joints
-    # the addresses the other controllers read (myoexo.control.oracle)
-    assert env._knee_qadr == env.model.joint("knee_angle_r").qposadr[0]
-    assert env._knee_dadr == env.model.joint("knee_angle_r").dofadr[0]
-    assert env._exo_act == env.model.actuator("exo_motor").id
+    assert env.obs_layout.knee_qadr == env.model.joint("knee_angle_r").qposadr[0]
+    assert env.obs_layout.knee_dadr == env.model.joint("knee_angle_r").dofadr[0]

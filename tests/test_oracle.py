@@ -23,12 +23,12 @@ def test_planning_leaves_the_env_untouched_and_is_deterministic():
     for _ in range(5):
         env.step(np.array([-1.0], np.float32))
     qpos, qvel, t = base.data.qpos.copy(), base.data.qvel.copy(), base.data.time
-    delay = list(base.spasticity._delay._theta)
+    delay = base.spasticity.history_state()
     u = oracle.act(None, {})
     assert -1.0 <= u[0] <= 1.0 and oracle.plans == 1
     np.testing.assert_array_equal(base.data.qpos, qpos)
     np.testing.assert_array_equal(base.data.qvel, qvel)
-    assert base.data.time == t and list(base.spasticity._delay._theta) == delay
+    assert base.data.time == t and base.spasticity.history_state() == delay
     a = run_episode(env, OracleMPC.from_env(env, **FAST), seed=5)
     b = run_episode(env, OracleMPC.from_env(env, **FAST), seed=5)
     np.testing.assert_array_equal(a.signals["knee_angle_deg"], b.signals["knee_angle_deg"])

@@ -43,7 +43,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from myoexo.model import strap_knee_torque
+from myoexo.model import EXO_ACTUATOR, KNEE_JOINT, strap_knee_torque
 from myoexo.spasticity.stage import SpasticityStage, StageHost
 
 #: Scale of the interaction torque in the cost (Nm): the motor's peak torque.
@@ -154,9 +154,11 @@ class OracleMPC:
         self._data = mujoco.MjData(e.model)
         self._host = StageHost(e.model, self._data, e.dt)
         self._frame_skip = int(e.frame_skip)
-        self._exo_act = int(e._exo_act)
-        self._knee_qadr = int(e._knee_qadr)
-        self._knee_dadr = int(e._knee_dadr)
+        # the twin's named parts, looked up by their names in the model
+        knee = e.model.joint(KNEE_JOINT)
+        self._exo_act = int(e.model.actuator(EXO_ACTUATOR).id)
+        self._knee_qadr = int(knee.qposadr[0])
+        self._knee_dadr = int(knee.dofadr[0])
         self._strap_torque = strap_knee_torque(e.model)
         self._torque_aware = self.config.interaction_weight > 0 or self.config.peak_weight > 0
         self._target_rad = math.radians(e.target_angle_deg)

@@ -305,15 +305,6 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             spec = dataclasses.replace(spec, max_episode_steps=self.episode_steps)
         self._spec = spec
 
-    # the layout's addresses, read by the other controllers (myoexo.control.oracle)
-    @property
-    def _knee_qadr(self) -> int:
-        return self.obs_layout.knee_qadr
-
-    @property
-    def _knee_dadr(self) -> int:
-        return self.obs_layout.knee_dadr
-
     # ------------------------------------------------------------------ observation
     def _data_views(self) -> DataViews:
         """What the step reads from ``self.data`` (:class:`DataViews`), set up once per
