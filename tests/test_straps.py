@@ -86,8 +86,8 @@ def test_kelvin_voigt_overshoot_falls_with_damping():
 
 def test_the_old_undamped_pins_had_a_bound_far_above_the_motor():
     """With the pins' former 1 Nm s/rad the strap rang: its own bound was twice the motor's."""
-    model, _ = build_model(TwinParams(scene=False, pin_damping_nm_s_rad=1.0))
-    assert strap_bound(model, TwinParams(pin_damping_nm_s_rad=1.0)).torque_nm > 250.0
+    model, _ = build_model(TwinParams.of_version(1, scene=False))
+    assert strap_bound(model).torque_nm > 250.0
 
 
 def _episode(controller, level: int, seed: int, **env_kwargs):

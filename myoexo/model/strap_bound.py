@@ -50,7 +50,6 @@ import numpy as np
 from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.model.leg import KNEE_JOINT
-from myoexo.model.params import TwinParams
 from myoexo.model.posing import pose_twin
 
 __all__ = [
@@ -59,6 +58,9 @@ __all__ = [
     "kelvin_voigt_step_peak",
     "strap_bound",
 ]
+
+#: The cuff pins that carry the strap's rotation about the knee, in series.
+SAGITTAL_PINS = ("exo_thigh_pin", "exo_shank_pin")
 
 #: Knee angles (deg) over which the leg's strongest knee torque is searched.
 _KNEE_ANGLES_DEG = tuple(range(0, 100, 5))
@@ -192,10 +194,14 @@ def _muscle_knee_torque(model: mujoco.MjModel, data: mujoco.MjData) -> float:
     return float(max(t[t > 0].sum(initial=0.0), -t[t < 0].sum(initial=0.0)))
 
 
-def strap_bound(model: mujoco.MjModel, params: TwinParams | None = None) -> StrapBound:
-    """The strap bound of a twin built from *params* (default ``TwinParams()``), measured on
-    *model* (its inertias at 90 deg flexion, its muscles over 0-95 deg)."""
-    params = params or TwinParams()
+def _series(a: float, b: float) -> float:
+    """Two springs (or dampers) in series."""
+    return a * b / (a + b) if a + b > 0.0 else 0.0
+
+
+def strap_bound(model: mujoco.MjModel) -> StrapBound:
+    """The strap bound of the twin *model* (its inertias at 90 deg flexion, its muscles over
+    0-95 deg, its cuff pins' springs, dampers and ranges)."""
     data = mujoco.MjData(model)
     pose_twin(model, data, knee_angle_deg=90.0)
     mujoco.mj_forward(model, data)
@@ -213,19 +219,17 @@ def strap_bound(model: mujoco.MjModel, params: TwinParams | None = None) -> Stra
     mujoco.mj_forward(model, data)
     lever = float(np.linalg.norm(data.subtree_com[body] - data.xanchor[hinge.id]))
     motor = model.actuator(EXO_ACTUATOR)
-    k_pin = params.pin_stiffness_nm_rad
+    pins = [model.joint(name) for name in SAGITTAL_PINS]
+    stiffness = [float(model.jnt_stiffness[p.id]) for p in pins]
+    damping = [float(model.dof_damping[p.dofadr[0]]) for p in pins]
+    half_range_deg = [float(np.degrees(np.max(np.abs(model.jnt_range[p.id])))) for p in pins]
     return StrapBound(
         motor_limit_nm=float(np.max(np.abs(motor.forcerange))),
         exo_inertia_kg_m2=exo_inertia,
         knee_inertia_kg_m2=knee_inertia,
         human_torque_nm=human,
         exo_weight_nm=mass * _G_M_S2 * lever,
-        pin_stiffness_nm_rad=k_pin / 2.0,
-        pin_damping_nm_s_rad=params.pin_damping_nm_s_rad / 2.0,
-        misalignment_deg=float(
-            min(
-                max(abs(v) for v in params.thigh_pin_range_deg),
-                max(abs(v) for v in params.shank_pin_range_deg),
-            )
-        ),
+        pin_stiffness_nm_rad=_series(*stiffness),
+        pin_damping_nm_s_rad=_series(*damping),
+        misalignment_deg=round(min(half_range_deg), 3),  # the model stores radians
     )
