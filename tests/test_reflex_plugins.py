@@ -31,16 +31,20 @@ from myoexo.spasticity.registry import _REGISTRY
 EXAMPLES = Path(__file__).resolve().parents[1] / "docs" / "examples"
 
 
-@pytest.fixture(scope="module")
-def velocity_reflex():
-    """The docs' example module, imported as a user's script would (it registers itself)."""
+def _example(name: str):
+    """A docs' example module, imported as a user's script would (it registers itself)."""
+    import importlib
+
     sys.path.insert(0, str(EXAMPLES))
     try:
-        import velocity_reflex
-
-        yield velocity_reflex
+        yield importlib.import_module(name)
     finally:
         sys.path.remove(str(EXAMPLES))
+
+
+@pytest.fixture(scope="module")
+def velocity_reflex():
+    yield from _example("velocity_reflex")
 
 
 @pytest.fixture
@@ -225,15 +229,9 @@ def test_a_user_model_reaches_the_training_and_distillation_envs(velocity_reflex
 
 @pytest.fixture(scope="module")
 def spindle_reflex():
-    """The docs' example of a model on the muscles' own state (it registers itself)."""
-    sys.path.insert(0, str(EXAMPLES))
-    try:
-        import spindle_reflex
-
-        yield spindle_reflex
-    finally:
-        sys.path.remove(str(EXAMPLES))
-        _REGISTRY.pop("spindle_example", None)
+    """The docs' example of a model on the muscles' own state."""
+    yield from _example("spindle_reflex")
+    _REGISTRY.pop("spindle_example", None)
 
 
 def test_the_sensory_record_is_mujocos_muscle_state():
