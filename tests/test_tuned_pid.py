@@ -40,7 +40,8 @@ def test_tune_pid_write_records_its_provenance(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
     argv = ["tune-pid", "--feedback", "exo", "--rel-tol", "0.3", "--quiet", "--write", "mine"]
     assert cli.main(argv) == 0
-    entry = tuned.TunedPID.from_file(tmp_path / "pid_tuned_mine.json")
+    assert (tmp_path / "pid_tuned_mine.json").is_file()
+    entry = tuned.TunedPID.from_fit("mine")
     assert entry.name == "mine" and entry.feedback == "exo"
     assert entry.command == "myoexo tune-pid --feedback exo --rel-tol 0.3 --write mine"
     assert entry.twin_version == TWIN_VERSION

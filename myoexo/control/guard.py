@@ -24,7 +24,7 @@ controller that reads only the exoskeleton's sensors gets a guard on the exo enc
 (``feedback="exo"``, :func:`exo_guard`), the one angle it has. The encoder is not the knee:
 the straps and cuffs give under the motor's torque, and a knee held by spastic muscles
 against 70-100 Nm stays 5-8 deg more flexed than the encoder reads, in proportion to the
-command (:data:`EXO_STRAP_LAG_DEG_PER_COMMAND`). An encoder guard that took the encoder's error
+command (:func:`exo_strap_lag_deg_per_command`). An encoder guard that took the encoder's error
 for the knee's stayed silent on subjects whose knee ended 20-22 deg short; the encoder guard
 estimates the knee error as the encoder's plus that lag. A controller that never stalls
 beyond ``engage_error_deg`` is unchanged, command for command.
@@ -67,7 +67,7 @@ class StallGuardConfig:
             60-100 Nm that hold a spastic knee the knee stays 5-8 deg more flexed than the
             encoder reads, and an encoder guard would stay silent on a knee 20 deg short.
             The guard's knee error is the encoder's error minus this lag times its last
-            command. 0: the encoder's error as it is. :data:`EXO_STRAP_LAG_DEG_PER_COMMAND`
+            command. 0: the encoder's error as it is. :func:`exo_strap_lag_deg_per_command`
             is the twin's.
     """
 

@@ -18,7 +18,6 @@ pid:tuned=exo``); the entry sets the gains and the feedback, and any other PID o
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -66,11 +65,10 @@ class TunedPID:
     use: str
 
     @classmethod
-    def from_file(cls, path: Path) -> TunedPID:
-        """The entry a ``--write`` file holds (its name from the file's)."""
-        doc = json.loads(path.read_text())
+    def from_fit(cls, name: str) -> TunedPID:
+        """The tuned PID *name* as the package's fit ``pid_tuned_<name>`` holds it."""
+        doc = fits.read_fit(f"{_PREFIX}{name}")
         result, provenance = doc["result"], doc["provenance"]
-        name = path.stem[len(_PREFIX) :]
         return cls(
             name=name,
             feedback=str(result["settings"]["feedback"]),
@@ -78,7 +76,7 @@ class TunedPID:
             ultimate_gain_per_rad=float(result["ultimate_gain_per_rad"]),
             ultimate_period_s=float(result["ultimate_period_s"]),
             gains=PIDGains(**result["zn_gains"]),
-            record="/".join((*fits.FITS_PACKAGE_DIR, path.name)),
+            record="/".join((*fits.FITS_PACKAGE_DIR, f"{_PREFIX}{name}.json")),
             command=str(provenance["command"]),
             twin_version=int(provenance["twin_version"]),
             use=TUNED_PID_USES.get(name, ""),
@@ -92,8 +90,8 @@ def write_tuned_pid(name: str, result: dict[str, Any], provenance: dict[str, Any
 
 
 def _load() -> dict[str, TunedPID]:
-    files = sorted(fits.fits_dir().glob(f"{_PREFIX}*.json"))
-    return {t.name: t for t in (TunedPID.from_file(p) for p in files)}
+    names = sorted(p.stem[len(_PREFIX) :] for p in fits.fits_dir().glob(f"{_PREFIX}*.json"))
+    return {name: TunedPID.from_fit(name) for name in names}
 
 
 #: The tuned PIDs by name (``pid:tuned=NAME``), read from the package's files.

@@ -268,9 +268,9 @@ def _version_mismatch(spec: ControllerSpec) -> str | None:
     """A warning if the policy was trained on another twin version than today's
     (:data:`~myoexo.model.TWIN_VERSION`; a policy that records none was trained on version 1),
     else ``None``."""
-    from myoexo.model import TWIN_VERSION
+    from myoexo.model import TWIN_VERSION, recorded_twin_version
 
-    version = int(policy_metadata(spec).get("twin_version", 1))
+    version = recorded_twin_version(policy_metadata(spec))
     if version == TWIN_VERSION:
         return None
     return (

@@ -51,6 +51,7 @@ from myoexo.evaluation.risk import (
     verdict_against,
 )
 from myoexo.evaluation.storage import load_table
+from myoexo.model import recorded_twin_version
 from myoexo.runtime.files import write_json_atomic
 
 #: Where the committed result sets live, relative to the repository root.
@@ -267,7 +268,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
         "subjects_per_level": int(cfg.get("subjects", 0)),
         "root_seed": int(cfg.get("root_seed", 0)),
         "twin": cfg.get("twin"),
-        "twin_version": int(config.get("twin_version", 1)),
+        "twin_version": recorded_twin_version(config),
         "episodes": len(table),
         "versions": config.get("versions", {}),
     }
@@ -307,7 +308,7 @@ def _updated(
     import pandas as pd
 
     summary, risk, red, heads, old = _read(dest)
-    old = {"twin_version": 1, **old}
+    old = {**old, "twin_version": recorded_twin_version(old)}
     for key in ("reference", "root_seed", "subjects_per_level", "twin", "twin_version"):
         if old.get(key) != meta.get(key):
             raise ValueError(
@@ -460,7 +461,7 @@ def earlier_twin_note(meta: dict[str, Any]) -> str | None:
     ``None`` for a set of today's twin."""
     from myoexo.model import TWIN_VERSION
 
-    version = int(meta.get("twin_version", 1))
+    version = recorded_twin_version(meta)
     if version == TWIN_VERSION:
         return None
     return (

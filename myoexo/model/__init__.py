@@ -34,7 +34,7 @@ from myoexo.model.exo import (
     strap_knee_torque,
 )
 from myoexo.model.leg import HIP_JOINTS, KNEE_JOINT
-from myoexo.model.params import TWIN_VERSION, TwinParams
+from myoexo.model.params import TWIN_VERSION, TwinParams, recorded_twin_version
 from myoexo.model.posing import pose_twin, strap_violation
 
 __all__ = [
@@ -55,6 +55,7 @@ __all__ = [
     "build_model",
     "knee_axis_fit",
     "pose_twin",
+    "recorded_twin_version",
     "strap_knee_torque",
     "strap_violation",
     "twin_geometry",

@@ -31,9 +31,11 @@ lever arm (100 Nm / 0.2 m = 500 N, hence 15 N of slider friction). A small visco
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from typing import Any
 
-__all__ = ["EARLIER_TWINS", "TWIN_VERSION", "TwinParams"]
+__all__ = ["EARLIER_TWINS", "TWIN_VERSION", "TwinParams", "recorded_twin_version"]
 
 #: Version of the default twin's physics, recorded in every evaluation folder and result set
 #: (``twin_version``); results without it were measured on version 1. CHANGELOG.md says what
@@ -46,6 +48,12 @@ TWIN_VERSION = 2
 EARLIER_TWINS: dict[int, dict[str, float]] = {
     1: {"pin_damping_nm_s_rad": 1.0, "pin_armature_kg_m2": 0.001},
 }
+
+
+def recorded_twin_version(record: Mapping[str, Any]) -> int:
+    """The twin version a record (a result set's meta, an evaluation's config, a policy's
+    metadata) was made on: its ``twin_version``, or 1 for a record made before versions."""
+    return int(record.get("twin_version", 1))
 
 
 def _check_range(name: str, value: tuple[float, float], *, contains_zero: bool) -> None:
@@ -282,6 +290,15 @@ class TwinParams:
                 raise ValueError(f"TwinParams.{name} must be a non-empty body name")
         if not isinstance(self.scene, bool):
             raise ValueError(f"TwinParams.scene must be True or False, got {self.scene!r}")
+
+    @property
+    def misalignment_bound_deg(self) -> float:
+        """How far the exo hinge may sit from the knee (deg): one sagittal cuff pin's range,
+        the misalignment the coupling is built to absorb."""
+        return min(
+            max(abs(v) for v in self.thigh_pin_range_deg),
+            max(abs(v) for v in self.shank_pin_range_deg),
+        )
 
     @property
     def slide_frictionloss_n(self) -> float:

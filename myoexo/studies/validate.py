@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from myoexo.evaluation.config import CALIBRATION_ROOT_SEED, check_fit_root, subject_seed
+from myoexo.model.params import TwinParams
 from myoexo.spasticity.levels import VALID_LEVELS, sample_subject
 from myoexo.spasticity.registry import ReflexModel, reflex_label, reflex_names
 
@@ -249,7 +250,7 @@ _KIM_RI, _KIM_RI_SD = 1.678, 0.090
 _KIM_V, _KIM_V_SD = 3.873, 0.622
 _KIM_V2, _KIM_V2_SD = 3.076, 0.551
 #: The misalignment bound under the paper's PID: one cuff pin's range (deg).
-_MISALIGNMENT_BOUND_DEG = 15.0
+_MISALIGNMENT_BOUND_DEG = TwinParams().misalignment_bound_deg
 
 
 def _pid_misalignment(m: Measures) -> tuple[str, bool]:
@@ -361,7 +362,6 @@ def measure_model(
     from myoexo.clinical.mas import MASExamParams, run_mas_exam
     from myoexo.clinical.pendulum import FREED_EXO_RANGE_DEG, RECLINED, run_pendulum
     from myoexo.clinical.tardieu import TardieuParams, run_tardieu
-    from myoexo.model import TwinParams
     from myoexo.spasticity.registry import resolve_reflex
     from myoexo.studies.pid_check import pid_outcome
 

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.envs.options import TwinOptions
+from myoexo.model import recorded_twin_version
 from myoexo.policies.actor import MLPActor, save_actor
 from myoexo.training import checkpoints as ck
 
@@ -188,7 +189,7 @@ def _checkpoint_parts(
         "obs_preset": twin.obs_preset,
         "reward_weights": [list(p) for p in twin.reward_weights],
         "twin": twin.to_dict(),
-        "twin_version": int(state.get("twin_version", 1)),
+        "twin_version": recorded_twin_version(state),
         "selection_root_seed": (
             selection_root_seed
             if selection_root_seed is not None
