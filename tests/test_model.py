@@ -3,8 +3,8 @@
 Measured with the default ``TwinParams`` (2 ms timestep), which the bounds below cover
 with some margin:
 
-* passive equilibrium (zero torque, zero excitation, 5 s from 90 deg): knee 85.8 deg,
-  exo 85.1 deg; hip within 0.002 deg of 90;
+* passive equilibrium (zero torque, zero excitation, 10 s from 90 deg): knee 78.6 deg; hip
+  within 0.002 deg of 90;
 * 40 Nm constant extension torque from 90 deg: exo-vs-human knee angle within 3.0 deg,
   slide travel ~4 mm, strap violation < 0.5 mm / 0.02 rad;
 * saturating P controller (Kp = 7 /rad, +-100 Nm) to 7 deg: within 7.1 deg (the exo and
@@ -143,14 +143,17 @@ def test_pose_twin_rejects_out_of_range_angle(twin: mujoco.MjModel) -> None:
 
 
 def test_passive_hang_is_stable_and_near_equilibrium(twin: mujoco.MjModel) -> None:
-    data, trace, strap = _simulate(twin, 5.0)
+    data, trace, strap = _simulate(twin, 10.0)
     assert np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all()
     assert data.warning.number.sum() == 0
     hip_deg = np.degrees(trace[HIP_JOINTS[0]])
     assert np.abs(hip_deg - 90.0).max() < 1.0
     knee_deg = np.degrees(trace[KNEE_JOINT])
-    # Gravity equilibrium of the hanging shank (thigh horizontal): measured 85.8 deg.
-    assert 80.0 < knee_deg[-1] < 92.0
+    # Equilibrium of the hanging shank (thigh horizontal) between its weight and the passive
+    # knee's extending moment at hip 90 deg (Riener and Edrich 1999): measured 78.6 deg
+    # (85.8 on twin versions 1-2, whose muscles' passive fibres carried the passive knee). The
+    # knee's light damping (0.1 Nm s/rad) lets it settle in about 8 s.
+    assert 74.0 < knee_deg[-1] < 84.0
     assert np.ptp(knee_deg[-250:]) < 0.1  # settled over the last 0.5 s
     assert abs(np.degrees(trace[EXO_JOINT][-1]) - knee_deg[-1]) < 3.0
     assert strap[:, 0].max() < 1e-3
@@ -197,7 +200,9 @@ def test_saturating_controller_keeps_the_coupling_in_range(twin: mujoco.MjModel)
     assert knee_deg[-1] < 15.0
     assert np.abs(exo_deg - knee_deg).max() < 9.0  # measured 7.1 deg (11.5 on twin v1)
     _assert_coupling_inside_ranges(twin, trace)
-    assert strap[:, 0].max() < 1e-3 and strap[:, 1].max() < 0.06
+    # measured 1.0 mm / 0.041 rad (under 1 mm on twin version 2, whose knee the muscles' passive
+    # fibres stiffened)
+    assert strap[:, 0].max() < 1.5e-3 and strap[:, 1].max() < 0.06
 
 
 def test_sensors_report_exo_state(twin: mujoco.MjModel) -> None:

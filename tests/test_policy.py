@@ -218,12 +218,21 @@ def test_the_shipped_policies_headline_criteria_against_the_pid_on_a_few_subject
     from myoexo.control import PID
     from myoexo.envs import TaskParams
     from myoexo.evaluation import evaluate_controller
+    from myoexo.spasticity import StretchCalibration, StretchReflex
 
     policy = load_policy(name)
+    # the twin it was trained on: version 1 and the stretch reflex with its recorded calibration
+    recorded = policy.metadata["twin"]["reflex_parameters"]
+    assert policy.metadata["twin"]["reflex"] == "stretch"
+    reflex = StretchReflex(
+        delay_s=recorded["delay_s"],
+        calibration=StretchCalibration.from_dict(recorded["calibration"]),
+    )
+    trained = {**TRAINED_TWIN, "reflex": reflex}
     pid = PID(dt_s=TaskParams().control_period_s)
     for level in range(4):
-        mine, _ = evaluate_controller(policy, level, 3, 0, label=name, env_kwargs=TRAINED_TWIN)
-        base, _ = evaluate_controller(pid, level, 3, 0, label="pid", env_kwargs=TRAINED_TWIN)
+        mine, _ = evaluate_controller(policy, level, 3, 0, label=name, env_kwargs=trained)
+        base, _ = evaluate_controller(pid, level, 3, 0, label="pid", env_kwargs=trained)
         assert (mine["abs_final_error_deg"] < 20.0).all(), (level, mine["abs_final_error_deg"])
         if level in ACCURATE_LEVELS[name]:
             assert mine["abs_final_error_deg"].mean() < 1.0, level

@@ -16,6 +16,7 @@ from myoexo.spasticity.delay import DelayLine
 from myoexo.spasticity.levels import LEVELS, SPASTIC_EXTENSORS, SPASTIC_FLEXORS, SpasticityParams
 from myoexo.spasticity.reflex import (
     CALIBRATION,
+    DEFAULT_REFLEX,
     UNCALIBRATED,
     LevelCalibration,
     StretchReflex,
@@ -100,7 +101,9 @@ def test_delay_line_returns_the_state_delay_steps_ago() -> None:
 
 
 def test_bad_reflex_settings_are_rejected() -> None:
-    with pytest.raises(ValueError, match=r"not a registered reflex model.*persistent, stretch"):
+    with pytest.raises(
+        ValueError, match=r"not a registered reflex model.*persistent, spindle, stretch"
+    ):
         get_reflex("clonus")
     with pytest.raises(ValueError, match=r"outside \[0, 0.2\]"):
         StretchReflex(delay_s=0.5)
@@ -148,7 +151,10 @@ def test_envs_take_the_reflex_keyword_and_keep_it_through_pickling() -> None:
 
     import myoexo  # noqa: F401
 
-    stretch = gym.make("MyoExoKnee-v3")
+    default = gym.make("MyoExoKnee-v3")
+    assert default.unwrapped.spasticity.reflex == get_reflex(DEFAULT_REFLEX)
+    default.close()
+    stretch = gym.make("MyoExoKnee-v3", reflex="stretch")
     uniform = gym.make("MyoExoKnee-v3", reflex="uniform")
     assert stretch.unwrapped.spasticity.reflex == get_reflex("stretch") == StretchReflex()
     assert uniform.unwrapped.spasticity.reflex == UniformReflex()
@@ -220,24 +226,28 @@ def _wrappers(env):
         env = env.env
 
 
-@pytest.mark.parametrize("model", ["stretch", "tsrt"])
+@pytest.mark.parametrize("model", ["stretch", "spindle", "tsrt"])
 def test_the_reflex_calibrations_are_fitted_data_with_provenance(model: str) -> None:
-    """The stretch and tsrt reflexes read their calibrations from the package's fits, which
-    record how they were fitted; the twin version they were fitted on (1) is stated."""
+    """The fitted reflexes read their calibrations from the package's fits, which record how
+    they were fitted, on the twin of today."""
+    from myoexo.model import TWIN_VERSION
     from myoexo.runtime.fits import read_fit
     from myoexo.spasticity.reflex import STRETCH_FIT
+    from myoexo.spasticity.spindle import SPINDLE_CALIBRATION, SPINDLE_FIT
     from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRT_FIT
 
     name, calibration = {
         "stretch": (STRETCH_FIT, CALIBRATION),
+        "spindle": (SPINDLE_FIT, SPINDLE_CALIBRATION),
         "tsrt": (TSRT_FIT, TSRT_CALIBRATION),
     }[model]
     doc = read_fit(name)
-    assert type(calibration).from_dict(doc["result"]) == calibration
+    result = doc["result"]["calibration"] if model == "spindle" else doc["result"]
+    assert type(calibration).from_dict(result) == calibration
     assert type(calibration).from_dict(calibration.to_dict()) == calibration
     assert doc["provenance"]["command"].startswith(f"{calibration.note.split(':')[0]}")
     assert doc["provenance"]["root_seed"] == calibration.root_seed == 2
-    assert doc["provenance"]["twin_version"] == 1
+    assert doc["provenance"]["twin_version"] == TWIN_VERSION
 
 
 @pytest.mark.slow

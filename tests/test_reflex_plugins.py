@@ -181,7 +181,7 @@ def _cli(*args: str, env_plugins: str | None = None) -> subprocess.CompletedProc
 def test_an_unknown_reflex_on_the_command_line_lists_the_registered_ones():
     out = _cli("tardieu", "--reflex", "clonus", "--levels", "1")
     assert out.returncode == 2
-    assert "clonus" in out.stderr and "persistent, stretch, tsrt, uniform" in out.stderr
+    assert "clonus" in out.stderr and "persistent, spindle, stretch, tsrt, uniform" in out.stderr
 
 
 @pytest.mark.slow
@@ -256,7 +256,7 @@ def test_the_sensory_record_is_mujocos_muscle_state():
     r = records[-1]
     nf = r.n_flexors
     assert nf == len(stage.flexors) and len(r.fibre_length) == len(stage.muscles)
-    assert ((r.fibre_length > 0.3) & (r.fibre_length < 2.0)).all()
+    assert ((r.fibre_length > 0.2) & (r.fibre_length < 2.0)).all()
     assert (r.lengthening_speed[:nf] > 0.0).all()  # the paper's flexors: stretched
     quadriceps = [i for i, m in enumerate(stage.muscles) if m.startswith(("vas", "recfem"))]
     assert len(quadriceps) == 4 and (r.lengthening_speed[quadriceps] < 0.0).all()
@@ -289,7 +289,7 @@ def test_a_model_on_the_muscles_own_state_runs_as_a_plug_in(spindle_reflex):
             flex.append(stage.last_flexor_excitation)
             quad.append(stage.last_excitations[quadriceps].max())
         assert stage.delay_steps == 3  # 30 ms at 100 Hz
-        assert max(flex) > 0.1 and max(quad) < 0.01
+        assert max(flex) > 0.1 and max(quad) < 0.1 * max(flex)  # the shortened quadriceps
         # the excitation is the model's of the record delay_steps old
         record = stage.delay_line.state()[0]
         assert all(r is not None for r in record)

@@ -137,17 +137,22 @@ def test_the_committed_calibrations_are_the_constants_the_twin_uses():
     """docs/studies/calibration_*: the output of `myoexo calibrate` on the calibration root,
     whose fitted values and provenance are the package's constants."""
     from myoexo.spasticity import CALIBRATION, PERSISTENT
+    from myoexo.spasticity.spindle import SPINDLE_CALIBRATION
 
     studies = REPO / "docs" / "studies"
-    stretch = (studies / "calibration_stretch" / "calibration.md").read_text()
-    assert CALIBRATION.note in stretch and "**The fit** (in-sample" in stretch
-    for level, c in CALIBRATION.levels.items():
-        line = (
-            f"{level}: LevelCalibration(flexor_gain={c.flexor_gain:g}, "
-            f"extensor_gain={c.extensor_gain:g}, "
-            f"flexor_threshold_shift_deg={c.flexor_threshold_shift_deg:.2f})"
-        )
-        assert line in stretch
+    for folder, calibration in (
+        ("calibration_stretch", CALIBRATION),
+        ("calibration_spindle", SPINDLE_CALIBRATION),
+    ):
+        record = (studies / folder / "calibration.md").read_text()
+        assert calibration.note in record and "**The fit** (in-sample" in record
+        for level, c in calibration.levels.items():
+            line = (
+                f"{level}: LevelCalibration(flexor_gain={c.flexor_gain:g}, "
+                f"extensor_gain={c.extensor_gain:g}, "
+                f"flexor_threshold_shift_deg={c.flexor_threshold_shift_deg:.2f})"
+            )
+            assert line in record, (folder, line)
     persistent = (studies / "calibration_persistent" / "calibration.md").read_text()
     gains = ", ".join(f"{lv}: {g:.4f}" for lv, g in sorted(PERSISTENT.gains.items()))
     assert PERSISTENT.note in persistent and f"gains=MappingProxyType({{{gains}}})" in persistent

@@ -42,7 +42,7 @@ def test_the_record_parses_validates_and_round_trips():
     assert TwinOptions().env_kwargs() == {}  # the default twin adds nothing
     assert twin.replace(episode_duration_s=None).task == ()
     for bad, match in (
-        ("reflex=clonus", "registered: persistent, stretch, tsrt, uniform"),
+        ("reflex=clonus", "registered: persistent, spindle, stretch, tsrt, uniform"),
         ("episode_duration_s=-1", "outside the accepted range"),
         ("reward_weights=nope:1", "accepted"),
         ("obs_preset=nope", "accepted"),
@@ -161,7 +161,8 @@ def test_the_evaluation_warns_in_the_api_too(tmp_path):
         evaluate(config, tmp_path / "eval", workers=1, progress=False, log=lambda m: None)
     mismatches = [w for w in caught if issubclass(w.category, TwinMismatchWarning)]
     assert len(mismatches) == 1  # the policy, not the PID
-    assert "'student_exo' was trained on [default twin]" in str(mismatches[0].message)
+    # trained on twin 1's default reflex, stretch; evaluated here on uniform
+    assert "'student_exo' was trained on [reflex=stretch]" in str(mismatches[0].message)
 
 
 @pytest.mark.slow

@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
-from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.envs.twin import Twin
+from myoexo.model.exo import EXO_ACTUATOR
 from myoexo.model.leg import KNEE_JOINT
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams, sample_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, add_reflex_argument
-from myoexo.spasticity.stage import SpasticityStage, StageHost
+from myoexo.spasticity.stage import SpasticityStage
 
 if TYPE_CHECKING:
     import mujoco
@@ -65,7 +65,7 @@ DRIVE_COLUMNS: tuple[str, ...] = (
     "knee_vel_rad_s",
     "sc_total",
     "exo_torque_nm",
-    "muscle_torque_nm",
+    "leg_torque_nm",
     "pd_torque_nm",
     "feedback_deg",
 )
@@ -73,7 +73,7 @@ DRIVE_COLUMNS: tuple[str, ...] = (
 
 @dataclasses.dataclass(frozen=True)
 class DriveParams:
-    """How the exo drives the knee, and which joints it reads.
+    """How the exo drives the knee, and which joint it reads.
 
     Attributes:
         kp_nm_per_rad: Proportional gain of the exo position controller, Nm/rad (400: as
@@ -84,18 +84,12 @@ class DriveParams:
             the envs: 10 ms).
         feedback_joint: Joint whose angle the PD controls: the human knee (default: the
             clinician imposes the limb's motion) or the exo hinge (``"exo_knee"``).
-        exo_joint: Exo knee hinge.
-        exo_actuator: Exo motor (a torque actuator).
-        human_joint: Human knee joint, read by the reflex.
     """
 
     kp_nm_per_rad: float = 400.0
     kd_nm_s_per_rad: float = 5.0
     control_period_s: float = 0.01
     feedback_joint: str = KNEE_JOINT
-    exo_joint: str = EXO_JOINT
-    exo_actuator: str = EXO_ACTUATOR
-    human_joint: str = KNEE_JOINT
 
     def __post_init__(self) -> None:
         for name in ("kp_nm_per_rad", "kd_nm_s_per_rad"):
@@ -255,15 +249,16 @@ def simulate_drive(
         pose: ``pose(model, data, knee_angle_deg=...)`` that puts the twin at *start_deg*.
         start_deg: Knee angle of the initial (static) pose, deg.
         powered: Per step, whether the PD drives the exo (default: every step).
-        drive: Controller gains, control period and joint names.
+        drive: Controller gains, control period and feedback joint.
         reflex: Reflex model (a registered name or :class:`~myoexo.spasticity.ReflexModel`).
         subject: Individual reflex parameters (default: the level's Table I values).
 
     Returns:
         ``(times_s, columns)``: the time of each step and one array per name of
         :data:`DRIVE_COLUMNS` (state at the start of the step, torques applied during it;
-        ``pd_torque_nm`` is the unclipped PD torque, 0 while unpowered; ``muscle_torque_nm``
-        the muscles' torque along the coupled knee, flexion positive).
+        ``pd_torque_nm`` is the unclipped PD torque, 0 while unpowered; ``leg_torque_nm``
+        the leg's own torque along the coupled knee, flexion positive: its muscles' and its
+        passive knee's springs, :mod:`myoexo.model.passive_knee`).
 
     Raises:
         ValueError: If the level, the reflex or a joint/actuator name is unknown.
@@ -276,28 +271,22 @@ def simulate_drive(
     if len(ref_vel_rad_s) != n_steps or len(powered_steps) != n_steps:
         raise ValueError("ref_deg, ref_vel_rad_s and powered must have one entry per step.")
     fb_j = model.joint(drive.feedback_joint)
-    exo_j = model.joint(drive.exo_joint)
-    knee_j = model.joint(drive.human_joint)
-    exo_a = model.actuator(drive.exo_actuator).id
+    exo_a = model.actuator(EXO_ACTUATOR).id
     fb_q, fb_d = int(fb_j.qposadr[0]), int(fb_j.dofadr[0])
-    exo_q = int(exo_j.qposadr[0])
-    knee_q, knee_d = int(knee_j.qposadr[0]), int(knee_j.dofadr[0])
-    muscle_torque = CoupledJointTorque(model, drive.human_joint)
     nm_per_ctrl = motor_nm_per_ctrl(model, exo_a)
     ctrl_lo, ctrl_hi = model.actuator_ctrlrange[exo_a]
-    n_sub, dt = control_substeps(drive, model)
+    _, dt = control_substeps(drive, model)
 
     data = mujoco.MjData(model)
     pose(model, data, knee_angle_deg=start_deg)
-    host = StageHost(model, data, dt)
     stage = SpasticityStage(level, subject_noise=False, reflex=reflex)
     if subject is not None:
         stage.set_subject(subject)
+    twin = Twin(model, stage, dt, data=data)
 
     ref_rad = np.radians(np.asarray(ref_deg, dtype=np.float64))
     ref_vel = np.asarray(ref_vel_rad_s, dtype=np.float64)
     rec = np.empty((n_steps, len(DRIVE_COLUMNS)))
-    ctrl = np.zeros(model.nu)
     for i in range(n_steps):
         q, qd = data.qpos[fb_q], data.qvel[fb_d]
         if powered_steps[i]:
@@ -307,20 +296,18 @@ def simulate_drive(
             u = min(max(torque / nm_per_ctrl, ctrl_lo), ctrl_hi)
         else:
             torque, u = 0.0, 0.0
-        ctrl[:] = 0.0  # relaxed limb: the muscles get the reflex only
-        ctrl[exo_a] = u
-        data.ctrl[:] = stage.apply(host, ctrl)
+        twin.apply_command(u)  # relaxed limb: the muscles get the reflex only
         rec[i] = (  # in the order of DRIVE_COLUMNS
-            math.degrees(data.qpos[exo_q]),
-            math.degrees(data.qpos[knee_q]),
-            data.qvel[knee_d],
+            twin.exo_angle_deg,
+            twin.knee_angle_deg,
+            twin.knee_velocity_rad_s,
             stage.last_sc_total,
             u * nm_per_ctrl,
-            muscle_torque(data),
+            twin.leg_torque_nm,
             torque,
             math.degrees(q),
         )
-        mujoco.mj_step(model, data, nstep=n_sub)
+        twin.advance()
     return np.arange(n_steps) * dt, {name: rec[:, j] for j, name in enumerate(DRIVE_COLUMNS)}
 
 

@@ -8,9 +8,10 @@ knee is held, the fast and the slow stretch leave the same resistance. A reflex 
 after-discharge (``"persistent"``: motoneurons firing on for seconds after a fast stretch,
 Gorassini et al. 2004, Mottram et al. 2009) keeps resisting after the fast stretch only.
 
-Per level the test reports the muscles' resisting torque (against the extension, Nm) in two
-windows of the hold, ``early`` (0.5-1 s after the stop) and ``late`` (the last 0.5 s), after
-each stretch, and the excess of the fast over the slow stretch in each window::
+Per level the test reports the leg's resisting torque (its muscles' and its passive knee's,
+against the extension, Nm) in two windows of the hold, ``early`` (0.5-1 s after the stop) and
+``late`` (the last 0.5 s), after each stretch, and the excess of the fast over the slow
+stretch in each window::
 
     hold_excess_early_nm = fast_early_nm - slow_early_nm
     hold_excess_late_nm  = fast_late_nm  - slow_late_nm
@@ -99,7 +100,7 @@ class StretchHoldResult:
     Attributes:
         summary: One row per level (see :meth:`table`).
         traces: One row per control step of every run: ``level, speed, vel_rad_s`` and the
-            stretch-test columns plus ``muscle_resisting_nm`` and ``hold_time_s`` (time since
+            stretch-test columns plus ``leg_resisting_nm`` and ``hold_time_s`` (time since
             the hold began, NaN before).
         params: The test parameters.
         reflex: Name of the reflex model.
@@ -156,7 +157,7 @@ def run_stretch_hold(
             ht = trace["hold_time_s"]
             early = (ht >= 0.5) & (ht < 1.0)
             late = ht >= params.hold_s - 0.5
-            res = trace["muscle_resisting_nm"]
+            res = trace["leg_resisting_nm"]
             moving = trace["phase"].isin(MOVING_PHASES)
             row[f"{speed}_early_nm"] = float(res[early].mean())
             row[f"{speed}_late_nm"] = float(res[late].mean())

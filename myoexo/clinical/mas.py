@@ -162,7 +162,7 @@ class MASExamResult:
         summary: One row per level (see :meth:`table`).
         traces: One row per control step of the motion: ``level, time_s, ref_deg, knee_deg,
             position`` (range position), ``knee_vel_rad_s, resisting_torque_nm,
-            muscle_resisting_nm, excess_nm, sc_total, tracking_error_deg``.
+            leg_resisting_nm, excess_nm, sc_total, tracking_error_deg``.
         params: The exam parameters.
         reflex: Name of the reflex model.
     """
@@ -214,7 +214,7 @@ def _simulate(
             "knee_vel_rad_s": col["knee_vel_rad_s"],
             # along the extension (-1 x flexion positive): the exo pushes, the limb resists
             "resisting_torque_nm": -col["exo_torque_nm"],
-            "muscle_resisting_nm": col["muscle_torque_nm"],
+            "leg_resisting_nm": col["leg_torque_nm"],
             "sc_total": col["sc_total"],
             "tracking_error_deg": ref_deg - col["feedback_deg"],
         }

@@ -46,15 +46,12 @@ at level 0 without a large hold torque). Clinics run the test semi-reclined, the
 table, the hip at about 30-60 deg. :data:`RECLINED` does that: the twin is built with
 ``TwinParams(hip_flexion_deg=40)`` and gravity is turned by the 50 deg the trunk reclines
 (about the lateral axis), so the thigh is horizontal again (within 0.1 deg) while the
-hamstrings are slack. On either posture the twin cannot reach the healthy ``R >= 1.6``: with
-``A0`` of 61 (seated) or 78 deg (reclined), the first swing would have to reach 122 or
-129 deg of flexion, at or beyond the model knee's 120 deg range (Rajagopal), and the exo's
-95 deg stop caps it near 100 deg of knee flexion first (the straps give a few degrees): level
-0 gives ``R`` = 1.25 seated and 1.22 reclined. With the exo's stop moved out of the way
-(``twin=TwinParams(exo_knee_range_deg=(-15, 130))``, a diagnostic, not the worn exo) the
-seated swing runs into the knee's 120 deg limit (``R`` = 1.57) and the reclined one stops at
-112 deg (``R`` = 1.38), braked by the passive rectus femoris, which the extended hip
-lengthens.
+hamstrings are slack. With the exo worn, its 95 deg stop caps the first swing near 100 deg
+of knee flexion (the straps give a few degrees): level 0 gives ``R`` = 1.40 seated and 1.43
+reclined on twin 3. With the exo's stop moved out of the way (``--device freed``,
+``twin=TwinParams(exo_knee_range_deg=(-15, 130))``) the healthy leg gives 1.77 seated and
+1.70 reclined, the latter within Kim et al.'s 1.678 +- 0.090 (twin 2, whose passive knee was
+its muscles' passive fibres, gave 1.57 and 1.38).
 
 CLI::
 
@@ -86,6 +83,7 @@ from myoexo.clinical.common import (
     twin_model,
     write_outputs,
 )
+from myoexo.model.exo import EXO_JOINT
 from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, reflex_label
@@ -229,7 +227,7 @@ class PendulumResult:
         summary: One row per level (see :meth:`table`).
         traces: One row per control step: ``level, time_s`` (0 at the release, negative
             while held), ``phase`` ("hold"/"swing"), ``knee_deg, knee_vel_deg_s, exo_deg,
-            exo_torque_nm, muscle_torque_nm, sc_total``.
+            exo_torque_nm, leg_torque_nm, sc_total``.
         params: The test parameters.
         reflex: Name of the reflex model.
     """
@@ -355,7 +353,7 @@ def run_pendulum(
     twin = dataclasses.replace(twin or TwinParams(), hip_flexion_deg=params.hip_flexion_deg)
     model: mujoco.MjModel = twin_model(twin)
     model.opt.gravity[:] = reclined_gravity(params.recline_deg)
-    exo = model.joint(params.drive.exo_joint)
+    exo = model.joint(EXO_JOINT)
     exo_stop_deg = math.degrees(float(model.jnt_range[exo.id, 1]))
     _, dt = control_substeps(params.drive, model)
     n_hold = round(params.hold_s / dt)
@@ -394,7 +392,7 @@ def run_pendulum(
                     "knee_vel_deg_s": knee_vel_deg_s,
                     "exo_deg": col["exo_deg"],
                     "exo_torque_nm": col["exo_torque_nm"],
-                    "muscle_torque_nm": col["muscle_torque_nm"],
+                    "leg_torque_nm": col["leg_torque_nm"],
                     "sc_total": col["sc_total"],
                 }
             )

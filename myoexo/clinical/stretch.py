@@ -16,10 +16,11 @@ which stretches the spastic hamstrings and gastrocnemii. It stops at 20 deg beca
 at 90 deg flexion the passive hamstrings limit extension (the clinical popliteal angle): near
 full extension the resistance is passive tension at any speed and level, not the reflex.
 
-The muscle torque at the knee is reported as well. Rajagopal's knee couples the tibial and
-patellar coordinates to ``knee_angle_r`` by joint equalities, and the quadriceps act through the
-patella, so the torque is ``sum_j qfrc_actuator[j] dq_j/dtheta`` over the knee and its coupled
-coordinates (virtual work along the coupling), not ``qfrc_actuator`` of ``knee_angle_r`` alone.
+The leg's own torque at the knee (its muscles' and its passive knee's springs) is reported
+as well. Rajagopal's knee couples the tibial and patellar coordinates to ``knee_angle_r`` by
+joint equalities, and the quadriceps act through the patella, so the torque is ``sum_j
+(qfrc_actuator[j] + qfrc_spring[j]) dq_j/dtheta`` over the knee and its coupled coordinates
+(virtual work along the coupling), not the entry of ``knee_angle_r`` alone.
 
 CLI::
 
@@ -91,9 +92,6 @@ class StretchTestParams:
         control_period_s: Control period (the stage and the PD run once per period), s.
         feedback_joint: Joint whose angle the PD controls: the human knee (default) or the
             exo hinge (``"exo_knee"``, what a real device's encoder measures).
-        exo_joint: Exo knee hinge.
-        exo_actuator: Exo motor (a torque actuator).
-        human_joint: Human knee joint, read by the reflex.
     """
 
     start_deg: float = 90.0
@@ -107,9 +105,6 @@ class StretchTestParams:
     end_hold_s: float = 0.2
     control_period_s: float = 0.01
     feedback_joint: str = KNEE_JOINT
-    exo_joint: str = "exo_knee"
-    exo_actuator: str = "exo_motor"
-    human_joint: str = KNEE_JOINT
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "velocities_rad_s", tuple(float(v) for v in self.velocities_rad_s))
@@ -149,16 +144,13 @@ class StretchTestParams:
 
     @property
     def drive(self) -> DriveParams:
-        """The controller gains, control period and joint names as
+        """The controller gains, control period and feedback joint as
         :class:`~myoexo.clinical.common.DriveParams`."""
         return DriveParams(
             kp_nm_per_rad=self.kp_nm_per_rad,
             kd_nm_s_per_rad=self.kd_nm_s_per_rad,
             control_period_s=self.control_period_s,
             feedback_joint=self.feedback_joint,
-            exo_joint=self.exo_joint,
-            exo_actuator=self.exo_actuator,
-            human_joint=self.human_joint,
         )
 
 
@@ -169,9 +161,9 @@ class StretchTestResult:
     Attributes:
         traces: One row per control step and condition: ``level, vel_rad_s, time_s, phase,
             ref_deg, exo_deg, knee_deg, knee_vel_rad_s, sc_total, exo_torque_nm,
-            resisting_torque_nm, muscle_torque_nm (muscles' torque at the human knee along
-            its coupled motion, flexion positive), saturated, tracking_error_deg`` (reference
-            minus the feedback joint's angle).
+            resisting_torque_nm, leg_torque_nm (the leg's own torque at the human knee
+            along its coupled motion, muscles and passive knee, flexion positive),
+            saturated, tracking_error_deg`` (reference minus the feedback joint's angle).
         summary: One row per (level, speed): ``peak_resisting_torque_nm`` (over the
             constant-speed phase), ``mean_resisting_torque_nm`` (same phase),
             ``peak_resisting_torque_all_nm`` (whole motion, acceleration included),
@@ -316,7 +308,7 @@ def simulate_stretch(
             "sc_total": col["sc_total"],
             "exo_torque_nm": exo_torque,
             "resisting_torque_nm": params.direction * exo_torque,
-            "muscle_torque_nm": col["muscle_torque_nm"],
+            "leg_torque_nm": col["leg_torque_nm"],
             "saturated": np.abs(col["pd_torque_nm"] - exo_torque) > 1e-9,
             "tracking_error_deg": ref_deg - col["feedback_deg"],
         }
@@ -352,7 +344,8 @@ def simulate_two_speeds(
 ) -> dict[str, tuple[float, pd.DataFrame]]:
     """The slow and the fast stretch of a two-speed test at one level (:func:`simulate_stretch`
     with ``test.stretch(speed)``): ``{"slow": (speed rad/s, trace), "fast": ...}``, each trace
-    with ``muscle_resisting_nm``, the muscles' torque against the motion."""
+    with ``leg_resisting_nm``, the leg's own torque (muscles and passive knee) against the
+    motion."""
     runs = {}
     for name, vel in (("slow", test.slow_rad_s), ("fast", test.fast_rad_s)):
         stretch = test.stretch(vel)
@@ -360,7 +353,7 @@ def simulate_two_speeds(
             model, level, vel, stretch, pose=pose, subject=subject, reflex=reflex
         )
         # flexion positive x -direction: the torque that resists the extension
-        trace["muscle_resisting_nm"] = -stretch.direction * trace["muscle_torque_nm"]
+        trace["leg_resisting_nm"] = -stretch.direction * trace["leg_torque_nm"]
         runs[name] = (vel, trace)
     return runs
 

@@ -27,12 +27,14 @@ clinic (Tardieu; Boyd and Graham 1999) the test reports, per level:
     Peak resisting torque of the fast stretch over that of the slow one (both over the
     motion).
 
-The resisting torque analysed is the muscles' torque at the knee along the stretch
-(``muscle_resisting_nm``: positive = resists the extension), not the exo's torque. At 3 rad/s
+The resisting torque analysed is the leg's own torque at the knee along the stretch, its
+muscles' and its passive knee's (``leg_resisting_nm``: positive = resists the extension), not
+the exo's torque. At 3 rad/s
 the exo torque also carries the shank's inertia and the PD's ringing after the 50 ms
 acceleration (about +-15 Nm at level 0, whose muscles give the same torque at both speeds),
-which a threshold would read as catches; MuJoCo's passive muscle force has no velocity
-term, so at level 0 the muscle torques of the two speeds agree within 1 Nm. A device would
+which a threshold would read as catches; the passive knee (and MuJoCo's passive muscle
+force) has no velocity term, so at level 0 the leg's torques of the two speeds agree within
+1 Nm. A device would
 estimate the same quantity by subtracting a model of the limb's inertia and weight. The exo
 torques are reported too (``*_exo_nm``). The analysis uses the motion only (not the holds).
 
@@ -108,10 +110,9 @@ class TardieuParams:
             catch (R1), Nm: 10 Nm, ten times the < 1 Nm the two speeds differ by at level 0
             (no reflex) and a tenth of the motor's 100 Nm.
         end_feel_torque_nm: Resisting torque of the slow stretch that marks the end of the
-            passive range (R2), Nm: 25 Nm, the hamstrings' passive torque near the seated end
-            of range of the level-0 twin (about 23 deg of flexion; 25 Nm of muscle torque
-            plus about 13 Nm of shank and exo weight is the ~40 Nm a healthy seated knee
-            stays near 18 deg under, docs/reference.md section 6).
+            passive range (R2), Nm: 25 Nm, the passive knee's torque near the seated end of
+            range (Riener and Edrich's moment at hip 90 deg reaches 25 Nm at about 12 deg
+            of flexion; docs/reference.md section 6).
         levels: Spasticity levels to test.
         accel_time_s: Time to reach (and leave) each stretch speed, s.
         hold_s: Time held at the start before the stretch (tone and activations settle), s.
@@ -157,8 +158,8 @@ class TardieuResult:
         summary: One row per level (see :meth:`table`).
         traces: One row per control step of every stretch: ``level, speed ("slow"/"fast"),
             vel_rad_s`` and the stretch-test columns (:class:`myoexo.clinical.stretch
-            .StretchTestResult`) plus ``muscle_resisting_nm`` (the muscles' torque against
-            the extension).
+            .StretchTestResult`) plus ``leg_resisting_nm`` (the leg's own torque, muscles
+            and passive knee, against the extension).
         params: The test parameters.
         reflex: Name of the reflex model.
     """
@@ -185,11 +186,11 @@ def analyse_tardieu(
     slow: pd.DataFrame, fast: pd.DataFrame, params: TardieuParams
 ) -> dict[str, Any]:
     """R1, R2, their difference and the peak ratio of one level (definitions: module
-    docstring) from its slow and fast stretch traces (with ``muscle_resisting_nm``)."""
+    docstring) from its slow and fast stretch traces (with ``leg_resisting_nm``)."""
     slow_m, fast_m = _moving(slow), _moving(fast)
-    slow_res = slow_m["muscle_resisting_nm"].to_numpy()
+    slow_res = slow_m["leg_resisting_nm"].to_numpy()
     slow_deg = slow_m["knee_deg"].to_numpy()
-    fast_res = fast_m["muscle_resisting_nm"].to_numpy()
+    fast_res = fast_m["leg_resisting_nm"].to_numpy()
     fast_deg = fast_m["knee_deg"].to_numpy()
 
     # the end-feel: from R2 on, the resistance stays at or above the threshold to the end of
@@ -288,7 +289,7 @@ def plot_tardieu(result: TardieuResult) -> Figure:
         for speed, style, vel in (("slow", "--", p.slow_rad_s), ("fast", "-", p.fast_rad_s)):
             sel = tr[(tr["level"] == level) & (tr["speed"] == speed)]
             ax.plot(
-                sel["knee_deg"], sel["muscle_resisting_nm"], style, color=color,
+                sel["knee_deg"], sel["leg_resisting_nm"], style, color=color,
                 label=f"{speed} {vel:g} rad/s",
             )  # fmt: skip
         ax.axhline(p.end_feel_torque_nm, color="0.6", lw=0.8, ls=":")
@@ -305,7 +306,7 @@ def plot_tardieu(result: TardieuResult) -> Figure:
         ax.set_xlabel("knee flexion (deg)")
         ax.invert_xaxis()  # the extension runs left to right
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("muscle torque against the extension (Nm)")
+    axes[0].set_ylabel("leg torque against the extension (Nm)")
     axes[0].legend(fontsize=8, loc="upper left")
     fig.suptitle(
         f"Simulated Tardieu test ({result.reflex} reflex): knee {p.start_deg:g} → "

@@ -43,8 +43,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from myoexo.model import EXO_ACTUATOR, KNEE_JOINT, strap_knee_torque
-from myoexo.spasticity.stage import SpasticityStage, StageHost
+from myoexo.envs.twin import Twin
+from myoexo.spasticity.stage import SpasticityStage
 
 #: Scale of the interaction torque in the cost (Nm): the motor's peak torque.
 _TORQUE_SCALE_NM = 100.0
@@ -152,18 +152,12 @@ class OracleMPC:
         e = self.env
         self._model = e.model
         self._data = mujoco.MjData(e.model)
-        self._host = StageHost(e.model, self._data, e.dt)
-        self._frame_skip = int(e.frame_skip)
-        # the twin's named parts, looked up by their names in the model
-        knee = e.model.joint(KNEE_JOINT)
-        self._exo_act = int(e.model.actuator(EXO_ACTUATOR).id)
-        self._knee_qadr = int(knee.qposadr[0])
-        self._knee_dadr = int(knee.dofadr[0])
-        self._strap_torque = strap_knee_torque(e.model)
+        # the planner's own twin: a copy of the env's state, stepped with a planning copy of
+        # its reflex stage (set at each plan)
+        self._twin = Twin(e.model, e.spasticity, e.dt, data=self._data)
         self._torque_aware = self.config.interaction_weight > 0 or self.config.peak_weight > 0
         self._target_rad = math.radians(e.target_angle_deg)
         self._steps = max(2, round(self.config.horizon_s / e.dt))
-        self._ctrl = np.zeros(e.model.nu)
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         self._state_spec = spec
         self._state = np.zeros(mujoco.mj_stateSize(e.model, spec))
@@ -198,31 +192,29 @@ class OracleMPC:
 
     # ------------------------------------------------------------------ planning
     def _rollout_cost(self, plan: np.ndarray, stage: SpasticityStage, delay: tuple) -> float:
-        m, d = self._model, self._data
-        mujoco.mj_setState(m, d, self._state, self._state_spec)
+        twin = self._twin
+        mujoco.mj_setState(self._model, self._data, self._state, self._state_spec)
+        twin.stage = stage
         stage.set_history_state(delay)
-        ctrl, host = self._ctrl, self._host
         cfg = self.config
         cost = 0.0
         tw, iw = cfg.torque_weight, cfg.interaction_weight
         peak = self._peak_nm
+        d = self._data
         ramping = cfg.ramp_s > 0 and d.time < cfg.ramp_s  # else the target is the reference
         target = self._target_rad
         for k in range(self._steps):
             u = float(plan[k])
-            ctrl.fill(0.0)
-            ctrl[self._exo_act] = u
-            d.ctrl[:] = stage.apply(host, ctrl)
-            mujoco.mj_step(m, d, self._frame_skip)
+            twin.step(u)
             reference = self._reference_rad(d.time) if ramping else target
-            e = d.qpos.item(self._knee_qadr) - reference
+            e = twin.knee_angle_rad - reference
             step_cost = e * e + tw * u * u
             if self._torque_aware:
-                tau = self._interaction_torque_nm(d)
+                tau = twin.interaction_torque_nm  # as the env's interaction_torque_nm
                 step_cost += iw * (tau / _TORQUE_SCALE_NM) ** 2
                 peak = max(peak, tau)
             cost += self._weights[k] * step_cost
-        v = d.qvel.item(self._knee_dadr)
+        v = twin.knee_velocity_rad_s
         rise = (peak**2 - self._peak_nm**2) / _TORQUE_SCALE_NM**2
         return cost + cfg.terminal_weight * cfg.velocity_weight * v * v + cfg.peak_weight * rise
 
@@ -233,16 +225,11 @@ class OracleMPC:
             return self._target_rad
         return self._start_rad + (self._target_rad - self._start_rad) * time_s / ramp
 
-    def _interaction_torque_nm(self, d: mujoco.MjData) -> float:
-        """The strap's torque on the knee of the step just taken (Nm, magnitude), as the
-        env's ``interaction_torque_nm``."""
-        return abs(self._strap_torque(d, d.qpos.item(self._knee_qadr)))
-
     def _plan_now(self) -> None:
         e, cfg = self.env, self.config
         mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
         if self._start_rad is None:
-            self._start_rad = e.data.qpos.item(self._knee_qadr)
+            self._start_rad = e.twin.knee_angle_rad
         stage = e.spasticity.planning_copy(e.model, e.dt)
         delay = e.spasticity.history_state()  # delay line + after-discharge
         # the best plan so far, shifted by the steps it has run
@@ -251,7 +238,7 @@ class OracleMPC:
         best = np.interp(grid, np.arange(cfg.knots), self._knots)
         best_cost = self._rollout_cost(self._basis @ best, stage, delay)
         candidates = [np.full(cfg.knots, -1.0), np.full(cfg.knots, 1.0)]
-        error_rad = abs(e.data.qpos.item(self._knee_qadr) - self._target_rad)
+        error_rad = abs(e.twin.knee_angle_rad - self._target_rad)
         sigma = cfg.noise * min(1.0, max(0.1, error_rad / cfg.noise_error_rad))
         for _ in range(cfg.iters):
             n_random = cfg.samples - 1 - len(candidates)

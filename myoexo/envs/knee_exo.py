@@ -74,6 +74,7 @@ from myoexo.envs.robustness import (
     robustness_params,
     twin_perturbation,
 )
+from myoexo.envs.twin import Twin
 from myoexo.model import EXO_ACTUATOR, TwinParams, build_model, pose_twin
 from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -206,7 +207,6 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._ctrl_dt = float(m.opt.timestep * frame_skip)
-        self._half_timestep_s = 0.5 * float(m.opt.timestep)
         self.mj_instability_termination = False  # instability truncates, see step()
 
         # observation: keys and where they live in the model (observation.py)
@@ -226,7 +226,6 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         # action: the exo motor's ctrl entry; the muscles get the ctrl stages' excitations
         self._exo_act = int(m.actuator(EXO_ACTUATOR).id)
         self._muscle_act_ind = m.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE
-        self._ctrl = np.zeros(m.nu)
         self._stage_applies: tuple | None = None  # see _run_ctrl_stages
 
         # reward (reward.py): MyoSuite's weighted_reward_keys
@@ -250,6 +249,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             level=spasticity_level, subject_noise=subject_noise, reflex=reflex
         )
         self.add_ctrl_stage("spasticity", self.spasticity.apply, self.spasticity.reset)
+        #: The stepping twin (:class:`~myoexo.envs.twin.Twin`): this env's model, data and
+        #: reflex stage, stepped through this env's control stages.
+        self.twin = Twin(
+            m, self.spasticity, self._ctrl_dt, data=self.data, stages=self._run_ctrl_stages
+        )
 
         self._input_seed = seed
         gym.Env.reset(self, seed=seed)
@@ -409,7 +413,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the exo command for one control period and return the 5-tuple.
 
-        Physics: exactly ``mj_step(model, data, frame_skip)`` with this step's ``ctrl``
+        Physics: :meth:`Twin.step <myoexo.envs.twin.Twin.step>`, exactly ``mj_step(model, data,
+        frame_skip)`` with this step's ``ctrl``
         (run as ``frame_skip - 1`` substeps and a last one, to note the knee angle in
         between; the state trajectory is bit-identical to raw ``mj_step``), and no extra
         ``mj_forward``: the returned quantities are what the state and the last substep
@@ -442,24 +447,12 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._command = u
         views = self._data_views()
         layout = self.obs_layout
-        knee_qadr = layout.knee_qadr
-        ctrl = self._ctrl
-        ctrl.fill(0.0)
-        ctrl[self._exo_act] = u
-        views.ctrl[:] = self._run_ctrl_stages(ctrl)
-        m, d = self.model, self.data
-        t_expected_s = d.time + self._ctrl_dt
-        if self.frame_skip > 1:
-            mujoco.mj_step(m, d, self.frame_skip - 1)
-        forces_knee_rad = views.qpos.item(knee_qadr)  # knee angle at t - h
-        mujoco.mj_step(m, d)
-        self._steps += 1
         # MuJoCo checks every substep for NaN/inf/huge qpos, qvel or qacc and then resets
-        # the data (time -> 0, finite state): a time that went back is an instability.
-        unstable = d.time < t_expected_s - self._half_timestep_s
-        if unstable:
-            mujoco.mj_forward(m, d)
-            forces_knee_rad = views.qpos.item(knee_qadr)
+        # the data (time -> 0, finite state): the twin reports that as an instability.
+        twin = self.twin
+        unstable = twin.step(u)
+        forces_knee_rad = twin.force_knee_angle_rad  # knee angle at t - h
+        self._steps += 1
 
         raw = layout.gather(views, u, forces_knee_rad)
         values = raw[: layout.info_len].tolist()  # python floats: cheapest for scalar math

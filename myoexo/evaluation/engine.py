@@ -313,9 +313,15 @@ def resolve_controllers(
         if root_seed is not None:
             check_no_selection_leak(spec, root_seed)
         trained = policy_twin(spec) if twin is not None else None
-        mismatch = twin_mismatch(trained, twin) if trained is not None and twin else None
-        if trained is not None and twin is not None and not mismatch:
-            mismatch = _parameter_mismatch(spec, twin) or _version_mismatch(spec)
+        mismatch = None
+        if trained is not None and twin is not None:
+            options = twin_mismatch(trained, twin)  # another reflex, task or robustness
+            found = (
+                options,
+                _version_mismatch(spec),
+                None if options else _parameter_mismatch(spec, twin),
+            )
+            mismatch = "; and ".join(m for m in found if m) or None
         if mismatch:
             message = f"controller {text!r} was {mismatch}"
             log(f"myoexo evaluate: warning: {message}")

@@ -12,6 +12,8 @@ root, both legs, 80 muscles, Rajagopal's coupled knees) is loaded through
   equalities, so the thigh is horizontal and the shank hangs under gravity;
 * keeps the knee (with Rajagopal's coupled translations/rotations and the patella
   equalities), ankle, subtalar and mtp joints free;
+* gives the knee its passive moment and damping (``TwinParams.passive_knee``,
+  :mod:`myoexo.model.passive_knee`);
 * disables all contacts (and drops the foot touch sensors): a single seated leg without
   floor has nothing to touch, and the broad phase then costs nothing.
 
@@ -31,6 +33,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model.params import TwinParams
+from myoexo.model.passive_knee import install_passive_knee
 
 if TYPE_CHECKING:
     from myosuite.core.model_builder import ModelBuilder
@@ -123,6 +126,15 @@ def seat_subject(params: TwinParams) -> Callable[[mujoco.MjSpec], mujoco.MjSpec]
         root.pos = np.array([0.0, 0.0, params.hip_height_m])
         root.quat = np.array(_ROOT_QUAT)
         _lock_hip(spec, params)
+        if params.passive_knee == "riener_edrich":
+            install_passive_knee(
+                spec,
+                knee_joint=KNEE_JOINT,
+                hip_deg=params.hip_flexion_deg,
+                damping_nm_s_rad=params.knee_damping_nm_s_rad,
+            )
+        else:
+            spec.joint(KNEE_JOINT).damping = np.array([params.knee_damping_nm_s_rad, 0.0, 0.0])
         for geom in spec.geoms:
             geom.contype = 0
             geom.conaffinity = 0

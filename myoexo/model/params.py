@@ -40,14 +40,28 @@ __all__ = ["EARLIER_TWINS", "TWIN_VERSION", "TwinParams", "recorded_twin_version
 #: Version of the default twin's physics, recorded in every evaluation folder and result set
 #: (``twin_version``); results without it were measured on version 1. CHANGELOG.md says what
 #: each version changed. 2: the sagittal cuff pins are damped (``pin_damping_nm_s_rad``) and
-#: carry an armature (``pin_armature_kg_m2``).
-TWIN_VERSION = 2
+#: carry an armature (``pin_armature_kg_m2``). 3: the passive knee is Riener and Edrich's
+#: measured moment with a knee damping of its own (``passive_knee``,
+#: ``knee_damping_nm_s_rad``; :mod:`myoexo.model.passive_knee`).
+TWIN_VERSION = 3
 
 #: The fields that give an earlier twin version's physics (:meth:`TwinParams.of_version`), so
 #: that a result or a policy of that version can be reproduced on the twin it was made on.
-EARLIER_TWINS: dict[int, dict[str, float]] = {
-    1: {"pin_damping_nm_s_rad": 1.0, "pin_armature_kg_m2": 0.001},
+EARLIER_TWINS: dict[int, dict[str, float | str]] = {
+    1: {
+        "pin_damping_nm_s_rad": 1.0,
+        "pin_armature_kg_m2": 0.001,
+        "passive_knee": "muscles",
+        "knee_damping_nm_s_rad": 0.5,
+    },
+    2: {"passive_knee": "muscles", "knee_damping_nm_s_rad": 0.5},
 }
+
+
+#: The passive knee models (``TwinParams.passive_knee``): ``"muscles"``, the MyoSuite
+#: muscles' passive fibres with MyoSuite's damping on every knee coordinate (twins 1-2);
+#: ``"riener_edrich"``, :mod:`myoexo.model.passive_knee`.
+_PASSIVE_KNEE_MODELS = ("muscles", "riener_edrich")
 
 
 def recorded_twin_version(record: Mapping[str, Any]) -> int:
@@ -88,6 +102,15 @@ class TwinParams:
         hip_lock_solimp: ``solimp`` of the hip-lock equalities (stiff: the hip is fixed).
         hip_height_m: Height of the pelvis origin above the world origin (m); the subject
             sits facing +x with +z up. Visual only: the twin has no floor.
+        passive_knee: Where the relaxed knee's passive moment comes from:
+            ``"riener_edrich"`` (Riener and Edrich 1999's measured moment at the locked
+            hip, built as springs; the knee muscles' passive fibres off;
+            :mod:`myoexo.model.passive_knee`) or ``"muscles"`` (the MyoSuite muscles'
+            passive fibres, twins 1-2).
+        knee_damping_nm_s_rad: Viscous damping of the knee flexion (Nm s/rad). With
+            ``"riener_edrich"`` it is the flexion's only damping (the knee's dependent
+            coordinates are undamped); with ``"muscles"`` it is ``knee_angle_r``'s own,
+            MyoSuite's 0.5 on every knee coordinate.
         thigh_body: Human body the thigh cuff is strapped to.
         shank_body: Human body the shank cuff is strapped to.
         exo_knee_range_deg: Exo knee hinge range (deg), paper [-15, 95].
@@ -164,6 +187,9 @@ class TwinParams:
     hip_lock_solref: tuple[float, float] = (0.005, 1.0)
     hip_lock_solimp: tuple[float, float, float, float, float] = (0.99, 0.999, 0.001, 0.5, 2.0)
     hip_height_m: float = 0.55
+
+    passive_knee: str = "riener_edrich"
+    knee_damping_nm_s_rad: float = 0.1
 
     thigh_body: str = "femur_r"
     shank_body: str = "tibia_r"
@@ -256,6 +282,7 @@ class TwinParams:
             "coupling_damping_nm_s_rad",
             "exo_knee_damping_nm_s_rad",
             "exo_knee_armature_kg_m2",
+            "knee_damping_nm_s_rad",
         )
         for name in non_negative:
             value = getattr(self, name)
@@ -285,6 +312,11 @@ class TwinParams:
                     f"TwinParams.{name} must satisfy 0 < dmin <= dmax < 1, width > 0, "
                     f"0 < midpoint < 1, power >= 1, got {getattr(self, name)!r}"
                 )
+        if self.passive_knee not in _PASSIVE_KNEE_MODELS:
+            raise ValueError(
+                f"TwinParams.passive_knee = {self.passive_knee!r}; accepted: "
+                f"{list(_PASSIVE_KNEE_MODELS)}"
+            )
         for name in ("thigh_body", "shank_body"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ValueError(f"TwinParams.{name} must be a non-empty body name")

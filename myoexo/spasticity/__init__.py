@@ -114,6 +114,7 @@ from myoexo.spasticity.registry import (
     resolve_reflex,
 )
 from myoexo.spasticity.sensory import MuscleSensors, SensoryRecord
+from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
 from myoexo.spasticity.wrapper import SpasticityWrapper
 
@@ -144,6 +145,7 @@ __all__ = [
     "SpasticityParams",
     "SpasticityStage",
     "SpasticityWrapper",
+    "SpindleReflex",
     "StageHost",
     "StretchCalibration",
     "StretchReflex",
@@ -170,4 +172,5 @@ __all__ = [
     "sc_total_torch",
     "sc_velocity",
     "sc_velocity_torch",
+    "spindle_geometry",
 ]

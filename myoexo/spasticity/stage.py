@@ -31,7 +31,7 @@ from myoexo.spasticity.levels import (
 )
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import Memory, ReflexModel, reflex_label, resolve_reflex
-from myoexo.spasticity.sensory import MuscleSensors
+from myoexo.spasticity.sensory import MuscleSensors, SensoryRecord
 
 #: What :meth:`SpasticityStage.history_state` returns: the delay line's state and the reflex
 #: model's memory (e.g. the after-discharge ``(r,)`` of ``"persistent"``; ``()`` for the
@@ -303,6 +303,19 @@ class SpasticityStage:
         """
         return float(sc_total(theta_deg, vel_rad_s, self.subject))
 
+    def sensory_record(self, env: Any) -> SensoryRecord:
+        """What the reflex senses in *env*'s data as it stands (undelayed; the delay line is
+        not touched)."""
+        model = env.model
+        if model is not self._model:
+            self.bind(model, getattr(env, "dt", None))
+        data = env.data
+        return self._sensors.read(
+            data,
+            data.qpos.item(self._qpos_adr) * _RAD_TO_DEG,
+            data.qvel.item(self._dof_adr),
+        )
+
     def apply(self, env: Any, ctrl: np.ndarray) -> np.ndarray:
         """Add the reflex excitation to the spastic muscles' entries of *ctrl* (in place;
         returned).
@@ -344,7 +357,9 @@ class SpasticityStage:
             exc[nf:] = ext
         else:
             exc[:], self.memory = reflex.excite(self.constants, self.memory, record)
-            flex, ext = float(exc[:nf].mean()), float(exc[nf:].mean())
+            excitations = exc.tolist()  # a python mean: numpy's costs ~10 us on 11 values
+            flex = sum(excitations[:nf]) / nf
+            ext = sum(excitations[nf:]) / (len(excitations) - nf)
         u = ctrl[ids]  # a copy (fancy indexing); clip in place, cheaper than np.clip
         u += exc
         np.minimum(u, self._ones, out=u)

@@ -220,6 +220,7 @@ def calibrate(
     levels: Sequence[int] = VALID_LEVELS,
     log: Callable[[str], None] = print,
     check_root_seed: int = EVALUATION_ROOT_SEED,
+    base: StretchReflex | None = None,
 ) -> CalibrationResult:
     """Fit the threshold shifts of the target levels, then verify every level.
 
@@ -235,6 +236,8 @@ def calibrate(
         log: Progress lines.
         check_root_seed: Root seed of the verification's subjects (default: the evaluation
             root, where the fitted twin is then checked, not fitted).
+        base: The model whose calibration is fitted (default ``StretchReflex``; a
+            :class:`~myoexo.spasticity.spindle.SpindleReflex` is fitted the same way).
     """
     root_seed = check_fit_root(root_seed, "calibration")
     t0 = time.perf_counter()
@@ -244,7 +247,7 @@ def calibrate(
             {lv: LevelCalibration(extensor_gain=extensor_gain) for lv in VALID_LEVELS if lv > 0}
         )
     )
-    reflex = StretchReflex(delay_s=delay_s, calibration=cal)
+    reflex = dataclasses.replace(base or StretchReflex(), delay_s=delay_s, calibration=cal)
     fitted: dict[int, PIDOutcome] = {}
     for level, target in sorted(tg.pid_final_error_deg.items()):
         log(f"fitting level {level}: PID final error -> {target} deg ({subjects} subjects)")
@@ -258,8 +261,9 @@ def calibrate(
     log(f"verifying on {verify_subjects} subjects per level")
     outcomes = {lv: pid_outcome(lv, reflex, verify_subjects, check_root_seed) for lv in levels}
     elapsed = time.perf_counter() - t0
+    model_flag = "" if type(reflex) is StretchReflex else " --reflex spindle"
     note = (
-        f"myoexo calibrate --subjects {subjects} --verify-subjects {verify_subjects} "
+        f"myoexo calibrate{model_flag} --subjects {subjects} --verify-subjects {verify_subjects} "
         f"--delay {delay_s} --extensor-gain {extensor_gain} --seed {root_seed}: fitted on "
         f"root {root_seed}; check on root {check_root_seed}, PID final error "
         + ", ".join(
@@ -498,9 +502,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--reflex",
-        choices=("stretch", "persistent", "tsrt"),
+        choices=("stretch", "spindle", "persistent", "tsrt"),
         default="stretch",
-        help="model to fit: the stretch reflex's thresholds (default), the persistent "
+        help="model to fit: the stretch reflex's thresholds (default), the spindle reflex's "
+        "(the same fit, on the muscles' fibre lengths measured on the twin), the persistent "
         "reflex's after-discharge gains, or the tsrt reflex jointly to the PID table and the "
         "clinical rows (myoexo.studies.joint_fit)",
     )
@@ -542,8 +547,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--write",
         action="store_true",
-        help="stretch, tsrt: make the fit the package's (myoexo/assets/fits/reflex_<model>.json, "
-        "with its provenance), which the reflex model then reads",
+        help="stretch, spindle, tsrt: make the fit the package's "
+        "(myoexo/assets/fits/reflex_<model>.json, with its provenance), which the reflex model "
+        "then reads",
     )
 
 
@@ -562,31 +568,53 @@ def run(args: argparse.Namespace) -> int:
         return _run_persistent(args)
     if reflex == "tsrt":
         return _run_tsrt(args)
+    base: StretchReflex = StretchReflex()
+    if reflex == "spindle":
+        from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
+
+        base = SpindleReflex(geometry=spindle_geometry())
     result = calibrate(
         args.subjects,
         args.verify_subjects,
         args.delay,
         extensor_gain=args.extensor_gain,
         root_seed=args.seed,
+        base=base,
     )
-    code = _report("stretch", result.calibration.note, "", result, args.out)
+    code = _report(reflex, result.calibration.note, "", result, args.out)
     if getattr(args, "write", False):
-        from myoexo.spasticity.reflex import STRETCH_FIT
+        if reflex == "spindle":
+            from myoexo.spasticity.spindle import SPINDLE_FIT
 
-        _write_calibration(STRETCH_FIT, result.calibration, result.fit_root_seed)
+            _write_calibration(
+                SPINDLE_FIT,
+                result.calibration,
+                result.fit_root_seed,
+                {"geometry": base.geometry.to_dict()},  # type: ignore[attr-defined]
+            )
+        else:
+            from myoexo.spasticity.reflex import STRETCH_FIT
+
+            _write_calibration(STRETCH_FIT, result.calibration, result.fit_root_seed)
     return code
 
 
-def _write_calibration(name: str, calibration: Any, root_seed: int) -> None:
+def _write_calibration(
+    name: str, calibration: Any, root_seed: int, extra: dict[str, Any] | None = None
+) -> None:
     """Make a reflex model's fitted *calibration* the package's fit *name*, with its
-    provenance (the command is the calibration note's, which names every option)."""
+    provenance (the command is the calibration note's, which names every option); with
+    *extra*, the fit is ``{"calibration": ..., **extra}``."""
     from myoexo.model import TWIN_VERSION
     from myoexo.runtime.fits import provenance, write_fit
 
     command = calibration.note.split(":")[0]
+    result = calibration.to_dict()
+    if extra is not None:
+        result = {"calibration": result, **extra}
     path = write_fit(
         name,
-        calibration.to_dict(),
+        result,
         provenance(f"{command} --write", TWIN_VERSION, root_seed=root_seed),
     )
     print(f"written: {path}")
@@ -617,7 +645,7 @@ def _report(model: str, note: str, constant: str, result: Any, out: Path | None)
     where = (
         f"in myoexo.spasticity.reflex.{constant}"
         if constant
-        else "the package's with --write: myoexo/assets/fits/reflex_stretch.json"
+        else f"the package's with --write: myoexo/assets/fits/reflex_{model}.json"
     )
     text = (
         f"# Calibration of the {model} reflex\n\n{note}\n\n"

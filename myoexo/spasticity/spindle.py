@@ -1,0 +1,312 @@
+"""``"spindle"``: the stretch reflex read on each muscle's own fibre length and speed.
+
+Muscle spindles sense their own muscle's fibre length and lengthening speed, not the knee
+angle. A biarticular hamstring is longer with the hip flexed than with it extended at the
+same knee angle: seated (hip 90 deg) a knee extension stretches it into its reflex range,
+reclined for the pendulum test (hip 40 deg) the same knee angle leaves it slack. A reflex
+read on the knee angle cannot tell the two apart; this one can.
+
+Each spastic muscle ``i`` maps its own normalised fibre length ``L_i`` and lengthening speed
+``s_i`` (:class:`~myoexo.spasticity.SensoryRecord`) onto the knee angle and velocity that
+would stretch it that far **in the seated posture of the study** (:class:`SpindleGeometry`:
+the least-squares line of ``L_i`` over the knee's 0-90 deg, seated; ``dL_i/dtheta`` in
+optimal lengths per rad)::
+
+    theta_i = theta_ref + (L_i - L_ref,i) / (dL_i/dtheta)      (deg)
+    v_i     = s_i / (dL_i/dtheta)                              (rad/s)
+
+and answers with the ``"stretch"`` reflex's term of the side that stretches it (the flexor
+term for a muscle that extension lengthens, ``dL_i/dtheta < 0``, the extensor term for one
+that flexion lengthens), with the same Table I windows, calibration form and 20 ms delay::
+
+    e_i = g_flex [ s_theta below(theta_i; theta_ext + shift) + s_v below(v_i; v_lower) ]
+          (muscles extension lengthens)
+    e_i = g_ext  [ s_theta above(theta_i; theta_flex)        + s_v above(v_i; v_upper) ]
+          (muscles flexion lengthens)
+
+So in the seated task it is the ``"stretch"`` reflex, muscle by muscle (each threshold a
+fibre length, the tonic-stretch-reflex-threshold form of Levin and Feldman 1994 on the
+muscle's own state); in any other posture each muscle answers the stretch it actually has.
+The gracilis, which the paper groups with the extensors, is lengthened by extension and
+answers as a flexor here. The per-level parameters (gains, the flexors' threshold shift) are
+fitted by ``myoexo calibrate --reflex spindle`` to the study's PID table like
+``"stretch"``'s, and written with the geometry to the package's fit :data:`SPINDLE_FIT`.
+
+No memory, no torch twin (the gradient fits do not take it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from myoexo.runtime.fits import fit_path, read_fit
+from myoexo.spasticity.levels import SPASTIC_MUSCLES
+from myoexo.spasticity.reflex import (
+    StretchCalibration,
+    StretchConstants,
+    StretchReflex,
+    stretch_constants,
+)
+from myoexo.spasticity.registry import Memory, register_reflex
+
+if TYPE_CHECKING:
+    from myoexo.model import TwinParams
+    from myoexo.spasticity.sensory import SensoryRecord
+
+__all__ = [
+    "SPINDLE_FIT",
+    "SpindleConstants",
+    "SpindleGeometry",
+    "SpindleReflex",
+    "spindle_constants",
+    "spindle_geometry",
+]
+
+#: The package's fit of the ``"spindle"`` reflex: its geometry and its per-level parameters
+#: (``myoexo calibrate --reflex spindle --write``).
+SPINDLE_FIT = "reflex_spindle"
+
+#: Knee angles (deg) over which each muscle's fibre length is fitted by a line, seated.
+_GEOMETRY_KNEE_DEG = tuple(float(v) for v in range(0, 95, 5))
+
+
+@dataclass(frozen=True)
+class SpindleGeometry:
+    """Each spastic muscle's fibre length against the knee angle in the seated posture.
+
+    Attributes:
+        muscles: The muscles, in the stage's order (flexors, then extensors).
+        reference_knee_deg: The knee angle the lines are taken about, deg.
+        reference_length: Each muscle's normalised fibre length there (``L / L_opt``).
+        slope_per_rad: ``dL/dtheta`` of each muscle, optimal lengths per rad of knee
+            flexion (< 0: knee extension lengthens it).
+        hip_flexion_deg: The hip posture the lines were measured in.
+        rms_error: Each line's RMS error over the fitted range, optimal lengths.
+    """
+
+    muscles: tuple[str, ...]
+    reference_knee_deg: float
+    reference_length: tuple[float, ...]
+    slope_per_rad: tuple[float, ...]
+    hip_flexion_deg: float
+    rms_error: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.muscles)
+        if len(self.reference_length) != n or len(self.slope_per_rad) != n:
+            raise ValueError(
+                f"SpindleGeometry needs one reference length and one slope per muscle "
+                f"({n}), got {len(self.reference_length)} and {len(self.slope_per_rad)}"
+            )
+        bad = [m for m, s in zip(self.muscles, self.slope_per_rad, strict=True) if s == 0.0]
+        if bad:
+            raise ValueError(f"SpindleGeometry: muscles {bad} do not change length with the knee")
+
+    def equivalent_knee_deg(self, fibre_length: np.ndarray) -> np.ndarray:
+        """The knee angle (deg) that would stretch each muscle to *fibre_length* seated."""
+        slope = np.asarray(self.slope_per_rad)
+        return self.reference_knee_deg + np.degrees(
+            (np.asarray(fibre_length) - np.asarray(self.reference_length)) / slope
+        )
+
+    def equivalent_knee_velocity_rad_s(self, lengthening_speed: np.ndarray) -> np.ndarray:
+        """The knee velocity (rad/s) that would lengthen each muscle at *lengthening_speed*."""
+        return np.asarray(lengthening_speed) / np.asarray(self.slope_per_rad)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "muscles": list(self.muscles),
+            "reference_knee_deg": self.reference_knee_deg,
+            "reference_length": list(self.reference_length),
+            "slope_per_rad": list(self.slope_per_rad),
+            "hip_flexion_deg": self.hip_flexion_deg,
+            "rms_error": list(self.rms_error),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> SpindleGeometry:
+        """The geometry :meth:`to_dict` wrote."""
+        return cls(
+            muscles=tuple(doc["muscles"]),
+            reference_knee_deg=float(doc["reference_knee_deg"]),
+            reference_length=tuple(float(v) for v in doc["reference_length"]),
+            slope_per_rad=tuple(float(v) for v in doc["slope_per_rad"]),
+            hip_flexion_deg=float(doc["hip_flexion_deg"]),
+            rms_error=tuple(float(v) for v in doc.get("rms_error", ())),
+        )
+
+
+def spindle_geometry(
+    params: TwinParams | None = None, muscles: Sequence[str] = SPASTIC_MUSCLES
+) -> SpindleGeometry:
+    """Measure :class:`SpindleGeometry` on the twin *params* (default: the seated twin):
+    each muscle's normalised fibre length at knee angles 0-90 deg, a line through them."""
+    import mujoco
+
+    from myoexo.model import TwinParams, build_model, pose_twin
+    from myoexo.spasticity.sensory import MuscleSensors
+
+    params = params or TwinParams(scene=False)
+    model, _ = build_model(params)
+    data = mujoco.MjData(model)
+    ids = np.array([model.actuator(name).id for name in muscles])
+    sensors = MuscleSensors(model, ids, len(muscles))
+    knee = np.array(_GEOMETRY_KNEE_DEG)
+    lengths = np.empty((len(knee), len(muscles)))
+    for row, knee_deg in enumerate(knee):
+        pose_twin(model, data, knee_angle_deg=float(knee_deg))
+        mujoco.mj_forward(model, data)
+        lengths[row] = sensors.read(data, float(knee_deg), 0.0).fibre_length
+    reference_deg = float(knee.mean())
+    x = np.radians(knee - reference_deg)
+    design = np.column_stack([np.ones_like(x), x])
+    coef, *_ = np.linalg.lstsq(design, lengths, rcond=None)
+    rms = np.sqrt(np.mean((design @ coef - lengths) ** 2, axis=0))
+    return SpindleGeometry(
+        muscles=tuple(muscles),
+        reference_knee_deg=reference_deg,
+        reference_length=tuple(float(v) for v in coef[0]),
+        slope_per_rad=tuple(float(v) for v in coef[1]),
+        hip_flexion_deg=float(params.hip_flexion_deg),
+        rms_error=tuple(float(v) for v in rms),
+    )
+
+
+def _package_fit() -> tuple[SpindleGeometry | None, StretchCalibration]:
+    """The package's geometry and calibration (``None`` and an empty calibration before the
+    first ``--write``)."""
+    if not fit_path(SPINDLE_FIT).exists():
+        return None, StretchCalibration(note="not fitted")
+    result = read_fit(SPINDLE_FIT)["result"]
+    return (
+        SpindleGeometry.from_dict(result["geometry"]),
+        StretchCalibration.from_dict(result["calibration"]),
+    )
+
+
+#: The package's fit (:data:`SPINDLE_FIT`): the seated geometry and the per-level parameters.
+SPINDLE_GEOMETRY, SPINDLE_CALIBRATION = _package_fit()
+
+
+class SpindleConstants(NamedTuple):
+    """A subject's constants of the ``"spindle"`` reflex, folded into one affine map per term.
+
+    With ``s_i = -1`` for a muscle that extension lengthens (the flexor term's ``below``) and
+    ``+1`` for one that flexion lengthens (the extensor term's ``above``), each term is
+    ``weight_i (1 + tanh(x_i))`` with ``x_i = slope_i * sensed_i + offset_i``: the first
+    half of each array is the angle term on the fibre length, the second the velocity term on
+    the lengthening speed."""
+
+    slope: np.ndarray
+    offset: np.ndarray
+    weight: np.ndarray
+    n_muscles: int
+
+
+def spindle_constants(stretch: StretchConstants, geometry: SpindleGeometry) -> SpindleConstants:
+    """Fold the stretch reflex's constants and the geometry into :class:`SpindleConstants`."""
+    slope = np.asarray(geometry.slope_per_rad, dtype=np.float64)
+    lengthened_by_extension = slope < 0.0
+    sign = np.where(lengthened_by_extension, -1.0, 1.0)
+    deg_per_length = np.degrees(1.0 / slope)
+    # theta_i = theta_ref + (L_i - L_ref_i) deg_per_length_i, v_i = speed_i / slope_i
+    theta_offset = (
+        geometry.reference_knee_deg - np.asarray(geometry.reference_length) * deg_per_length
+    )
+    theta_threshold = np.where(
+        lengthened_by_extension, stretch.flex_theta_deg, stretch.theta_flex_deg
+    )
+    vel_threshold = np.where(lengthened_by_extension, stretch.v_lower_rad_s, stretch.v_upper_rad_s)
+    hk = stretch.half_k
+    return SpindleConstants(
+        slope=np.concatenate([hk * sign * deg_per_length, hk * sign / slope]),
+        offset=np.concatenate(
+            [hk * sign * (theta_offset - theta_threshold), -hk * sign * vel_threshold]
+        ),
+        weight=0.5
+        * np.concatenate(
+            [
+                np.where(lengthened_by_extension, stretch.flex_s_theta, stretch.ext_s_theta),
+                np.where(lengthened_by_extension, stretch.flex_s_v, stretch.ext_s_v),
+            ]
+        ),
+        n_muscles=len(slope),
+    )
+
+
+@dataclass(frozen=True)
+class SpindleReflex(StretchReflex):
+    """``"spindle"``: each spastic muscle answers the stretch of its own fibres (module
+    docstring).
+
+    Attributes:
+        delay_s: Transmission delay, s (the stretch reflex's 20 ms).
+        calibration: Per-level gains and flexor threshold shift (:data:`SPINDLE_CALIBRATION`).
+        geometry: The muscles' fibre length against the knee angle, seated
+            (:data:`SPINDLE_GEOMETRY`; measured with :func:`spindle_geometry` when the
+            package has no fit yet).
+    """
+
+    calibration: StretchCalibration = SPINDLE_CALIBRATION
+    geometry: SpindleGeometry | None = field(default=SPINDLE_GEOMETRY, compare=True)
+
+    def subject_constants(
+        self, level: int, subject: Any, individual: Any, control_period_s: float
+    ) -> SpindleConstants:
+        geometry = self.geometry or _measured_geometry()
+        return spindle_constants(stretch_constants(subject, self.calibration[level]), geometry)
+
+    def excite(
+        self, constants: Any, memory: Memory, record: SensoryRecord
+    ) -> tuple[Sequence[float], Memory]:
+        c: SpindleConstants = constants
+        x = np.concatenate((record.fibre_length, record.lengthening_speed))
+        x *= c.slope
+        x += c.offset
+        np.tanh(x, out=x)
+        x += 1.0
+        x *= c.weight
+        n = c.n_muscles
+        return x[:n] + x[n:], memory
+
+    def step(
+        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
+    ) -> tuple[float, float, Memory]:
+        raise NotImplementedError(
+            "SpindleReflex reads the muscles' own state: call excite with a SensoryRecord"
+        )
+
+    def step_torch(self, *args: Any, **kwargs: Any) -> Any:
+        raise NotImplementedError("SpindleReflex has no torch twin of its step")
+
+
+_MEASURED: list[SpindleGeometry] = []
+
+
+def _measured_geometry() -> SpindleGeometry:
+    """The default twin's geometry, measured once per process (before the package's fit)."""
+    if not _MEASURED:
+        _MEASURED.append(spindle_geometry())
+    return _MEASURED[0]
+
+
+def geometry_summary(geometry: SpindleGeometry) -> str:
+    """One line per muscle: its slope in optimal lengths per 10 deg and the line's error."""
+    lines = []
+    for name, slope, rms in zip(
+        geometry.muscles,
+        geometry.slope_per_rad,
+        geometry.rms_error or (math.nan,) * 99,
+        strict=False,
+    ):
+        lines.append(f"{name}: {slope * math.radians(10):+.4f} L_opt per 10 deg (RMS {rms:.4f})")
+    return "\n".join(lines)
+
+
+register_reflex("spindle", SpindleReflex())

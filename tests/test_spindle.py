@@ -1,0 +1,121 @@
+"""The ``"spindle"`` reflex: each muscle answers the stretch of its own fibres, so the same
+knee angle stretches the hamstrings seated and leaves them slack reclined."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from myoexo.model import TwinParams, build_model, pose_twin
+from myoexo.spasticity import (
+    LEVELS,
+    SPASTIC_FLEXORS,
+    SPASTIC_MUSCLES,
+    MuscleSensors,
+    SpasticityStage,
+    StageHost,
+    get_reflex,
+    reflex_names,
+)
+from myoexo.spasticity.reflex import CALIBRATION, StretchReflex, stretch_constants, stretch_terms
+from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
+
+HAMSTRINGS = ("semimem_r", "semiten_r", "bflh_r")
+
+
+@pytest.fixture(scope="module")
+def seated() -> tuple[mujoco.MjModel, object]:
+    model, _ = build_model(TwinParams(scene=False))
+    return model, spindle_geometry(TwinParams(scene=False))
+
+
+def _record(model: mujoco.MjModel, knee_deg: float):
+    data = mujoco.MjData(model)
+    pose_twin(model, data, knee_angle_deg=knee_deg)
+    mujoco.mj_forward(model, data)
+    ids = np.array([model.actuator(n).id for n in SPASTIC_MUSCLES])
+    return MuscleSensors(model, ids, len(SPASTIC_FLEXORS)).read(data, knee_deg, 0.0)
+
+
+def test_geometry_signs_and_lines(seated) -> None:
+    _, geometry = seated
+    slope = dict(zip(geometry.muscles, geometry.slope_per_rad, strict=True))
+    for name in (*HAMSTRINGS, "bfsh_r", "grac_r", "gaslat_r", "gasmed_r"):
+        assert slope[name] < 0.0, name  # knee extension lengthens the flexors (and gracilis)
+    for name in ("vasmed_r", "vaslat_r", "vasint_r", "recfem_r"):
+        assert slope[name] > 0.0, name
+    assert max(geometry.rms_error) < 0.02  # a line is close over 0-90 deg
+
+
+def test_seated_fibre_lengths_read_as_the_knee_angle(seated) -> None:
+    model, geometry = seated
+    for knee_deg in (20.0, 45.0, 70.0):
+        theta = geometry.equivalent_knee_deg(_record(model, knee_deg).fibre_length)
+        assert np.abs(theta - knee_deg).max() < 15.0, (knee_deg, theta)
+
+
+def test_the_reclined_hip_slackens_the_hamstrings_and_stretches_rectus_femoris(seated) -> None:
+    _, geometry = seated
+    reclined, _ = build_model(TwinParams(hip_flexion_deg=40.0, scene=False))
+    record = _record(reclined, 10.0)
+    theta = dict(
+        zip(SPASTIC_MUSCLES, geometry.equivalent_knee_deg(record.fibre_length), strict=True)
+    )
+    for name in HAMSTRINGS:
+        assert theta[name] > 10.0 + 30.0, name  # as slack as a knee 30+ deg more flexed
+    assert theta["recfem_r"] > 10.0 + 30.0  # rectus femoris crosses the hip too
+    assert abs(theta["bfsh_r"] - 10.0) < 15.0  # a one-joint muscle does not care
+
+
+def test_the_folded_excitation_is_the_stretch_reflex_on_each_muscles_state(seated) -> None:
+    """excite's one affine map and tanh equal the stretch reflex's terms evaluated at each
+    muscle's equivalent knee angle and speed, the flexor term for the muscles extension
+    lengthens and the extensor term for the others."""
+    model, geometry = seated
+    reflex = SpindleReflex(calibration=CALIBRATION, geometry=geometry)
+    rng = np.random.default_rng(0)
+    for level in (1, 2, 3):
+        subject = LEVELS[level]
+        constants = reflex.subject_constants(level, subject, None, 0.01)
+        stretch = stretch_constants(subject, CALIBRATION[level])
+        for knee_deg in (10.0, 50.0, 85.0):
+            record = _record(model, knee_deg)._replace(
+                lengthening_speed=rng.normal(0.0, 1.5, len(SPASTIC_MUSCLES))
+            )
+            got, _ = reflex.excite(constants, (), record)
+            theta = geometry.equivalent_knee_deg(record.fibre_length)
+            vel = geometry.equivalent_knee_velocity_rad_s(record.lengthening_speed)
+            flex, ext = stretch_terms(theta, vel, stretch, np.tanh)
+            expected = np.where(np.asarray(geometry.slope_per_rad) < 0.0, flex, ext)
+            np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_it_excites_each_muscle_on_its_own_stretch(seated) -> None:
+    model, geometry = seated
+    reflex = SpindleReflex(calibration=CALIBRATION, geometry=geometry)
+    stage = SpasticityStage(3, subject_noise=False, reflex=reflex)
+    data = mujoco.MjData(model)
+    pose_twin(model, data, knee_angle_deg=10.0)
+    mujoco.mj_forward(model, data)
+    host = StageHost(model, data, 0.01)
+    stage.reset(host)
+    ctrl = stage.apply(host, np.zeros(model.nu))
+    exc = stage.last_excitations
+    assert exc.shape == (len(SPASTIC_MUSCLES),)
+    assert len(set(np.round(exc, 6))) > 2  # per muscle, not one value per group
+    assert np.isfinite(ctrl).all()
+    # seated near extension the stretched hamstrings fire more than the slack vasti
+    by_name = dict(zip(SPASTIC_MUSCLES, exc, strict=True))
+    assert min(by_name[n] for n in HAMSTRINGS) > max(by_name[n] for n in ("vasmed_r", "vasint_r"))
+
+
+def test_registered_and_reads_only_the_record() -> None:
+    assert "spindle" in reflex_names()
+    model = get_reflex("spindle")
+    assert isinstance(model, SpindleReflex) and isinstance(model, StretchReflex)
+    with pytest.raises(NotImplementedError, match="SensoryRecord"):
+        model.step((), (), 10.0, 0.0)
+    assert dataclasses.replace(model, delay_s=0.03).delay_s == 0.03
