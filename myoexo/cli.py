@@ -47,7 +47,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "calibrate": (
         "myoexo.studies.calibrate",
-        "fit the stretch reflex so that the paper's PID behaves as in the study",
+        "fit a reflex model (each model registers its own fit) so that the paper's PID "
+        "behaves as in the study",
     ),
     "validate": (
         "myoexo.studies.validate",

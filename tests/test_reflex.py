@@ -266,5 +266,43 @@ def test_calibrate_write_makes_the_fit_the_packages(tmp_path, monkeypatch, capsy
     assert 0.0 < fitted[2].flexor_threshold_shift_deg < 150.0
     assert doc["provenance"]["twin_version"] == TWIN_VERSION
     assert doc["provenance"]["command"].endswith("--seed 2 --write")
-    assert cli.main([*argv, "--reflex", "persistent", "--write"]) == 2
+    assert cli.main(["calibrate", "--reflex", "persistent", "--write"]) == 2
     assert "chosen, not fitted" in capsys.readouterr().err
+
+
+def test_each_model_registers_its_own_fit_and_options(capsys) -> None:
+    """``myoexo calibrate`` runs the fit registered for ``--reflex``; another model's option
+    is refused with one line naming whose it is; a plug-in registers its fit the same way."""
+    import argparse
+
+    from myoexo import cli
+    from myoexo.studies import calibrate as cal
+
+    assert set(cal.fit_names()) >= {"stretch", "spindle", "persistent", "tsrt"}
+    assert cli.main(["calibrate", "--sweeps", "3"]) == 2
+    assert "--sweeps is an option of --reflex tsrt, not of --reflex stretch" in (
+        capsys.readouterr().err
+    )
+    seen: dict[str, object] = {}
+
+    def fit_mine(args: argparse.Namespace) -> int:
+        seen.update(vars(args))
+        return 0
+
+    mine = cal.ReflexFit(
+        "mine_example",
+        "a plug-in's fit",
+        fit_mine,
+        (cal.FitOption("--rate-hz", 5.0, {"type": float}),),
+    )
+    cal.register_fit(mine)
+    try:
+        with pytest.raises(ValueError, match="has a fit already"):
+            cal.register_fit(mine)
+        assert cli.main(["calibrate", "--reflex", "mine_example", "--subjects", "3"]) == 0
+        assert seen["rate_hz"] == 5.0 and seen["subjects"] == 3
+        assert cli.main(["calibrate", "--reflex", "mine_example", "--rate-hz", "7"]) == 0
+        assert seen["rate_hz"] == 7.0
+        assert cli.main(["calibrate", "--rate-hz", "7"]) == 2  # stretch takes no --rate-hz
+    finally:
+        cal._FITS.pop("mine_example")

@@ -38,6 +38,8 @@ The package, one module per part (each name is re-exported here):
 * :mod:`~myoexo.spasticity.reflex`: the built-in models (``"stretch"``, ``"uniform"``,
   ``"persistent"``), their calibration data (:data:`CALIBRATION`, :data:`PERSISTENT`) and
   their torch twins;
+* :mod:`~myoexo.spasticity.spindle`: ``"spindle"``, the envs' default, the stretch reflex
+  read on each muscle's own fibre length and lengthening speed (:class:`SpindleReflex`);
 * :mod:`~myoexo.spasticity.delay`: the transmission delay line (of sensory records);
 * :mod:`~myoexo.spasticity.stage`: :class:`SpasticityStage`, the reflex as a stage of
   MyoSuite's muscle-command pipeline (:mod:`myosuite.envs.muscle_stages`), and

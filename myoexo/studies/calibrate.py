@@ -1,4 +1,10 @@
-"""``myoexo calibrate``: fit the stretch reflex so that the paper's PID behaves as in the study.
+"""``myoexo calibrate``: fit a reflex model so that the paper's PID behaves as in the study.
+
+Each reflex model registers its own fit (:func:`register_fit`, a :class:`ReflexFit` with the
+options only that fit takes); ``--reflex MODEL`` runs it, and an option of another model's
+fit is refused with one line naming whose it is. Built in: ``stretch`` and ``spindle`` (the
+threshold fit below), ``persistent`` (:func:`calibrate_persistent`) and ``tsrt``
+(:mod:`myoexo.studies.joint_fit`).
 
 The study reports what its Ziegler-Nichols PID (Kp = 7, Ki = 40, Kd = 0.05 on the error in
 rad) does on its twin: it overshoots the 7 deg target at levels 0 and 1 and stops short of it
@@ -485,53 +491,95 @@ def calibrate_persistent(
 
 
 # ----------------------------------------------------------------------------- CLI
+# ------------------------------------------------------------------ the command line
+@dataclass(frozen=True)
+class FitOption:
+    """One option of a model's fit: its flag, its default and the rest of
+    ``ArgumentParser.add_argument``'s keywords (``type``, ``help``)."""
+
+    flag: str
+    default: Any
+    kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def dest(self) -> str:
+        return self.flag.removeprefix("--").replace("-", "_")
+
+
+@dataclass(frozen=True)
+class ReflexFit:
+    """How ``myoexo calibrate --reflex MODEL`` fits one reflex model.
+
+    Attributes:
+        model: The registered reflex model it fits.
+        help: One line on what is fitted, for ``--help``.
+        run: ``run(args) -> exit status``: fit, report, and with ``--write`` (when
+            :attr:`writes`) make the fit the package's.
+        options: The options only this model's fit takes (the common ones: ``--subjects``,
+            ``--verify-subjects``, ``--seed``, ``--out``, ``--write``).
+        writes: Whether ``--write`` applies (a model whose parameters are chosen, not
+            fitted, refuses it).
+    """
+
+    model: str
+    help: str
+    run: Callable[[argparse.Namespace], int]
+    options: tuple[FitOption, ...] = ()
+    writes: bool = True
+
+
+_FITS: dict[str, ReflexFit] = {}
+
+
+def register_fit(fit: ReflexFit, *, replace: bool = False) -> ReflexFit:
+    """Make *fit* what ``myoexo calibrate --reflex <fit.model>`` runs (a plug-in module that
+    registers a reflex model registers its fit here too).
+
+    Raises:
+        ValueError: If the model has a fit already (unless *replace*), or an option of the
+            fit has the flag of another fit's option with other settings.
+    """
+    if fit.model in _FITS and not replace:
+        raise ValueError(f"the reflex model {fit.model!r} has a fit already")
+    for option in fit.options:
+        for other in _FITS.values():
+            for theirs in other.options:
+                if theirs.flag == option.flag and theirs != option and other.model != fit.model:
+                    raise ValueError(
+                        f"{option.flag} of the {fit.model!r} fit differs from the "
+                        f"{other.model!r} fit's option of that name"
+                    )
+    _FITS[fit.model] = fit
+    return fit
+
+
+def fit_names() -> tuple[str, ...]:
+    """The reflex models ``myoexo calibrate`` can fit."""
+    return tuple(_FITS)
+
+
+def _owners() -> dict[str, list[str]]:
+    """Each model option's flag -> the models whose fit takes it."""
+    owners: dict[str, list[str]] = {}
+    for fit in _FITS.values():
+        for option in fit.options:
+            owners.setdefault(option.flag, []).append(fit.model)
+    return owners
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo calibrate``."""
+    """Options of ``myoexo calibrate``: the common ones, then each model's own, grouped by
+    the models that take them."""
+    parser.add_argument(
+        "--reflex",
+        choices=fit_names(),
+        default="stretch",
+        help="the reflex model to fit (default: %(default)s); each model's own options "
+        "are listed below under its name",
+    )
     parser.add_argument("--subjects", type=int, default=40, help="subjects per level in the fit")
     parser.add_argument(
         "--verify-subjects", type=int, default=200, help="subjects per level of the check"
-    )
-    parser.add_argument(
-        "--delay", type=float, default=STRETCH_DELAY_S, help="reflex delay, s (%(default)s)"
-    )
-    parser.add_argument(
-        "--extensor-gain",
-        type=float,
-        default=1.0,
-        help="gain of the extensors' reflex at levels 1-3, fixed (default: 1)",
-    )
-    parser.add_argument(
-        "--reflex",
-        choices=("stretch", "spindle", "persistent", "tsrt"),
-        default="stretch",
-        help="model to fit: the stretch reflex's thresholds (default), the spindle reflex's "
-        "(the same fit, on the muscles' fibre lengths measured on the twin), the persistent "
-        "reflex's after-discharge gains, or the tsrt reflex jointly to the PID table and the "
-        "clinical rows (myoexo.studies.joint_fit)",
-    )
-    parser.add_argument(
-        "--clinical-subjects",
-        type=int,
-        default=1,
-        help="tsrt: subjects per level of the clinical tests in the fit (default: 1)",
-    )
-    parser.add_argument(
-        "--sweeps",
-        type=int,
-        default=2,
-        help="tsrt: coordinate sweeps of the joint fit (default: 2)",
-    )
-    parser.add_argument(
-        "--level1-fraction",
-        type=float,
-        default=0.5,
-        help="persistent: level 1's gain as a fraction of level 2's (default: 0.5)",
-    )
-    parser.add_argument(
-        "--ramp-s",
-        type=float,
-        default=3.0,
-        help="persistent: ramp of the gentle PID checked after the fit, s (default: 3)",
     )
     parser.add_argument(
         "--seed",
@@ -547,27 +595,56 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--write",
         action="store_true",
-        help="stretch, spindle, tsrt: make the fit the package's "
-        "(myoexo/assets/fits/reflex_<model>.json, with its provenance), which the reflex model "
-        "then reads",
+        help="make the fit the package's (myoexo/assets/fits/reflex_<model>.json, with its "
+        "provenance), which the reflex model then reads; models: "
+        + ", ".join(fit.model for fit in _FITS.values() if fit.writes),
     )
+    groups: dict[str, argparse._ArgumentGroup] = {}
+    added: set[str] = set()
+    owners = _owners()
+    for fit in _FITS.values():
+        for option in fit.options:
+            if option.flag in added:
+                continue
+            title = "--reflex " + ", ".join(owners[option.flag])
+            group = groups.get(title) or groups.setdefault(title, parser.add_argument_group(title))
+            kwargs = dict(option.kwargs)
+            kwargs["help"] = f"{kwargs.get('help', '')} (default: {option.default})".strip()
+            group.add_argument(option.flag, default=argparse.SUPPRESS, **kwargs)
+            added.add(option.flag)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo calibrate``."""
+    """Run ``myoexo calibrate``: the registered fit of ``--reflex``."""
     for name in ("subjects", "verify_subjects"):
         if getattr(args, name) < 2:
             raise ValueError(f"--{name.replace('_', '-')} = {getattr(args, name)} must be >= 2")
-    reflex = getattr(args, "reflex", "stretch")
-    if getattr(args, "write", False) and reflex == "persistent":
+    model = getattr(args, "reflex", "stretch")
+    if model not in _FITS:
+        raise ValueError(f"--reflex {model!r} has no fit; fits: {', '.join(fit_names())}")
+    fit = _FITS[model]
+    mine = {option.flag for option in fit.options}
+    for flag, models in _owners().items():
+        dest = flag.removeprefix("--").replace("-", "_")
+        if flag not in mine and hasattr(args, dest):
+            raise ValueError(
+                f"{flag} is an option of --reflex {' / '.join(models)}, not of --reflex {model}"
+            )
+    for option in fit.options:
+        if not hasattr(args, option.dest):
+            setattr(args, option.dest, option.default)
+    if getattr(args, "write", False) and not fit.writes:
+        writers = ", ".join(f.model for f in _FITS.values() if f.writes)
         raise ValueError(
-            "--write with --reflex persistent: the persistent reflex's gains are chosen, not "
-            "fitted (myoexo.spasticity.reflex.PERSISTENT); --write takes stretch or tsrt"
+            f"--write with --reflex {model}: its parameters are chosen, not fitted; --write "
+            f"takes {writers}"
         )
-    if reflex == "persistent":
-        return _run_persistent(args)
-    if reflex == "tsrt":
-        return _run_tsrt(args)
+    return fit.run(args)
+
+
+def _run_threshold_fit(args: argparse.Namespace) -> int:
+    """The stretch or spindle reflex: the flexors' threshold shift at levels 2-3."""
+    reflex = args.reflex
     base: StretchReflex = StretchReflex()
     if reflex == "spindle":
         from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
@@ -703,3 +780,64 @@ def _run_tsrt(args: argparse.Namespace) -> int:
 
         _write_calibration(TSRT_FIT, result.calibration, result.fit_root_seed)
     return 0
+
+
+_THRESHOLD_OPTIONS = (
+    FitOption("--delay", STRETCH_DELAY_S, {"type": float, "help": "reflex delay, s"}),
+    FitOption(
+        "--extensor-gain",
+        1.0,
+        {"type": float, "help": "gain of the extensors' reflex at levels 1-3, fixed"},
+    ),
+)
+register_fit(
+    ReflexFit(
+        "stretch",
+        "the flexors' threshold shift at levels 2-3, to the paper's PID",
+        _run_threshold_fit,
+        _THRESHOLD_OPTIONS,
+    )
+)
+register_fit(
+    ReflexFit(
+        "spindle",
+        "the same fit on the muscles' fibre lengths measured on the twin",
+        _run_threshold_fit,
+        _THRESHOLD_OPTIONS,
+    )
+)
+register_fit(
+    ReflexFit(
+        "persistent",
+        "the after-discharge gains at levels 2-3 by bisection (chosen, not written)",
+        _run_persistent,
+        (
+            FitOption(
+                "--level1-fraction",
+                0.5,
+                {"type": float, "help": "level 1's gain as a fraction of level 2's"},
+            ),
+            FitOption(
+                "--ramp-s",
+                3.0,
+                {"type": float, "help": "ramp of the gentle PID checked after the fit, s"},
+            ),
+        ),
+        writes=False,
+    )
+)
+register_fit(
+    ReflexFit(
+        "tsrt",
+        "jointly to the PID table and the clinical rows (myoexo.studies.joint_fit)",
+        _run_tsrt,
+        (
+            FitOption(
+                "--clinical-subjects",
+                1,
+                {"type": int, "help": "subjects per level of the clinical tests in the fit"},
+            ),
+            FitOption("--sweeps", 2, {"type": int, "help": "coordinate sweeps of the joint fit"}),
+        ),
+    )
+)
