@@ -19,7 +19,8 @@ extension beyond knee 40 deg:
 
 * the knee-crossing muscles (:data:`KNEE_MUSCLES`) lose their passive force (MuJoCo's
   ``fpmax``, ``biasprm[7]``, set to 1e-6: it must be positive); their active force and
-  fibre state are unchanged;
+  fibre state are unchanged. The gastrocnemii thereby lose their passive share at the ankle
+  too, which the free ankle's other muscles (soleus, tibialis, peronei) keep;
 * the moment is built into the model as springs, which MuJoCo evaluates in every substep at
   no cost to Python: a cubic spring on ``knee_angle_r`` and two one-sided cubic springs, fixed
   tendons on the knee angle whose dead band is ``(-inf, knot_low]`` and ``[knot_high, inf)``.
