@@ -150,11 +150,9 @@ class OracleMPC:
         self.env = env.unwrapped
         self.config = config or OracleConfig()
         e = self.env
-        self._model = e.model
-        self._data = mujoco.MjData(e.model)
-        # the planner's own twin: a copy of the env's state, stepped with a planning copy of
-        # its reflex stage (set at each plan)
-        self._twin = Twin(e.model, e.spasticity, e.dt, data=self._data)
+        # the planner's own twin, on its own data: a copy of the env's state, stepped with a
+        # planning copy of its reflex stage (set at each plan)
+        self._twin = Twin(e.model, e.spasticity, e.dt)
         self._torque_aware = self.config.interaction_weight > 0 or self.config.peak_weight > 0
         self._target_rad = math.radians(e.target_angle_deg)
         self._steps = max(2, round(self.config.horizon_s / e.dt))
@@ -193,14 +191,14 @@ class OracleMPC:
     # ------------------------------------------------------------------ planning
     def _rollout_cost(self, plan: np.ndarray, stage: SpasticityStage, delay: tuple) -> float:
         twin = self._twin
-        mujoco.mj_setState(self._model, self._data, self._state, self._state_spec)
+        d = twin.data
+        mujoco.mj_setState(twin.model, d, self._state, self._state_spec)
         twin.stage = stage
         stage.set_history_state(delay)
         cfg = self.config
         cost = 0.0
         tw, iw = cfg.torque_weight, cfg.interaction_weight
         peak = self._peak_nm
-        d = self._data
         ramping = cfg.ramp_s > 0 and d.time < cfg.ramp_s  # else the target is the reference
         target = self._target_rad
         for k in range(self._steps):

@@ -74,8 +74,8 @@ from myoexo.envs.robustness import (
     robustness_params,
     twin_perturbation,
 )
-from myoexo.envs.twin import Twin
-from myoexo.model import EXO_ACTUATOR, TwinParams, build_model, pose_twin
+from myoexo.envs.twin import Twin, frame_skip_of
+from myoexo.model import TwinParams, build_model, pose_twin
 from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel
@@ -177,15 +177,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.reward_params = reward
         self.twin_params = _params(TwinParams, twin)
 
-        timestep_s = self.twin_params.timestep_s
-        frame_skip = round(self.task.control_period_s / timestep_s)
-        if frame_skip < 1 or not math.isclose(
-            frame_skip * timestep_s, self.task.control_period_s, rel_tol=1e-9
-        ):
-            raise ValueError(
-                f"control_period_s = {self.task.control_period_s} must be a whole multiple "
-                f"of the physics timestep {timestep_s} s"
-            )
+        frame_skip = frame_skip_of(self.task.control_period_s, self.twin_params.timestep_s)
         MyoGymnasiumEnv.__init__(self, frame_skip=frame_skip, render_mode=render_mode)
         EzPickle.__init__(
             self,
@@ -223,8 +215,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.coupling_joints = self.obs_layout.coupling_joints
         self._views: DataViews | None = None  # see _data_views
 
-        # action: the exo motor's ctrl entry; the muscles get the ctrl stages' excitations
-        self._exo_act = int(m.actuator(EXO_ACTUATOR).id)
+        # action: the exo motor's ctrl entry (the twin's); the muscles get the ctrl stages'
+        # excitations
         self._muscle_act_ind = m.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE
         self._stage_applies: tuple | None = None  # see _run_ctrl_stages
 

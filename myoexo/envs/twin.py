@@ -41,9 +41,24 @@ from myoexo.model import EXO_ACTUATOR, EXO_JOINT, KNEE_JOINT, strap_knee_torque
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import SensoryRecord, SpasticityStage
 
-__all__ = ["Twin"]
+__all__ = ["Twin", "frame_skip_of"]
 
 _RAD_TO_DEG = 180.0 / math.pi
+
+
+def frame_skip_of(control_period_s: float, timestep_s: float) -> int:
+    """The physics steps one control period takes.
+
+    Raises:
+        ValueError: If the period is not a whole number (>= 1) of timesteps.
+    """
+    frame_skip = round(control_period_s / timestep_s)
+    if frame_skip < 1 or not math.isclose(frame_skip * timestep_s, control_period_s, rel_tol=1e-9):
+        raise ValueError(
+            f"control_period_s = {control_period_s} must be a whole multiple of the physics "
+            f"timestep {timestep_s} s"
+        )
+    return frame_skip
 
 
 class Twin:
@@ -76,18 +91,11 @@ class Twin:
         seed: int = 0,
     ) -> None:
         timestep_s = float(model.opt.timestep)
-        frame_skip = round(control_period_s / timestep_s)
-        if frame_skip < 1 or not math.isclose(
-            frame_skip * timestep_s, control_period_s, rel_tol=1e-9
-        ):
-            raise ValueError(
-                f"control_period_s = {control_period_s} must be a whole multiple of the physics "
-                f"timestep {timestep_s} s"
-            )
+        frame_skip = frame_skip_of(control_period_s, timestep_s)
         self.model = model
         self.data = mujoco.MjData(model) if data is None else data
         self.stage = stage
-        self.frame_skip = int(frame_skip)
+        self.frame_skip = frame_skip
         #: Control period, s (what the reflex stage's delay line counts in).
         self.dt = frame_skip * timestep_s
         self.np_random = np.random.default_rng(seed)

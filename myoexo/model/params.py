@@ -35,7 +35,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-__all__ = ["EARLIER_TWINS", "TWIN_VERSION", "TwinParams", "recorded_twin_version"]
+__all__ = [
+    "EARLIER_TWINS",
+    "PASSIVE_KNEE_MODELS",
+    "TWIN_VERSION",
+    "TwinParams",
+    "recorded_twin_version",
+]
 
 #: Version of the default twin's physics, recorded in every evaluation folder and result set
 #: (``twin_version``); results without it were measured on version 1. CHANGELOG.md says what
@@ -61,7 +67,7 @@ EARLIER_TWINS: dict[int, dict[str, float | str]] = {
 #: The passive knee models (``TwinParams.passive_knee``): ``"muscles"``, the MyoSuite
 #: muscles' passive fibres with MyoSuite's damping on every knee coordinate (twins 1-2);
 #: ``"riener_edrich"``, :mod:`myoexo.model.passive_knee`.
-_PASSIVE_KNEE_MODELS = ("muscles", "riener_edrich")
+PASSIVE_KNEE_MODELS: tuple[str, ...] = ("muscles", "riener_edrich")
 
 
 def recorded_twin_version(record: Mapping[str, Any]) -> int:
@@ -312,10 +318,10 @@ class TwinParams:
                     f"TwinParams.{name} must satisfy 0 < dmin <= dmax < 1, width > 0, "
                     f"0 < midpoint < 1, power >= 1, got {getattr(self, name)!r}"
                 )
-        if self.passive_knee not in _PASSIVE_KNEE_MODELS:
+        if self.passive_knee not in PASSIVE_KNEE_MODELS:
             raise ValueError(
                 f"TwinParams.passive_knee = {self.passive_knee!r}; accepted: "
-                f"{list(_PASSIVE_KNEE_MODELS)}"
+                f"{list(PASSIVE_KNEE_MODELS)}"
             )
         for name in ("thigh_body", "shank_body"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):

@@ -37,6 +37,7 @@ and ``A`` is taken at its neutral 0 deg, where the ankle's share of the moment i
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -46,17 +47,12 @@ import numpy as np
 __all__ = [
     "KNEE_MUSCLES",
     "KNEE_SPRING_TENDONS",
-    "PASSIVE_KNEE_MODELS",
     "RIENER_EDRICH_1999",
     "KneeSprings",
     "PassiveMomentFit",
     "install_passive_knee",
     "knee_springs",
 ]
-
-#: How the twin's passive knee moment is made: ``"muscles"`` (the MyoSuite muscles' passive
-#: fibres and MyoSuite's joint damping: twins 1-2) or ``"riener_edrich"`` (this module).
-PASSIVE_KNEE_MODELS: tuple[str, ...] = ("muscles", "riener_edrich")
 
 #: The muscles with a knee moment arm in the seated leg (checked against the model's moment
 #: arms in the tests).
@@ -192,11 +188,13 @@ _KNOTS_DEG = (22.5, 60.0)
 _SPRINGREF_CANDIDATES_DEG = np.arange(-60.0, 205.0, 5.0)
 
 
+@functools.lru_cache(maxsize=16)
 def knee_springs(
     hip_deg: float, fit: PassiveMomentFit = RIENER_EDRICH_1999, ankle_deg: float = 0.0
 ) -> KneeSprings:
     """Fit the knee springs to *fit*'s moment at the hip angle *hip_deg* (linear least
-    squares for each candidate reference angle; the best one is kept)."""
+    squares for each candidate reference angle; the best one is kept). Cached: a twin's build
+    fits them for its leg alone (the knee axis) and for the coupled twin."""
     knee_deg = np.linspace(*_FIT_RANGE_DEG, _FIT_SAMPLES)
     x = np.radians(knee_deg)
     target = fit.moment_nm(knee_deg, hip_deg, ankle_deg)

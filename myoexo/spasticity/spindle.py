@@ -37,7 +37,7 @@ No memory, no torch twin (the gradient fits do not take it).
 
 from __future__ import annotations
 
-import math
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -286,27 +286,10 @@ class SpindleReflex(StretchReflex):
         raise NotImplementedError("SpindleReflex has no torch twin of its step")
 
 
-_MEASURED: list[SpindleGeometry] = []
-
-
+@functools.cache
 def _measured_geometry() -> SpindleGeometry:
     """The default twin's geometry, measured once per process (before the package's fit)."""
-    if not _MEASURED:
-        _MEASURED.append(spindle_geometry())
-    return _MEASURED[0]
-
-
-def geometry_summary(geometry: SpindleGeometry) -> str:
-    """One line per muscle: its slope in optimal lengths per 10 deg and the line's error."""
-    lines = []
-    for name, slope, rms in zip(
-        geometry.muscles,
-        geometry.slope_per_rad,
-        geometry.rms_error or (math.nan,) * 99,
-        strict=False,
-    ):
-        lines.append(f"{name}: {slope * math.radians(10):+.4f} L_opt per 10 deg (RMS {rms:.4f})")
-    return "\n".join(lines)
+    return spindle_geometry()
 
 
 register_reflex("spindle", SpindleReflex())

@@ -503,7 +503,7 @@ class FitOption:
 
     @property
     def dest(self) -> str:
-        return self.flag.removeprefix("--").replace("-", "_")
+        return _dest(self.flag)
 
 
 @dataclass(frozen=True)
@@ -529,6 +529,11 @@ class ReflexFit:
 
 
 _FITS: dict[str, ReflexFit] = {}
+
+
+def _dest(flag: str) -> str:
+    """The namespace attribute argparse makes of an option flag."""
+    return flag.removeprefix("--").replace("-", "_")
 
 
 def register_fit(fit: ReflexFit, *, replace: bool = False) -> ReflexFit:
@@ -625,8 +630,7 @@ def run(args: argparse.Namespace) -> int:
     fit = _FITS[model]
     mine = {option.flag for option in fit.options}
     for flag, models in _owners().items():
-        dest = flag.removeprefix("--").replace("-", "_")
-        if flag not in mine and hasattr(args, dest):
+        if flag not in mine and hasattr(args, _dest(flag)):
             raise ValueError(
                 f"{flag} is an option of --reflex {' / '.join(models)}, not of --reflex {model}"
             )
