@@ -56,6 +56,7 @@ def serial_pid(subjects: int) -> dict[int, float]:
 
 def policy_step_s(steps: int = 2000) -> tuple[float, str]:
     """Seconds per policy decision and which policy was timed."""
+    from myoexo.control import declared_sensors, read_sensors
     from myoexo.control.policy import as_controller
 
     env = make_env(1)
@@ -69,10 +70,11 @@ def policy_step_s(steps: int = 2000) -> tuple[float, str]:
         name = "untrained SB3 SAC, 64-64 actor (no shipped policy yet)"
     ctrl = as_controller(policy)
     env.close()
-    ctrl.act(obs, info)
+    measurements = read_sensors(info, declared_sensors(ctrl))
+    ctrl.act(obs, measurements)
     t0 = time.perf_counter()
     for _ in range(steps):
-        ctrl.act(obs, info)
+        ctrl.act(obs, measurements)
     return (time.perf_counter() - t0) / steps, name
 
 

@@ -39,7 +39,7 @@ def main() -> None:
         worst, t_onnx, t_numpy = 0.0, [], []
         for k in range(args.episodes):
             env = make_env(k % 4, obs_preset="exo")
-            obs, info = env.reset(seed=100 + k)
+            obs, _ = env.reset(seed=100 + k)
             student.reset()
             memory, done = None, False
             while not done:
@@ -50,10 +50,10 @@ def main() -> None:
                 onnx_action, memory = sess.run(None, {"frame": frame[None], "memory": memory})
                 t_onnx.append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
-                action = student.act(obs, info)
+                action = student.act(obs)
                 t_numpy.append(time.perf_counter() - t0)
                 worst = max(worst, float(np.max(np.abs(onnx_action[0] - action))))
-                obs, _, term, trunc, info = env.step(action)
+                obs, _, term, trunc, _ = env.step(action)
                 done = term or trunc
             env.close()
 

@@ -3,10 +3,10 @@ transition, against the arithmetic limit of one core.
 
     python benchmarks/bench_training.py            # SB3 SAC vs SBX (JAX) SAC/TQC/CrossQ
     python benchmarks/bench_training.py --quick    # SB3 SAC vs SBX SAC, within ~3 minutes
-    python benchmarks/bench_training.py --learners sac sbx_sac:16 tqc
+    python benchmarks/bench_training.py --learners sac sbx_sac:16 sbx_tqc
 
-A learner is ``ALGORITHM[:K]``: a preset algorithm (``sac``, ``tqc``, ``crossq``,
-``sbx_sac``, ``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
+A learner is ``ALGORITHM[:K]``: an algorithm of the training config (``sac``, ``sbx_sac``,
+``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
 ``K x n_envs`` gradient updates, i.e. one update per transition for every ``K`` (default 1;
 a larger ``K`` runs many compiled updates per call). ``sbx_sac:KxN`` trains ``N`` seeds
 together, their updates in one compiled call (``jax.vmap`` over seeds,
@@ -151,15 +151,16 @@ def measure(
     venv, model, fill_sps = filled_model(preset, seed, env_steps)
     env_sps = fill_sps if measure_env else None
 
-    chunk = max(1, preset.gradient_steps)
-    model.train(gradient_steps=chunk, batch_size=preset.batch_size)  # compile / warm up
+    kw = preset.algorithm_kwargs
+    chunk = max(1, kw["gradient_steps"])
+    model.train(gradient_steps=chunk, batch_size=kw["batch_size"])  # compile / warm up
     calls = max(1, updates // chunk)
     t0 = time.perf_counter()
     for _ in range(calls):
-        model.train(gradient_steps=chunk, batch_size=preset.batch_size)
+        model.train(gradient_steps=chunk, batch_size=kw["batch_size"])
     ups = calls * chunk / (time.perf_counter() - t0)
 
-    model.learn(preset.n_envs * preset.train_freq, reset_num_timesteps=False)  # warm up learn
+    model.learn(preset.n_envs * kw["train_freq"], reset_num_timesteps=False)  # warm up learn
     before = model._n_updates
     t0 = time.perf_counter()
     model.learn(learn_steps, callback=RewardTermsCallback(), reset_num_timesteps=False)
@@ -167,7 +168,7 @@ def measure(
     learn_sps = learn_steps / dt
     learn_ups = (model._n_updates - before) / dt
     obs_dim = int(venv.observation_space.shape[0])
-    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, preset.batch_size)
+    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, kw["batch_size"])
     print(
         f"[{learner}] updates alone {ups:.0f}/s; learn {learn_sps:.0f} transitions/s, "
         f"{learn_ups:.0f} updates/s",
@@ -198,7 +199,8 @@ def measure_batched(
     venvs = [venv for venv, _, _ in filled]
     models = [model for _, model, _ in filled]
     batch = SeedBatchedSAC(models)
-    chunk = preset.gradient_steps
+    kw = preset.algorithm_kwargs
+    chunk = kw["gradient_steps"]
     batch.train(chunk)  # compile / warm up
     calls = max(1, updates // chunk)
     t0 = time.perf_counter()
@@ -206,14 +208,14 @@ def measure_batched(
         batch.train(chunk)
     ups = n_seeds * calls * chunk / (time.perf_counter() - t0)
 
-    learn_seed_batched(batch, preset.n_envs * preset.train_freq)  # warm up learn
+    learn_seed_batched(batch, preset.n_envs * kw["train_freq"])  # warm up learn
     before = sum(m._n_updates for m in models)
     t0 = time.perf_counter()
     learn_seed_batched(batch, learn_steps, [RewardTermsCallback() for _ in models])
     dt = time.perf_counter() - t0
     learn_ups = (sum(m._n_updates for m in models) - before) / dt
     obs_dim = int(venvs[0].observation_space.shape[0])
-    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, preset.batch_size)
+    flop = update_flops(obs_dim, 1, preset.net_arch_pi, preset.net_arch_qf, kw["batch_size"])
     print(
         f"[{learner}] {n_seeds} seeds in one call: updates alone {ups:.0f} seed-updates/s; "
         f"learn {n_seeds * learn_steps / dt:.0f} seed-transitions/s, {learn_ups:.0f} "
@@ -227,13 +229,15 @@ def measure_batched(
 
 def learner_preset(algorithm: str, k_steps: int) -> Any:
     """The ``cpu`` preset with *algorithm*, training every *k_steps* vector steps with one
-    update per transition."""
+    update per transition (CrossQ: without ``tau``, it has no target networks)."""
+    from myoexo.policies.algorithms import get_algorithm
     from myoexo.training import get_preset
 
     n_envs = get_preset("cpu").n_envs
-    return get_preset(
-        "cpu", algorithm=algorithm, train_freq=k_steps, gradient_steps=k_steps * n_envs
-    )
+    kwargs: dict[str, Any] = {"train_freq": k_steps, "gradient_steps": k_steps * n_envs}
+    if get_algorithm(algorithm).class_name == "CrossQ":
+        kwargs["tau"] = None
+    return get_preset("cpu", algorithm=algorithm, algorithm_kwargs=kwargs)
 
 
 def filled_model(preset: Any, seed: int, env_steps: int) -> tuple[Any, Any, float]:
@@ -244,7 +248,7 @@ def filled_model(preset: Any, seed: int, env_steps: int) -> tuple[Any, Any, floa
     from myoexo.training.train import build_model, make_vec_env
 
     venv = make_vec_env(preset, seed)
-    model = build_model(preset, venv, seed)
+    model = build_model(preset.replace(seed=seed), venv)
     model.learning_starts = 0
     model.set_logger(configure(None, []))
     rng = np.random.default_rng(seed)
@@ -271,7 +275,7 @@ def row(
     """One learner's line of the table."""
     return {
         "learner": learner,
-        "upd_per_transition": preset.gradient_steps / (preset.train_freq * preset.n_envs),
+        "upd_per_transition": preset.updates_per_transition(preset.algorithm_kwargs),
         "env_sps": env_sps,
         "ups": ups,
         "learn_sps": learn_sps,

@@ -153,7 +153,11 @@ def _api_index() -> str:
 
 
 def _api_nav(modules: list[str]) -> list[Any]:
-    """Nested nav of the API pages: a package is a section holding its page and children."""
+    """Nested nav of the API pages: the overview is the section's own page (mkdocs.yml's
+    ``navigation.indexes``); a package is a section whose own page is its ``index.md`` and
+    whose entries are its modules (by their last name) and sub-packages. The root package's
+    modules (``myoexo.cli``) are listed by their full name beside the root package's page,
+    before its sub-packages."""
 
     def children_of(parent: str) -> list[Any]:
         entries: list[Any] = []
@@ -161,13 +165,15 @@ def _api_nav(modules: list[str]) -> list[Any]:
             if m.rpartition(".")[0] != parent:
                 continue
             if _is_package(m):
-                entries.append({m: [{m: api_page(m)}, *children_of(m)]})
+                entries.append({m: [api_page(m), *children_of(m)]})
             else:
                 entries.append({m.rpartition(".")[2]: api_page(m)})
         return entries
 
     top = modules[0]
-    return [{"Overview": f"{API}/index.md"}, {top: api_page(top)}, *children_of(top)]
+    own = [{m: api_page(m)} for m in modules if m.rpartition(".")[0] == top and not _is_package(m)]
+    packages = [e for e in children_of(top) if not isinstance(next(iter(e.values())), str)]
+    return [f"{API}/index.md", {top: api_page(top)}, *own, *packages]
 
 
 # -- generated blocks ---------------------------------------------------------------------

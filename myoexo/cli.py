@@ -25,73 +25,107 @@ import sys
 import textwrap
 from collections.abc import Sequence
 from importlib import metadata
-from typing import Any
+from typing import Any, NoReturn
 
+from myoexo.runtime.fields import FieldError, option_of
 from myoexo.runtime.lifecycle import SIGNAL_EXIT_BASE
 
-#: sub-command -> (module implementing it, one-line help)
+#: command -> (module implementing it, one-line help); a two-word command is a sub-command
+#: of the group named by its first word (:data:`GROUPS`)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": (
         "myoexo.studies.demo",
-        "run the main job on built-in defaults and print where results are",
-    ),
-    "export-model": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
-    "plot-spasticity": ("myoexo.clinical.figures", "draw Fig. 2b and the stretch-test curves"),
-    "stretch-test": ("myoexo.clinical.stretch", "simulate the passive Tardieu stretch per level"),
-    "tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
-    "pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),
-    "mas-exam": ("myoexo.clinical.mas", "Modified Ashworth examination: resistance profile"),
-    "stretch-hold": (
-        "myoexo.clinical.hold",
-        "stretch and hold: does the resistance last after a fast stretch?",
-    ),
-    "calibrate": (
-        "myoexo.studies.calibrate",
-        "fit a reflex model (each model registers its own fit) so that the paper's PID "
-        "behaves as in the study",
-    ),
-    "validate": (
-        "myoexo.studies.validate",
-        "hold every reflex model to the study's PID table and the clinical tests, side by side",
-    ),
-    "torque-readings": (
-        "myoexo.studies.torque_readings",
-        "compare four readings of the interaction torque with the study's numbers",
+        "the shipped controllers against the paper's PID on a few subjects (about 2 minutes)",
     ),
     "evaluate": ("myoexo.evaluation.cli", "run the paper's evaluation protocol"),
     "report": ("myoexo.evaluation.report", "write figures and the Markdown report of a run"),
     "results": (
         "myoexo.evaluation.results",
-        "collect an evaluation into a committed result set; render the docs' results tables",
+        "collect an evaluation into a result set; print its tables",
     ),
     "frontier": (
         "myoexo.studies.frontier",
         "torque vs settling per level: shaped PIDs, policies, the study's point, the frontier",
     ),
-    "tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
-    "strap-lag": (
+    "video": ("myoexo.viz.video", "render an episode of a controller to MP4 or GIF"),
+    "twin export": ("myoexo.model.export", "write the human + exo twin as a standalone MJCF"),
+    "twin calibrate": (
+        "myoexo.studies.calibrate",
+        "fit a reflex model (each model registers its own fit) so that the paper's PID "
+        "behaves as in the study",
+    ),
+    "twin validate": (
+        "myoexo.studies.validate",
+        "hold every reflex model to the study's PID table and the clinical tests, side by side",
+    ),
+    "twin torque-readings": (
+        "myoexo.studies.torque_readings",
+        "compare four readings of the interaction torque with the study's numbers",
+    ),
+    "twin tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
+    "twin strap-lag": (
         "myoexo.studies.strap_lag",
         "fit the knee's lag behind the exo encoder per unit of command (the encoder guard's)",
     ),
-    "train": ("myoexo.training.cli", "train SAC on MyoExoKneeRandom-v0"),
-    "seeds": (
+    "clinic stretch": ("myoexo.clinical.stretch", "simulate the passive Tardieu stretch per level"),
+    "clinic tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
+    "clinic pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),
+    "clinic mas": ("myoexo.clinical.mas", "Modified Ashworth examination: resistance profile"),
+    "clinic hold": (
+        "myoexo.clinical.hold",
+        "stretch and hold: does the resistance last after a fast stretch?",
+    ),
+    "clinic plot": ("myoexo.clinical.figures", "draw Fig. 2b and the stretch-test curves"),
+    "policy train": (
+        "myoexo.training.cli",
+        "train a learned controller (SAC, PPO or SBX's learners) on MyoExoKneeRandom-v0",
+    ),
+    "policy seeds": (
         "myoexo.training.seeds",
         "train several seeds of one configuration in parallel; aggregate them with 95 % CIs",
     ),
-    "sweep": (
+    "policy sweep": (
         "myoexo.studies.sweep.cli",
         "Ray Tune over training configurations, ranked on the acceptance criteria",
     ),
-    "export-policy": ("myoexo.training.export", "export a trained policy (ONNX)"),
-    "distill": (
-        "myoexo.studies.distill",
-        "distil the full-state teacher into an exo-sensor student with memory (DAgger)",
-    ),
-    "video": ("myoexo.viz.video", "render an episode of a controller to MP4 or GIF"),
-    "select": (
+    "policy select": (
         "myoexo.training.select",
         "pick the checkpoint of a run that best meets the acceptance criteria",
     ),
+    "policy export": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "policy distill": (
+        "myoexo.studies.distill",
+        "distil the full-state teacher into an exo-sensor student with memory (DAgger)",
+    ),
+}
+
+#: group -> one-line help
+GROUPS: dict[str, str] = {
+    "twin": "the twin itself: export it, fit its reflex and PIDs, validate it",
+    "clinic": "clinical examinations of the simulated patient",
+    "policy": "train, select, distil and export learned controllers",
+}
+
+#: a command's earlier name -> its name now; the earlier name prints one line pointing to it
+RENAMED: dict[str, str] = {
+    "export-model": "twin export",
+    "calibrate": "twin calibrate",
+    "validate": "twin validate",
+    "torque-readings": "twin torque-readings",
+    "tune-pid": "twin tune-pid",
+    "strap-lag": "twin strap-lag",
+    "stretch-test": "clinic stretch",
+    "tardieu": "clinic tardieu",
+    "pendulum": "clinic pendulum",
+    "mas-exam": "clinic mas",
+    "stretch-hold": "clinic hold",
+    "plot-spasticity": "clinic plot",
+    "train": "policy train",
+    "seeds": "policy seeds",
+    "sweep": "policy sweep",
+    "select": "policy select",
+    "export-policy": "policy export",
+    "distill": "policy distill",
 }
 
 #: Exceptions that report a user's mistake rather than a bug (plus the project's
@@ -138,11 +172,18 @@ class HelpFormatter(argparse.HelpFormatter):
 
 class ArgumentParser(argparse.ArgumentParser):
     """The parser of ``myoexo`` and of every sub-command (their own sub-parsers included):
-    :class:`HelpFormatter` by default."""
+    :class:`HelpFormatter` by default, and a mistake on the command line reported as one
+    line, ``<prog>: error: <message>``, with exit status 2."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(
+            EXIT_USER_ERROR,
+            f"{self.prog}: error: {_one_line(message)} (see '{self.prog} --help')\n",
+        )
 
 
 def version() -> str:
@@ -194,14 +235,32 @@ def build_parser() -> argparse.ArgumentParser:
         "(also: MYOEXO_PLUGINS=mod1,mod2)",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    groups: dict[str, Any] = {}
     for name, (module_name, help_text) in COMMANDS.items():
+        group, _, leaf = name.rpartition(" ")
+        if group and group not in groups:
+            g = sub.add_parser(group, help=GROUPS[group], description=GROUPS[group])
+            groups[group] = g.add_subparsers(dest="subcommand", required=True, metavar="COMMAND")
         module = importlib.import_module(module_name)
         # argparse %-formats a sub-command's help (for %(prog)s and the like): a literal
         # "%" of the one-line help is doubled, the description is printed as written
-        p = sub.add_parser(name, help=help_text.replace("%", "%%"), description=help_text)
+        p = (groups[group] if group else sub).add_parser(
+            leaf, help=help_text.replace("%", "%%"), description=help_text
+        )
         module.add_arguments(p)
-        p.set_defaults(_module=module)
+        p.set_defaults(_module=module, _command=name, _parser=p)
     return parser
+
+
+def renamed_command(argv: Sequence[str]) -> str | None:
+    """The earlier command name that ``argv`` calls, if any (:data:`RENAMED`)."""
+    words = iter(argv)
+    for word in words:
+        if word == "--plugin":
+            next(words, None)
+        elif not word.startswith("-"):
+            return word if word in RENAMED else None
+    return None
 
 
 def is_user_error(exc: BaseException) -> bool:
@@ -222,6 +281,16 @@ def _fail(command: str, message: str, status: int = EXIT_USER_ERROR) -> int:
     return status
 
 
+def _message(exc: BaseException, parser: argparse.ArgumentParser) -> str:
+    """The message of a user error; a config field's error names the command's option for
+    that field when it has one (``--subjects = -1 ...``, not ``ValidationConfig.subjects``)."""
+    if isinstance(exc, FieldError):
+        flag = option_of(parser, exc.field)
+        if flag is not None:
+            return exc.describe(flag)
+    return str(exc) or type(exc).__name__
+
+
 def is_no_space_error(exc: BaseException) -> bool:
     """Whether ``exc`` is a write that found the disk (or the quota) full."""
     return isinstance(exc, OSError) and exc.errno in NO_SPACE_ERRNOS
@@ -229,7 +298,14 @@ def is_no_space_error(exc: BaseException) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``myoexo`` console script."""
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    old = renamed_command(argv)
+    if old is not None:
+        return _fail(old, f"this command is now 'myoexo {RENAMED[old]}'")
+    args, extra = build_parser().parse_known_args(argv)
+    if extra:
+        args._parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    command = args._command
     debug = args.debug or os.environ.get("MYOEXO_DEBUG", "") not in ("", "0")
     try:
         return int(args._module.run(args) or 0)
@@ -237,25 +313,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a command that stops with a message (``SystemExit("<command>: ...")``)
         if debug or not isinstance(exc.code, str):
             raise
-        message = exc.code.removeprefix(f"{args.command}: ")
-        return _fail(args.command, message)
+        message = exc.code.removeprefix(f"{command}: ")
+        return _fail(command, message)
     except KeyboardInterrupt:
         if debug:
             raise
-        print(f"myoexo {args.command}: interrupted", file=sys.stderr)
+        print(f"myoexo {command}: interrupted", file=sys.stderr)
         return SIGNAL_EXIT_BASE + int(signal.SIGINT)
     except Exception as exc:
         if not debug and isinstance(exc, OSError) and is_no_space_error(exc):
             where = f" while writing {exc.filename}" if exc.filename else ""
             return _fail(
-                args.command,
+                command,
                 f"{exc.strerror or 'no space left on device'}{where}; what was written "
                 "before is intact: free some space and run the same command again",
                 EXIT_NO_SPACE,
             )
         if debug or not is_user_error(exc):
             raise
-        return _fail(args.command, str(exc) or type(exc).__name__)
+        return _fail(command, _message(exc, args._parser))
 
 
 if __name__ == "__main__":

@@ -3,10 +3,47 @@
 from __future__ import annotations
 
 import contextlib
+import importlib.util
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 
 import pytest
+
+#: JAX reads its compilation cache settings from these (tests of the JAX learners build
+#: several models of the same shapes: each would compile the same XLA programs again).
+_JAX_CACHE_DIR = "JAX_COMPILATION_CACHE_DIR"
+
+
+def pytest_configure(config):
+    """One JAX compilation cache for the session, in a temporary folder removed at its end:
+    every compiled program (even a quick one) is written there and read back by later
+    compilations of the same program, in this process, in the pytest-xdist workers and in
+    the commands the tests start (they inherit the environment). A size limit turns on
+    JAX's file lock, so that the processes never read an entry half written. A cache set
+    by the caller is left alone."""
+    if os.environ.get(_JAX_CACHE_DIR):
+        return  # the caller's, or the one the xdist controller made for its workers
+    folder = tempfile.mkdtemp(prefix="myoexo-test-jax-cache-")
+    config._myoexo_jax_cache = folder
+    os.environ[_JAX_CACHE_DIR] = folder
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+    if importlib.util.find_spec("filelock") is not None:  # JAX's lock needs it
+        os.environ["JAX_COMPILATION_CACHE_MAX_SIZE"] = str(2**31)
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_myoexo_jax_cache", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        for name in (
+            _JAX_CACHE_DIR,
+            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+            "JAX_COMPILATION_CACHE_MAX_SIZE",
+        ):
+            os.environ.pop(name, None)
 
 
 @pytest.fixture(scope="module")

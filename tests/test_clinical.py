@@ -23,9 +23,11 @@ from myoexo.clinical import (
     run_pendulum,
     run_tardieu,
 )
-from myoexo.clinical.common import check_levels, check_positive, interp_on_angle
+from myoexo.clinical.common import DriveParams, ExamOptions, draw_subjects, interp_on_angle
+from myoexo.clinical.hold import StretchHoldParams
 from myoexo.clinical.mas import minimum_jerk
 from myoexo.clinical.pendulum import HEALTHY_RELAXATION_INDEX, RECLINED, reclined_gravity
+from myoexo.runtime.fields import FieldError
 
 REFLEXES = ("stretch", "uniform")
 SPASTIC = (1, 2, 3)
@@ -216,43 +218,88 @@ def test_mas_exam_reads_like_the_scale(mas) -> None:
 
 
 # ----------------------------------------------------------------------------- inputs
-def test_bad_inputs_name_the_value_and_the_accepted_range() -> None:
-    for make in (
-        lambda: TardieuParams(levels=(0, 4)),
-        lambda: PendulumParams(levels=(5,)),
-        lambda: MASExamParams(levels=(-1,)),
-        lambda: check_levels([True]),
-    ):
-        with pytest.raises(ValueError, match=r"accepted levels: \[0, 1, 2, 3\]"):
-            make()
-    with pytest.raises(ValueError, match=r"fast_rad_s = 0\.0 .*\(0, inf\) rad/s"):
-        TardieuParams(fast_rad_s=0.0)
-    with pytest.raises(ValueError, match=r"slow_rad_s = -0\.2 .*\(0, inf\) rad/s"):
-        TardieuParams(slow_rad_s=-0.2)
-    with pytest.raises(ValueError, match=r"duration_s = 0\.0 .*\(0, inf\) s"):
-        MASExamParams(duration_s=0.0)
-    with pytest.raises(ValueError, match=r"swing_s = nan .*\(0, inf\) s"):
-        PendulumParams(swing_s=float("nan"))
-    with pytest.raises(ValueError, match=r"end_deg = 95\.0 must be below start_deg"):
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: TardieuParams(levels=(0, 4)), "TardieuParams.levels = (0, 4) is not one of 0, 1"),
+        (lambda: PendulumParams(levels=(5,)), "PendulumParams.levels = (5,) is not one of 0, 1"),
+        (lambda: MASExamParams(levels=(True,)), "MASExamParams.levels = (True,) is not a whole"),
+        (lambda: TardieuParams(fast_rad_s=0.0), "TardieuParams.fast_rad_s = 0.0 must be > 0 rad/s"),
+        (lambda: TardieuParams(slow_rad_s=-0.2), "slow_rad_s = -0.2 must be > 0 rad/s"),
+        (lambda: TardieuParams(catch_threshold_nm=0), "catch_threshold_nm = 0 must be > 0 Nm"),
+        (lambda: MASExamParams(duration_s=0.0), "MASExamParams.duration_s = 0.0 must be > 0 s"),
+        (lambda: MASExamParams(hold_s=-1.0), "MASExamParams.hold_s = -1.0 must be >= 0 s"),
+        (lambda: PendulumParams(swing_s=float("nan")), "swing_s = nan must be > 0 s"),
+        (lambda: PendulumParams(start_deg=95.0), "start_deg = 95.0 is outside [0, 90] deg"),
+        (lambda: StretchHoldParams(hold_s=1.0), "hold_s = 1.0 is outside [1.5, 60] s"),
+        (lambda: TardieuParams(end_deg=130.0), "end_deg = 130.0 is outside [0, 120] deg"),
+        (lambda: DriveParams(feedback_joint="hip"), "feedback_joint = 'hip' is not one of"),
+        (lambda: ExamOptions(dpi=0), "ExamOptions.dpi = 0 must be >= 1"),
+    ],
+)
+def test_a_bad_field_names_the_value_and_what_is_accepted(make, message) -> None:
+    with pytest.raises(FieldError) as err:
+        make()
+    assert message in str(err.value), err.value
+
+
+def test_bad_combinations_name_both_fields() -> None:
+    with pytest.raises(ValueError, match=r"end_deg = 95\.0 must be below start_deg = 90\.0"):
         TardieuParams(end_deg=95.0)
+    with pytest.raises(ValueError, match=r"end_deg = 90\.0 must be below start_deg = 90\.0"):
+        MASExamParams(end_deg=90.0)
+    with pytest.raises(ValueError, match=r"fast_rad_s = 0\.2 must exceed slow_rad_s = 0\.5"):
+        StretchHoldParams(slow_rad_s=0.5, fast_rad_s=0.2)
+    with pytest.raises(ValueError, match=r"rest_window_s = 2\.0 must be shorter than swing_s"):
+        PendulumParams(rest_window_s=2.0, swing_s=1.5)
+    with pytest.raises(ValueError, match="levels is empty"):
+        TardieuParams(levels=())
     with pytest.raises(ValueError, match="reflex = 'bogus'"):
         run_tardieu(TardieuParams(levels=(0,)), reflex="bogus")
-    assert check_positive("x", 2, "s") == 2.0
+
+
+def test_levels_accept_a_list_and_numpy_integers() -> None:
+    params = TardieuParams(levels=[np.int64(2), 0])
+    assert params.levels == (2, 0) and all(type(level) is int for level in params.levels)
+    hash(params)  # frozen and hashable: a tuple, not the list given
+    assert list(draw_subjects(params.levels, seed=3)) == [2, 0]
 
 
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["tardieu", "--levels", "0", "7"], "Unknown spasticity level 7; accepted levels"),
-        (["tardieu", "--fast", "-3"], "fast_rad_s = -3.0 is not accepted"),
-        (["pendulum", "--levels", "4"], "Unknown spasticity level 4"),
-        (["mas-exam", "--duration-s", "0"], "duration_s = 0.0 is not accepted"),
+        # a value an option's field refuses: the option the user typed, the value, the range
+        (["clinic", "tardieu", "--fast", "-3"], "--fast-rad-s = -3.0 must be > 0 rad/s"),
+        (["clinic", "tardieu", "--slow-rad-s", "4"], "fast_rad_s = 3.0 must exceed slow_rad_s"),
+        (["clinic", "mas", "--duration-s", "0"], "--duration-s = 0.0 must be > 0 s"),
+        (["clinic", "hold", "--hold-s", "0.5"], "--hold-s = 0.5 is outside [1.5, 60] s"),
+        (["clinic", "pendulum", "--start-deg", "-5"], "--start-deg = -5.0 is outside [0, 90] deg"),
+        (["clinic", "pendulum", "--dpi", "0"], "--dpi = 0 must be >= 1"),
+        (["clinic", "stretch", "--velocities-rad-s", "0.2", "-3"], "--velocities-rad-s = (0.2,"),
     ],
 )
 def test_cli_bad_input_is_one_line(argv, message, capsys) -> None:
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
+    assert err[0].startswith(f"myoexo {' '.join(argv[:2])}: error: "), err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["clinic", "tardieu", "--levels", "0", "7"], "argument --levels: invalid choice: 7"),
+        (["clinic", "pendulum", "--levels", "4"], "argument --levels: invalid choice: 4"),
+        (["clinic", "pendulum", "--posture", "standing"], "argument --posture: invalid choice"),
+        (["clinic", "mas", "--end-deg", "far"], "argument --end-deg: 'far' is not a valid float"),
+    ],
+)
+def test_cli_bad_argument_is_one_line_before_any_work(argv, message, capsys) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"myoexo {' '.join(argv[:2])}: error: ") and message in line, line
 
 
 def test_interp_on_angle_is_nan_outside_the_recorded_angles() -> None:
@@ -264,9 +311,13 @@ def test_interp_on_angle_is_nan_outside_the_recorded_angles() -> None:
 @pytest.mark.parametrize(
     ("argv", "stem", "levels"),
     [
-        (["tardieu", "--levels", "0", "2", "--reflex", "uniform"], "tardieu", [0, 2]),
-        (["pendulum", "--levels", "1", "--swing-s", "2", "--subject-seed", "3"], "pendulum", [1]),
-        (["mas-exam", "--levels", "3"], "mas_exam", [3]),
+        (["clinic", "tardieu", "--levels", "0", "2", "--reflex", "uniform"], "tardieu", [0, 2]),
+        (
+            ["clinic", "pendulum", "--levels", "1", "--swing-s", "2", "--subject-seed", "3"],
+            "pendulum",
+            [1],
+        ),
+        (["clinic", "mas", "--levels", "3"], "mas_exam", [3]),
     ],
 )
 def test_cli_writes_table_traces_and_figure(argv, stem, levels, tmp_path, capsys) -> None:

@@ -20,27 +20,35 @@ from myoexo.control import (
 )
 from myoexo.control import ziegler_nichols as zn
 from myoexo.control.specs import pid_config
+from myoexo.envs.sensors import KNEE_ANGLE_SENSOR, KneeAngleMeasurements, Measurements
 
 DT = 0.01
 
 
-def info(knee_deg: float, target_deg: float = 7.0, exo_deg: float | None = None) -> dict:
-    return {
-        "knee_angle_deg": knee_deg,
-        "exo_angle_deg": knee_deg if exo_deg is None else exo_deg,
-        "target_angle_deg": target_deg,
-    }
+def sensed(
+    knee_deg: float, target_deg: float = 7.0, exo_deg: float | None = None
+) -> KneeAngleMeasurements:
+    """A sensor record with the knee angle sensor (knee and encoder at rest)."""
+    return KneeAngleMeasurements(
+        time_s=0.0,
+        setpoint_deg=target_deg,
+        exo_angle_deg=knee_deg if exo_deg is None else exo_deg,
+        exo_velocity_deg_s=0.0,
+        exo_torque_nm=0.0,
+        knee_angle_deg=knee_deg,
+        knee_velocity_deg_s=0.0,
+    )
 
 
 def test_sign_flexed_knee_gets_an_extending_command():
     pid = PID(dt_s=DT)
-    u = pid.act(np.zeros(3), info(90.0))  # env error_deg = +83 (still flexed)
+    u = pid.act(np.zeros(3), sensed(90.0))  # env error_deg = +83 (still flexed)
     assert u.shape == (1,) and u.dtype == np.float32
     assert u[0] == -1.0  # saturated extension torque
     pid.reset()
-    assert pid.act(np.zeros(3), info(-10.0))[0] == 1.0  # 17 deg past the target: flex back
+    assert pid.act(np.zeros(3), sensed(-10.0))[0] == 1.0  # 17 deg past the target: flex back
     pid.reset()
-    small = pid.act(np.zeros(3), info(7.5))[0]  # 0.5 deg short: small extending command
+    small = pid.act(np.zeros(3), sensed(7.5))[0]  # 0.5 deg short: small extending command
     assert -1.0 < small < 0.0
 
 
@@ -98,11 +106,15 @@ def test_anti_windup_clamping_and_back_calculation_vs_none():
 def test_feedback_option_reads_the_exo_encoder():
     knee = PID(dt_s=DT, config=PIDConfig(gains=PIDGains(kp=1.0, ki=0.0, kd=0.0)))
     exo = PID(dt_s=DT, config=PIDConfig(gains=PIDGains(kp=1.0, ki=0.0, kd=0.0), feedback="exo"))
-    i = info(10.0, exo_deg=12.0)
+    i = sensed(10.0, exo_deg=12.0)
     assert knee.act(None, i)[0] == pytest.approx(math.radians(7 - 10), rel=1e-6)
     assert exo.act(None, i)[0] == pytest.approx(math.radians(7 - 12), rel=1e-6)
-    with pytest.raises(ValueError, match="knee_angle_deg"):
-        knee.act(None, {"target_angle_deg": 7.0})
+    # the knee PID declares the knee angle sensor; the encoder PID only the device's own
+    assert knee.sensors == {KNEE_ANGLE_SENSOR} and exo.sensors == frozenset()
+    device_only = Measurements(0.0, 7.0, 12.0, 0.0, 0.0)  # no knee angle sensor
+    assert exo.act(None, device_only)[0] == pytest.approx(math.radians(7 - 12), rel=1e-6)
+    with pytest.raises(ValueError, match="knee angle sensor"):
+        knee.act(None, device_only)
 
 
 @pytest.mark.parametrize(
@@ -172,18 +184,18 @@ class _FakeSB3:
 def test_policy_adapters_clip_validate_and_dispatch():
     ctrl = as_controller(lambda obs: -3.0)
     assert isinstance(ctrl, CallableController) and isinstance(ctrl, Controller)
-    assert ctrl.act(np.zeros(2), {})[0] == -1.0  # clipped to the action bound
+    assert ctrl.act(np.zeros(2))[0] == -1.0  # clipped to the action bound
     sb3 = _FakeSB3()
     c = as_controller(sb3)
     assert isinstance(c, SB3Controller)
-    assert c.act(np.array([0.2], np.float32), {})[0] == pytest.approx(0.4)
+    assert c.act(np.array([0.2], np.float32))[0] == pytest.approx(0.4)
     assert sb3.calls == [True]  # deterministic by default
     pid = PID(dt_s=DT)
     assert as_controller(pid) is pid
     with pytest.raises(ValueError, match="non-finite"):
-        as_controller(lambda obs: np.nan).act(np.zeros(1), {})
+        as_controller(lambda obs: np.nan).act(np.zeros(1))
     with pytest.raises(ValueError, match="shape"):
-        as_controller(lambda obs: [0.1, 0.2]).act(np.zeros(1), {})
+        as_controller(lambda obs: [0.1, 0.2]).act(np.zeros(1))
     with pytest.raises(ValueError, match="cannot use"):
         as_controller(42)
 
@@ -203,7 +215,7 @@ def test_controller_specs(tmp_path):
     model.write_bytes(b"")
     spec = parse_controller_spec(str(model))
     assert spec.kind == "sb3" and spec.label == "my_policy" and spec.algorithm == "sac"
-    assert parse_controller_spec(f"td3:{model}").algorithm == "td3"
+    assert parse_controller_spec(f"ppo:{model}").algorithm == "ppo"
     for bad, match in [
         ("pid:gain=3", "unknown PID option"),
         ("pid:kp=abc", "not a number"),
@@ -255,7 +267,7 @@ def test_sb3_models_see_the_observation_normalization_they_were_trained_with(tmp
 
     normalizer = load_obs_normalizer(str(tmp_path / "model.zip"))
     ctrl = SB3Controller(EchoModel(), obs_normalizer=normalizer)
-    action = ctrl.act(np.array([3.0, 3.0, 3.0], np.float32), {})
+    action = ctrl.act(np.array([3.0, 3.0, 3.0], np.float32))
     assert action[0] == pytest.approx(0.1, rel=1e-3)  # (3 - 1) / sqrt(4) / 10
 
 
@@ -285,3 +297,83 @@ def test_ramped_setpoint_and_clipped_command():
         PIDConfig(ramp_s=-1.0)
     with pytest.raises(ValueError, match="output_limit"):
         PIDConfig(output_limit=1.5)
+
+
+# ----------------------------------------------------------------------------- sensors
+class _Spy:
+    """Records the sensor records it is given; commands nothing."""
+
+    def __init__(self, sensors=frozenset()):
+        self.sensors = frozenset(sensors)
+        self.seen: list = []
+
+    def reset(self, seed=None):
+        self.seen.clear()
+
+    def act(self, obs, measurements):
+        self.seen.append(measurements)
+        return np.zeros(1, dtype=np.float32)
+
+
+def test_a_controller_receives_only_the_record_of_its_sensors():
+    """On a perturbed twin (noisy, late sensors) a controller that declares no sensor gets
+    the exoskeleton's readings only: a record type without any knee field, no value of it the
+    true knee angle. One that declares the knee angle sensor gets that sensor's (noisy, late)
+    reading, never the true angle either."""
+    import dataclasses
+
+    from myoexo.control.rollout import rollout
+    from myoexo.envs import make_env
+
+    assert not any("knee" in f.name for f in dataclasses.fields(Measurements))
+    env = make_env(2, episode_duration_s=0.2, robustness=True)
+    infos: list[dict] = []
+    try:
+        for sensors in (frozenset(), {KNEE_ANGLE_SENSOR}):
+            infos.clear()
+            spy = _Spy(sensors)
+            rollout(env, spy, seed=4, on_step=lambda _, info: infos.append(dict(info)))
+            assert len(spy.seen) == len(infos) - 1 == 20
+            for m, info in zip(spy.seen, infos, strict=False):
+                assert dataclasses.is_dataclass(m) and not isinstance(m, dict)
+                if not sensors:
+                    assert type(m) is Measurements and not hasattr(m, "knee_angle_deg")
+                    assert info["knee_angle_deg"] not in dataclasses.astuple(m)
+                else:
+                    assert type(m) is KneeAngleMeasurements
+                    assert m.knee_angle_deg == info["measured_knee_angle_deg"]
+                    assert m.knee_angle_deg != info["knee_angle_deg"]
+                assert m.exo_angle_deg == info["measured_exo_angle_deg"]
+                assert m.exo_angle_deg != info["exo_angle_deg"]
+                assert m.setpoint_deg == info["target_angle_deg"] and m.time_s == info["time_s"]
+                with pytest.raises(dataclasses.FrozenInstanceError):
+                    m.exo_angle_deg = 0.0  # type: ignore[misc]
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="unknown sensors"):
+        rollout(make_env(0, episode_duration_s=0.05), _Spy({"hip_angle"}), seed=0)
+
+
+@pytest.mark.parametrize(
+    ("spec", "reads_knee"),
+    [
+        ("pid", True),
+        ("pid:tuned=latency", True),
+        ("guard:sac", True),
+        ("pid:feedback=exo", False),
+        ("guard:pid:feedback=exo", False),
+        ("student_exo", False),
+        ("guard:student_exo", False),
+        ("sac", False),  # its observation is the twin's full state; its record is the device's
+    ],
+)
+def test_only_the_controllers_on_the_knee_declare_the_knee_angle_sensor(spec, reads_knee):
+    from myoexo.control.protocol import declared_sensors
+    from myoexo.control.specs import build_controller
+
+    class _Env:
+        class unwrapped:
+            dt = 0.01
+
+    controller = build_controller(parse_controller_spec(spec), _Env())
+    assert declared_sensors(controller) == ({KNEE_ANGLE_SENSOR} if reads_knee else frozenset())

@@ -94,22 +94,25 @@ def test_reset_clears_memory(env_exo):
     student = _random_student()
     obs = _episode_obs(env_exo, seed=3, steps=12)
     assert student.memory is None
-    first = [student.act(o, {}) for o in obs]
+    first = [student.act(o) for o in obs]
     assert student.memory is not None
     student.reset(seed=1)
     assert student.memory is None
-    again = [student.act(o, {}) for o in obs]
+    again = [student.act(o) for o in obs]
     np.testing.assert_array_equal(np.concatenate(first), np.concatenate(again))
     # the memory matters: the same last observation after another history acts differently
     student.reset()
-    student.act(obs[0], {})
-    other = student.act(obs[-1], {})
+    student.act(obs[0])
+    other = student.act(obs[-1])
     assert not np.array_equal(other, first[-1])
 
 
 def test_never_reads_forbidden_keys(env_exo, env_full):
-    """Human-knee, muscle, strap and clock entries NaN (or info empty): it still acts, and
-    exactly as from the exo sensors alone."""
+    """Human-knee, muscle, strap and clock entries NaN (or a sensor record of NaN, or none):
+    it still acts, and exactly as from the exo sensors alone."""
+    from myoexo.envs.sensors import KneeAngleMeasurements
+
+    nan_record = KneeAngleMeasurements(*[math.nan] * 7)
     exo_obs = _episode_obs(env_exo, seed=9, steps=15)
     full_obs = _episode_obs(env_full, seed=9, steps=15)
     keys = list(env_full.unwrapped.obs_keys)
@@ -121,9 +124,8 @@ def test_never_reads_forbidden_keys(env_exo, env_full):
         xe[-1] = np.nan  # time_frac
         xf = xf.copy()
         xf[[i for i in range(xf.size) if i not in idx]] = np.nan  # knee, muscles, clock ...
-        info = {"obs_dict": {"knee_angle_rad": np.array([np.nan])}, "knee_angle_deg": np.nan}
-        ua = a.act(xe, info)
-        ub = b.act(xf, {})
+        ua = a.act(xe, nan_record)
+        ub = b.act(xf)
         assert np.isfinite(ua).all() and ua.shape == (1,) and ua.dtype == np.float32
         np.testing.assert_array_equal(ua, ub)
 
@@ -251,6 +253,47 @@ def test_distill_refuses_the_evaluation_root():
         DistillConfig(root_seed=0)
 
 
+def test_every_distill_setting_is_an_option_of_its_own_name(tmp_path, capsys):
+    import argparse
+
+    from myoexo.cli import main
+    from myoexo.envs.options import TwinOptions, twin_from_args
+    from myoexo.runtime.fields import FieldError, flag_of, from_options, option_fields
+    from myoexo.studies import distill as D
+
+    parser = argparse.ArgumentParser()
+    D.add_arguments(parser)
+    flags = {s for a in parser._actions for s in a.option_strings}
+    assert {flag_of(f) for f in option_fields(D.DistillConfig)} <= flags
+    args = parser.parse_args(
+        [
+            "--episodes-per-round", "4", "--fine-width-rad", "0.01", "--hidden", "32", "32",
+            "--action-noise-std", "0.1", "--teacher-guard", "--lr", "1e-4",
+            "--episode-duration-s", "0.5",
+        ]
+    )  # fmt: skip
+    config = from_options(D.DistillConfig, args, twin=twin_from_args(args))
+    assert config == D.DistillConfig(
+        episodes_per_round=4,
+        fine_width_rad=0.01,
+        hidden=(32, 32),
+        action_noise_std=0.1,
+        teacher_guard=True,
+        lr=1e-4,
+        twin=TwinOptions().replace(episode_duration_s=0.5),
+    )
+    assert from_options(D.DistillConfig, parser.parse_args([])) == D.DistillConfig()
+    with pytest.raises(FieldError, match="robust_fraction"):
+        D.DistillConfig(robust_fraction=1.5)
+    with pytest.raises(FieldError, match="subject_offset"):
+        D.DistillConfig(subject_offset=2, selection_subjects=8)
+    # a resume keeps the run's settings: only --rounds may be given
+    assert main(["policy", "distill", "--resume", str(tmp_path), "--lr", "1e-4"]) == 2
+    assert "drop --lr" in capsys.readouterr().err
+    assert main(["policy", "distill", "--run-dir", str(tmp_path), "--n-frames", "0"]) == 2
+    assert "--n-frames = 0 must be >= 1" in capsys.readouterr().err
+
+
 def test_teacher_labels_from_the_true_state():
     """On a perturbed twin the teacher's input is the exact state, not the sensed one."""
     from myoexo.envs import make_env
@@ -301,7 +344,7 @@ def test_shipped_student_loads_and_acts(env_exo, tmp_path):
     assert student.metadata["ship_seed"] in student.metadata["distill_seeds"]
     assert student.metadata["ship_rule"] == SHIP_RULE
     for o in _episode_obs(env_exo, seed=0, steps=10):
-        a = student.act(o, {})
+        a = student.act(o)
         assert a.shape == (1,) and np.isfinite(a).all() and -1 <= a[0] <= 1
     # the shipped controller exported whole (memory included) matches numpy on an episode
     episodes = [_episode_obs(env_exo, seed=s, steps=40) for s in (3, 4)]
@@ -312,7 +355,7 @@ def test_wrong_layout_is_refused(env_full):
     """An exo-layout student given a full-preset observation says so instead of acting."""
     obs, _ = env_full.reset(seed=0)
     with pytest.raises(ValueError, match="obs_preset"):
-        _random_student().act(obs, {})
+        _random_student().act(obs)
 
 
 def test_expert_fine_term_acts_only_near_the_target():
@@ -387,7 +430,7 @@ def test_ship_students_picks_a_typical_seed_and_groups_the_copies(tmp_path):
     carries the seeds and the rule, and the seed copies are one controller for evaluate."""
     import pandas as pd
 
-    from myoexo.control.specs import parse_controller_spec, seeds_folder_of
+    from myoexo.control.specs import parse_controller_spec
     from myoexo.envs.options import TwinOptions
     from myoexo.studies.distill import SHIP_RULE, DistillConfig, distill, ship_students
     from myoexo.training.seeds import closest_seed
@@ -419,7 +462,7 @@ def test_ship_students_picks_a_typical_seed_and_groups_the_copies(tmp_path):
     assert shipped.metadata["ship_seed"] == chosen.metadata["ship_seed"] == expected
     assert shipped.metadata["distill_seeds"] == [0, 1, 2]
     assert shipped.metadata["ship_rule"] == SHIP_RULE
+    assert "seed_group" not in shipped.metadata  # the copies are a group, the shipped one not
     copies = sorted((tmp_path / "copies").glob("*.npz"))
     assert [p.stem for p in copies] == [f"student_3seeds-seed_{s}-round_00" for s in (0, 1, 2)]
-    labels = {parse_controller_spec(str(p)).label for p in copies}
-    assert {seeds_folder_of(label) for label in labels} == {"student_3seeds"}
+    assert {parse_controller_spec(str(p)).seed_group for p in copies} == {"student_3seeds"}

@@ -198,7 +198,7 @@ def test_episode_truncates_at_8_s():
 
 def test_custom_episode_duration_truncates_in_the_env_itself():
     """A shorter task ends at its own duration; no TimeLimit is involved."""
-    env = gym.make("MyoExoKnee-v0", task=myoexo.envs.TaskParams(episode_duration_s=0.2))
+    env = gym.make("MyoExoKnee-v0", episode_duration_s=0.2)
     _, _, infos = _rollout(env, 0, 1000, action=0.0)
     assert len(infos) == 21 and infos[-1]["time_s"] == pytest.approx(0.2)
     # the spec reports this env's own length (20 steps), and no TimeLimit is added

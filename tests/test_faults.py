@@ -55,7 +55,7 @@ EVAL_ARGS = [
     "1",
     "--subjects",
     "6",
-    "--episode-duration",
+    "--episode-duration-s",
     "0.5",
     "--chunk-size",
     "1",
@@ -75,21 +75,23 @@ LONG_EVAL_ARGS = [*EVAL_ARGS]
 LONG_EVAL_ARGS[LONG_EVAL_ARGS.index("--subjects") + 1] = "30"
 #: ... and one with 2-s episodes, killed by its test, that cannot end while it is checked.
 ENDLESS_EVAL_ARGS = [*LONG_EVAL_ARGS]
-ENDLESS_EVAL_ARGS[ENDLESS_EVAL_ARGS.index("--episode-duration") + 1] = "2"
+ENDLESS_EVAL_ARGS[ENDLESS_EVAL_ARGS.index("--episode-duration-s") + 1] = "2"
 
 #: Tiny training settings (as in tests/test_training.py): half-second episodes, a checkpoint
 #: every 100 steps, no periodic evaluation.
 TINY_TRAIN = {
     "episode_duration_s": 0.5,
     "n_envs": 2,
-    "buffer_size": 2_000,
-    "batch_size": 32,
-    "learning_starts": 100,
     "checkpoint_every_s": 0.0,
     "checkpoint_every_steps": 100,
     "eval_every_steps": 0,
 }
-TINY_TRAIN_SETS = [arg for k, v in TINY_TRAIN.items() for arg in ("--set", f"{k}={v}")]
+TINY_KWARGS = {"buffer_size": 2_000, "batch_size": 32, "learning_starts": 100}
+TINY_TRAIN_SETS = [
+    *(arg for k, v in TINY_TRAIN.items() for arg in (f"--{k.replace('_', '-')}", str(v))),
+    "--algorithm-kwargs",
+    ",".join(f"{k}={v}" for k, v in TINY_KWARGS.items()),
+]
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -320,7 +322,7 @@ def test_a_damaged_chunk_is_recomputed(eval_reference, tmp_path):
 def test_a_full_disk_leaves_the_previous_files_and_no_temporary(tmp_path, monkeypatch, capsys):
     out = tmp_path / "eval"
     cmd = ["evaluate", "--controllers", "pid", "--levels", "0", "--subjects", "2"]
-    cmd += ["--episode-duration", "0.5", "--chunk-size", "1", "--workers", "1"]
+    cmd += ["--episode-duration-s", "0.5", "--chunk-size", "1", "--workers", "1"]
     cmd += ["--no-progress", "--out", str(out)]
     assert cli_main(cmd) == 0
     capsys.readouterr()
@@ -377,12 +379,15 @@ def test_a_folder_in_use_is_refused_with_the_holder_and_freed_by_its_death(
         assert f"in use by pid {holder.pid}" in line and "holder for the test" in line
         assert sorted(p.name for p in folder.iterdir()) == [LOCK_FILE]  # nothing written
 
-        config = {"preset": get_preset("cpu").to_dict(), "seed": 0}
+        config = {"config": get_preset("cpu").to_dict(), "seed": 0}
         (folder / ck.CONFIG_FILE).write_text(json.dumps(config))
-        for argv in (["train", "--resume", str(folder)], ["train", "--run-dir", str(folder)]):
+        for argv in (
+            ["policy", "train", "--resume", str(folder)],
+            ["policy", "train", "--run-dir", str(folder)],
+        ):
             assert cli_main(argv) == 2
             (line,) = capsys.readouterr().err.splitlines()
-            assert line.startswith("myoexo train: error: training run folder")
+            assert line.startswith("myoexo policy train: error: training run folder")
             assert f"in use by pid {holder.pid}" in line
     with FolderLock(folder):  # the lock died with its holder: no stale lock to clean
         assert json.loads((folder / LOCK_FILE).read_text())["pid"] == os.getpid()
@@ -410,8 +415,9 @@ def test_stop_signals_record_the_first_signal_and_restore_the_handlers():
 
 
 # ----------------------------------------------------------------------------- training
-def _tiny(**overrides):
-    return get_preset("cpu", **{**TINY_TRAIN, **overrides})
+def _tiny(algorithm_kwargs=None, **changes):
+    kwargs = {**TINY_KWARGS, **(algorithm_kwargs or {})}
+    return get_preset("cpu", **{**TINY_TRAIN, **changes}, algorithm_kwargs=kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -419,7 +425,7 @@ def tiny_run(tmp_path_factory):
     """A 300-step run: resumable checkpoints at 200 and 300 (the two kept), a snapshot at
     100."""
     run_dir = tmp_path_factory.mktemp("faults") / "run"
-    train(_tiny(total_timesteps=300), run_dir, seed=1, verbose=0)
+    train(_tiny(total_timesteps=300, seed=1), run_dir, verbose=0)
     return run_dir
 
 
@@ -470,10 +476,10 @@ def test_no_intact_checkpoint_says_how_to_start_again(tiny_run, tmp_path, capsys
         (checkpoint / ck.MODEL_FILE).write_bytes(b"")
     monkeypatch.delenv("MYOEXO_DEBUG", raising=False)
     with pytest.warns(ck.DamagedCheckpointWarning):
-        assert cli_main(["train", "--resume", str(run_dir)]) == 2
+        assert cli_main(["policy", "train", "--resume", str(run_dir)]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert "no intact resumable checkpoint" in line
-    assert f"myoexo train --restart {run_dir}" in line
+    assert f"myoexo policy train --restart {run_dir}" in line
 
 
 def test_resume_without_checkpoint_is_one_line_and_restart_starts_again(
@@ -489,33 +495,35 @@ def test_resume_without_checkpoint_is_one_line_and_restart_starts_again(
         raise RuntimeError("crash during the start")
 
     monkeypatch.setattr(train_module, "build_model", crash)
-    preset = _tiny(total_timesteps=150, learning_starts=50, first_checkpoint_steps=0)
+    preset = _tiny(
+        total_timesteps=150, algorithm_kwargs={"learning_starts": 50}, first_checkpoint_steps=0
+    )
     with pytest.raises(RuntimeError, match="crash"):
-        train(preset, run_dir, seed=0, verbose=0)
+        train(preset, run_dir, verbose=0)
     monkeypatch.setattr(train_module, "build_model", real_build)
     assert (run_dir / ck.CONFIG_FILE).is_file() and not ck.list_checkpoints(run_dir)
     (run_dir / "progress_00.csv").write_text("time/total_timesteps\n")  # a failed start's log
 
     monkeypatch.delenv("MYOEXO_DEBUG", raising=False)
-    assert cli_main(["train", "--resume", str(run_dir)]) == 2
+    assert cli_main(["policy", "train", "--resume", str(run_dir)]) == 2
     out, err = capsys.readouterr()
     (line,) = err.splitlines()
     assert "has no resumable checkpoint yet" in line
-    assert f"myoexo train --restart {run_dir}" in line and "Traceback" not in out + err
+    assert f"myoexo policy train --restart {run_dir}" in line and "Traceback" not in out + err
     # starting it again with the plain command is refused, pointing at --restart
-    assert cli_main(["train", "--run-dir", str(run_dir)]) == 2
+    assert cli_main(["policy", "train", "--run-dir", str(run_dir)]) == 2
     assert "--restart" in capsys.readouterr().err
 
-    assert cli_main(["train", "--restart", str(run_dir), "--no-progress", "-v", "0"]) == 0
+    assert cli_main(["policy", "train", "--restart", str(run_dir), "--no-progress", "-v", "0"]) == 0
     assert [c.name for c in ck.resumable_checkpoints(run_dir)] == [
         ck.checkpoint_name(100),
         ck.checkpoint_name(150),
     ]
-    assert ck.read_config(run_dir)["preset"]["total_timesteps"] == 150
+    assert ck.read_config(run_dir)["config"]["total_timesteps"] == 150
     assert [s["start_step"] for s in _sessions(run_dir)] == [0]
     capsys.readouterr()
-    assert cli_main(["train", "--restart", str(run_dir)]) == 2  # it has a checkpoint now
-    assert "continue it with: myoexo train --resume" in capsys.readouterr().err
+    assert cli_main(["policy", "train", "--restart", str(run_dir)]) == 2  # it has a checkpoint now
+    assert "continue it with: myoexo policy train --resume" in capsys.readouterr().err
 
 
 def test_a_full_disk_during_a_checkpoint_leaves_the_previous_one(tmp_path):
@@ -563,11 +571,11 @@ def test_a_signal_stops_training_with_a_checkpoint_and_resume_continues(
     sig, tmp_path, spawn, capsys
 ):
     run_dir = tmp_path / "run"
-    cmd = ["train", *TINY_TRAIN_SETS, "--total-timesteps", "100000", "--no-progress"]
+    cmd = ["policy", "train", *TINY_TRAIN_SETS, "--total-timesteps", "100000", "--no-progress"]
     proc = spawn([*cmd, "--run-dir", str(run_dir)], "train")
     assert _wait_for(lambda: bool(ck.resumable_checkpoints(run_dir)), proc)
 
-    assert cli_main(["train", "--resume", str(run_dir)]) == 2  # one writer per folder
+    assert cli_main(["policy", "train", "--resume", str(run_dir)]) == 2  # one writer per folder
     assert f"in use by pid {proc.pid}" in capsys.readouterr().err
 
     t0 = time.monotonic()
@@ -579,8 +587,8 @@ def test_a_signal_stops_training_with_a_checkpoint_and_resume_continues(
     assert last is not None and ck.checkpoint_problem(last) is None
     step = ck.read_state(last)["num_timesteps"]
     assert line == (
-        f"myoexo train: stopped by {sig.name} at step {step}; checkpoint {last.name}; "
-        f"resume with: myoexo train --resume {run_dir}"
+        f"myoexo policy train: stopped by {sig.name} at step {step}; checkpoint {last.name}; "
+        f"resume with: myoexo policy train --resume {run_dir}"
     )
     session = _sessions(run_dir)[-1]
     assert session["stopped_by"] == sig.name and session["end_step"] == step
@@ -598,13 +606,15 @@ def test_kill9_training_at_random_points_then_resume_continues_from_the_newest_c
     rng = random.Random(KILL_SEED + 1)
     run_dir = tmp_path / "run"
     total = 1_000
-    first = ["train", *TINY_TRAIN_SETS, "--total-timesteps", str(total), "--no-progress"]
+    first = ["policy", "train", *TINY_TRAIN_SETS, "--total-timesteps", str(total), "--no-progress"]
     first += ["--run-dir", str(run_dir)]
     expected: str | None = None  # the checkpoint the next session must start from
     kills = 0
     for i in range(N_KILLS):
         before = {c.name for c in ck.list_checkpoints(run_dir)}
-        proc = spawn(first if i == 0 else ["train", "--resume", str(run_dir), "--no-progress"])
+        proc = spawn(
+            first if i == 0 else ["policy", "train", "--resume", str(run_dir), "--no-progress"]
+        )
         _wait_for(lambda b=before: {c.name for c in ck.list_checkpoints(run_dir)} - b, proc)
         time.sleep(rng.uniform(0.0, 1.0))
         if proc.poll() is not None:

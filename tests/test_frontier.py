@@ -91,15 +91,18 @@ def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path)
         )
         (spec,) = seeds_controllers(tmp_path / name)
         assert spec.startswith("sbx_sac:")
-        labels.append(parse_controller_spec(spec).label)
+        parsed = parse_controller_spec(spec)
+        labels.append(parsed.label)
+        assert parsed.seed_group == name
+        assert parse_controller_spec(f"guard:{spec}").seed_group == f"guard:{name}"
     assert labels == ["inter0p1-seed_0-step_0000000100", "inter1p0-seed_0-step_0000000100"]
 
 
 def test_seeds_of_one_folder_share_a_legend_entry():
     from myoexo.studies.frontier import point_group
 
-    assert point_group("inter0p3-seed_2-step_0000100000") == "inter0p3 (seeds)"
-    assert point_group("sac") == "sac"
+    assert point_group("inter0p3-seed_2-step_0000100000", "inter0p3") == "inter0p3 (seeds)"
+    assert point_group("sac") == "sac" and point_group("sac", float("nan")) == "sac"
     assert point_group("run-step_0000100000") == "run-step_0000100000"
 
 

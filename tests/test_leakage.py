@@ -37,7 +37,7 @@ def test_an_evaluation_on_the_selection_root_is_refused_through_the_real_files(
 ):
     """`myoexo evaluate` of a shipped policy (by name, or its own .npz file) on the root that
     selected it exits 2 naming the root, and writes nothing; on the evaluation root it
-    resolves. (A `model.zip` chosen by `myoexo select` is refused the same way:
+    resolves. (A `model.zip` chosen by `myoexo policy select` is refused the same way:
     tests/test_twin_options.py runs it through the console script.)"""
     from myoexo.cli import main
 
@@ -92,9 +92,9 @@ def test_the_three_subject_roots_are_distinct_and_their_streams_disjoint():
 @pytest.mark.parametrize(
     "argv",
     [
-        ["calibrate", "--seed", "0", "--subjects", "2", "--verify-subjects", "2"],
-        ["calibrate", "--reflex", "persistent", "--seed", "0"],
-        ["select", "RUN", "--root-seed", "0"],
+        ["twin", "calibrate", "--seed", "0", "--subjects", "2", "--verify-subjects", "2"],
+        ["twin", "calibrate", "--reflex", "persistent", "--seed", "0"],
+        ["policy", "select", "RUN", "--root-seed", "0"],
     ],
 )
 def test_fitting_or_choosing_on_the_evaluation_root_is_refused_on_the_command_line(

@@ -46,7 +46,7 @@ def test_unknown_preset_raises():
     with pytest.raises(ValueError, match="obs_preset"):
         make_env(0, obs_preset="nope")
     assert set(OBS_PRESETS) == {"full", "exo"}
-    from myoexo.training.presets import get_preset
+    from myoexo.training import get_preset
 
     with pytest.raises(ValueError, match="obs_preset"):  # the presets read the env's table
         get_preset("cpu", obs_preset="nope")

@@ -24,7 +24,7 @@ def test_planning_leaves_the_env_untouched_and_is_deterministic():
         env.step(np.array([-1.0], np.float32))
     qpos, qvel, t = base.data.qpos.copy(), base.data.qvel.copy(), base.data.time
     delay = base.spasticity.history_state()
-    u = oracle.act(None, {})
+    u = oracle.act(None)
     assert -1.0 <= u[0] <= 1.0 and oracle.plans == 1
     np.testing.assert_array_equal(base.data.qpos, qpos)
     np.testing.assert_array_equal(base.data.qvel, qvel)
@@ -127,7 +127,7 @@ def test_a_peak_penalty_lowers_the_peak_and_a_ramp_starts_the_reference_at_the_k
     oracle = OracleMPC.from_env(env, **FAST, ramp_s=1.0)
     env.reset(seed=3)
     oracle.reset(3)
-    oracle.act(None, {})
+    oracle.act(None)
     start = oracle._start_rad
     assert start == pytest.approx(env.unwrapped.twin.knee_angle_rad)
     assert oracle._reference_rad(0.0) == pytest.approx(start)

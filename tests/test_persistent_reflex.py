@@ -198,6 +198,7 @@ def test_history_state_is_saved_and_restored_by_the_planning_copy_and_reset_clea
 def test_the_oracle_plans_on_the_after_discharge_without_touching_the_env() -> None:
     from myoexo.control.oracle import OracleMPC
     from myoexo.envs import make_env
+    from myoexo.envs.sensors import read_sensors
 
     env = make_env(2, reflex="persistent")
     obs, info = env.reset(seed=1)
@@ -205,7 +206,7 @@ def test_the_oracle_plans_on_the_after_discharge_without_touching_the_env() -> N
     stage.memory = (0.6,)  # a lasting after-discharge the planner must see
     saved = stage.history_state()
     oracle = OracleMPC.from_env(env, samples=3, horizon_s=0.05)
-    oracle.act(obs, info)
+    oracle.act(obs, read_sensors(info))
     assert stage.history_state() == saved
     env.close()
 

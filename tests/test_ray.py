@@ -1,6 +1,6 @@
 """Ray: the evaluation's Ray backend gives the process pool's table bit for bit, a killed
 driver leaves no process of its local cluster behind (and a joined cluster drops its tasks),
-and ``myoexo sweep`` runs Ray Tune over training runs, ranks them on the acceptance criteria
+and ``myoexo policy sweep`` runs Ray Tune over training runs, ranks them on the acceptance criteria
 and resumes after its driver is killed.
 
 Every cluster here is local and has 2 CPUs; the tests that start several clusters or train
@@ -42,7 +42,7 @@ ORPHAN_TIMEOUT_S = 5.0
 START_TIMEOUT_S = 120.0
 #: A protocol long enough to be killed half-way (80 PID episodes of 0.5 s).
 LONG_ARGS = ["--controllers", "pid", "--levels", "0", "3", "--subjects", "40"]
-LONG_ARGS += ["--episode-duration", "0.5", "--chunk-size", "1", "--no-progress"]
+LONG_ARGS += ["--episode-duration-s", "0.5", "--chunk-size", "1", "--no-progress"]
 ON_PROC = Path("/proc/self/stat").exists()
 ON_LINUX = pytest.mark.skipif(not ON_PROC, reason="needs /proc")
 
@@ -142,8 +142,8 @@ def test_ray_missing_is_a_one_line_error_and_writes_nothing(tmp_path, capsys, mo
     assert len(err.splitlines()) == 1 and not out.exists()
     sweep_file = tmp_path / "s.yaml"
     sweep_file.write_text("preset: cpu\n")
-    assert cli_main(["sweep", str(sweep_file), "--out", str(out)]) == 2
-    assert "myoexo sweep needs Ray" in capsys.readouterr().err
+    assert cli_main(["policy", "sweep", str(sweep_file), "--out", str(out)]) == 2
+    assert "myoexo policy sweep needs Ray" in capsys.readouterr().err
     assert not out.exists()
 
 
@@ -298,9 +298,7 @@ set:
   episode_duration_s: 0.5
   total_timesteps: 400
   n_envs: 2
-  buffer_size: 2000
-  batch_size: 32
-  learning_starts: 100
+  algorithm_kwargs: {buffer_size: 2000, batch_size: 32, learning_starts: 100}
   checkpoint_every_s: 0
   checkpoint_every_steps: 200
   eval_every_steps: 200
@@ -311,13 +309,15 @@ max_concurrent_trials: 2
 
 
 def test_sweep_file_is_checked_before_ray_starts(tmp_path):
-    from myoexo.studies.sweep.spec import build_preset, read_sweep_file
+    from myoexo.studies.sweep.spec import build_config, read_sweep_file
 
     good = tmp_path / "good.toml"
     text = (
         'preset = "cpu"\nseeds = [0, 1]\n[set]\neval_every_steps = 1000\n'
-        "total_timesteps = 4000\n[search]\nlearning_rate = {loguniform = [1e-3, 1e-4]}\n"
-        "batch_size = [64, 128]\n[reward_weights]\ninter = [-0.5, -1.0]\nact = -0.25\n"
+        "total_timesteps = 4000\n[set.algorithm_kwargs]\ntrain_freq = 2\n"
+        "[search]\nn_envs = [1, 2]\n[search.algorithm_kwargs]\n"
+        "learning_rate = {loguniform = [1e-3, 1e-4]}\nbatch_size = [64, 128]\n"
+        "[reward_weights]\ninter = [-0.5, -1.0]\nact = -0.25\n"
     )
     good.write_text(text)
     with pytest.raises(ValueError, match="loguniform bounds"):
@@ -325,20 +325,26 @@ def test_sweep_file_is_checked_before_ray_starts(tmp_path):
     good.write_text(text.replace("[1e-3, 1e-4]", '["1e-4", 1e-3]'))  # text, as YAML reads 1e-4
     spec = read_sweep_file(good)
     assert spec.name == "good" and spec.seeds == (0, 1)
-    preset = build_preset("cpu", spec.fixed, {"batch_size": 64}, {"inter": -0.5, "act": -0.25})
-    assert preset.batch_size == 64 and dict(preset.twin.reward_weights) == {
-        "inter": -0.5,
-        "act": -0.25,
-    }
+    search = {"n_envs": 2, "algorithm_kwargs": {"batch_size": 64}}
+    config = build_config("cpu", spec.fixed, search, {"inter": -0.5, "act": -0.25}, seed=1)
+    kw = config.algorithm_kwargs
+    assert (config.n_envs, config.seed, kw["batch_size"], kw["train_freq"]) == (2, 1, 64, 2)
+    assert kw["learning_rate"] == 3e-4  # the preset's, where the trial searches nothing
+    assert dict(config.twin.reward_weights) == {"inter": -0.5, "act": -0.25}
     bad = {
-        "preset: gpu\n": "unknown preset",
-        "search:\n  batchsize: [1, 2]\n": "unknown preset field",
-        "search:\n  batch_size: 64\n": "a list of values",
+        "preset: gpu\n": "preset",
+        "search:\n  batchsize: [1, 2]\n": "unknown training field",
+        "search:\n  batch_size: [1, 2]\n": "belong under algorithm_kwargs",
+        "search:\n  n_envs: 2\n": "a list of values",
+        "search:\n  algorithm_kwargs: {batch_size: 64}\n": "a list of values",
+        "set:\n  algorithm: ppo\n": "not an argument of ppo",
+        "set:\n  algorithm_kwargs: {learning_rate: 2}\n": "learning_rate",
+        "num_samples: 0\n": "num_samples = 0 must be >= 1",
         "reward_weights:\n  nope: [1.0]\n": "reward_weights has unknown keys",
         "set:\n  eval_every_steps: 0\n": "eval_every_steps > 0",
         "scheduler: hyperband\n": "scheduler",
         "algorithm: ppo\n": "unknown key",
-        "search:\n  learning_rate: {uniform: [0.1]}\n": "takes 2 arguments",
+        "search:\n  algorithm_kwargs:\n    learning_rate: {uniform: [0.1]}\n": "takes 2 arguments",
     }
     for text, message in bad.items():
         path = tmp_path / "bad.yaml"
@@ -382,7 +388,9 @@ def test_sweep_resumes_after_its_driver_is_killed(tmp_path):
     sweep_file.write_text(SWEEP_YAML)
     out = tmp_path / "sweeps"
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
-    cmd = cli("sweep", str(sweep_file), "--out", str(out), "--num-cpus", str(CPUS), "-v", "0")
+    cmd = cli(
+        "policy", "sweep", str(sweep_file), "--out", str(out), "--num-cpus", str(CPUS), "-v", "0"
+    )
     sweep_dir = out / "tiny"
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     seen: dict[int, str] = {}

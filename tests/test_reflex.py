@@ -5,6 +5,7 @@ differentiates, the delay line delays, and the stage drives each group with its 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import pickle
 
 import numpy as np
@@ -256,9 +257,23 @@ def test_calibrate_write_makes_the_fit_the_packages(tmp_path, monkeypatch, capsy
     from myoexo.model import TWIN_VERSION
     from myoexo.runtime import fits
     from myoexo.spasticity.reflex import STRETCH_FIT, StretchCalibration
+    from myoexo.studies import calibrate
 
     monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
-    argv = ["calibrate", "--subjects", "2", "--verify-subjects", "2", "--extensor-gain", "0.5"]
+    # what is written, not how closely it is fitted: a 5-deg bisection (7 trials a level
+    # instead of 12) ends inside the same bounds
+    fit = calibrate.fit_threshold_shift
+    monkeypatch.setattr(calibrate, "fit_threshold_shift", functools.partial(fit, tol_deg=5.0))
+    argv = [
+        "twin",
+        "calibrate",
+        "--subjects",
+        "2",
+        "--verify-subjects",
+        "2",
+        "--extensor-gain",
+        "0.5",
+    ]
     assert cli.main([*argv, "--write"]) == 0
     doc = fits.read_fit(STRETCH_FIT)
     fitted = StretchCalibration.from_dict(doc["result"])
@@ -266,43 +281,56 @@ def test_calibrate_write_makes_the_fit_the_packages(tmp_path, monkeypatch, capsy
     assert 0.0 < fitted[2].flexor_threshold_shift_deg < 150.0
     assert doc["provenance"]["twin_version"] == TWIN_VERSION
     assert doc["provenance"]["command"].endswith("--seed 2 --write")
-    assert cli.main(["calibrate", "--reflex", "persistent", "--write"]) == 2
+    assert cli.main(["twin", "calibrate", "--reflex", "persistent", "--write"]) == 2
     assert "chosen, not fitted" in capsys.readouterr().err
 
 
 def test_each_model_registers_its_own_fit_and_options(capsys) -> None:
-    """``myoexo calibrate`` runs the fit registered for ``--reflex``; another model's option
-    is refused with one line naming whose it is; a plug-in registers its fit the same way."""
-    import argparse
+    """``myoexo twin calibrate`` runs the fit registered for ``--reflex``; another model's option
+    is refused with one line naming whose it is; a plug-in registers its fit the same way, its
+    options the fields of a config dataclass (:mod:`myoexo.runtime.fields`)."""
+    from dataclasses import dataclass
 
     from myoexo import cli
+    from myoexo.runtime.fields import option
     from myoexo.studies import calibrate as cal
 
     assert set(cal.fit_names()) >= {"stretch", "spindle", "persistent", "tsrt"}
-    assert cli.main(["calibrate", "--sweeps", "3"]) == 2
+    assert cli.main(["twin", "calibrate", "--sweeps", "3"]) == 2
     assert "--sweeps is an option of --reflex tsrt, not of --reflex stretch" in (
         capsys.readouterr().err
     )
-    seen: dict[str, object] = {}
 
-    def fit_mine(args: argparse.Namespace) -> int:
-        seen.update(vars(args))
+    @dataclass(frozen=True)
+    class MineOptions:
+        rate_hz: float = option(5.0, "a plug-in's rate", low=0.0, unit="Hz")
+
+    seen: dict = {}
+
+    def fit_mine(config: cal.CalibrationConfig, options: MineOptions) -> int:
+        seen.update(config=config, options=options)
         return 0
 
-    mine = cal.ReflexFit(
-        "mine_example",
-        "a plug-in's fit",
-        fit_mine,
-        (cal.FitOption("--rate-hz", 5.0, {"type": float}),),
-    )
+    mine = cal.ReflexFit("mine_example", "a plug-in's fit", fit_mine, MineOptions)
     cal.register_fit(mine)
     try:
         with pytest.raises(ValueError, match="has a fit already"):
             cal.register_fit(mine)
-        assert cli.main(["calibrate", "--reflex", "mine_example", "--subjects", "3"]) == 0
-        assert seen["rate_hz"] == 5.0 and seen["subjects"] == 3
-        assert cli.main(["calibrate", "--reflex", "mine_example", "--rate-hz", "7"]) == 0
-        assert seen["rate_hz"] == 7.0
-        assert cli.main(["calibrate", "--rate-hz", "7"]) == 2  # stretch takes no --rate-hz
+        argv = ["twin", "calibrate", "--reflex", "mine_example"]
+        assert cli.main([*argv, "--subjects", "3"]) == 0
+        assert seen["options"] == MineOptions() and seen["config"].subjects == 3
+        assert cli.main([*argv, "--rate-hz", "7"]) == 0
+        assert seen["options"] == MineOptions(7.0)
+        assert cli.main([*argv, "--rate-hz", "-1"]) == 2
+        assert "--rate-hz = -1.0 must be >= 0 Hz" in capsys.readouterr().err
+        assert cli.main(["twin", "calibrate", "--rate-hz", "7"]) == 2  # stretch takes no --rate-hz
+        assert "--rate-hz is an option of --reflex mine_example" in capsys.readouterr().err
+
+        @dataclass(frozen=True)
+        class Clash:
+            rate_hz: int = option(5, "another rate")
+
+        with pytest.raises(ValueError, match="differs from"):
+            cal.register_fit(cal.ReflexFit("clash_example", "", fit_mine, Clash))
     finally:
         cal._FITS.pop("mine_example")

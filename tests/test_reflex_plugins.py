@@ -179,7 +179,7 @@ def _cli(*args: str, env_plugins: str | None = None) -> subprocess.CompletedProc
 
 
 def test_an_unknown_reflex_on_the_command_line_lists_the_registered_ones():
-    out = _cli("tardieu", "--reflex", "clonus", "--levels", "1")
+    out = _cli("clinic", "tardieu", "--reflex", "clonus", "--levels", "1")
     assert out.returncode == 2
     assert "clonus" in out.stderr and "persistent, spindle, stretch, tsrt, uniform" in out.stderr
 
@@ -189,7 +189,7 @@ def test_a_user_model_evaluates_through_the_cli_in_worker_processes(tmp_path):
     out = _cli(
         "--plugin", "velocity_reflex",
         "evaluate", "--controllers", "pid", "--levels", "2", "--subjects", "2",
-        "--workers", "2", "--episode-duration", "1", "--reflex", "velocity_example",
+        "--workers", "2", "--episode-duration-s", "1", "--reflex", "velocity_example",
         "--out", str(tmp_path / "eval"), "--no-progress",
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
@@ -200,7 +200,7 @@ def test_a_user_model_evaluates_through_the_cli_in_worker_processes(tmp_path):
     assert config["config"]["twin"]["reflex_parameters"]["class"].endswith("VelocityReflex")
     # the same through the environment variable, for tools that start myoexo themselves
     again = _cli(
-        "tardieu", "--reflex", "velocity_example", "--levels", "1",
+        "clinic", "tardieu", "--reflex", "velocity_example", "--levels", "1",
         env_plugins="velocity_reflex",
     )  # fmt: skip
     assert again.returncode == 0, again.stderr
@@ -210,13 +210,11 @@ def test_a_user_model_evaluates_through_the_cli_in_worker_processes(tmp_path):
 def test_a_user_model_reaches_the_training_and_distillation_envs(velocity_reflex):
     from myoexo.envs.options import TwinOptions
     from myoexo.studies.distill import DistillConfig, EnvPool
-    from myoexo.training.presets import apply_overrides, get_preset
+    from myoexo.training import get_preset
     from myoexo.training.train import make_vec_env
 
-    preset = apply_overrides(
-        get_preset("cpu", n_envs=1), ["reflex=velocity_example", "episode_duration_s=0.1"]
-    )
-    venv = make_vec_env(preset, seed=0)
+    preset = get_preset("cpu", n_envs=1, reflex="velocity_example", episode_duration_s="0.1")
+    venv = make_vec_env(preset)
     assert [s.reflex_name for s in venv.get_attr("spasticity")] == ["velocity_example"]
     venv.close()
     config = DistillConfig(twin=TwinOptions(reflex="velocity_example"))

@@ -1,11 +1,15 @@
-"""Result sets (myoexo.evaluation.results): an evaluation folder collected into small files,
-rendered into the docs' and the README's results tables, and a check that fails when a
+"""Result sets (myoexo.evaluation.results): an evaluation folder collected into small files
+and the tables computed from them; the repository's tool (tools/render_tables.py) that
+writes them into the docs, the README and the model cards, and fails its check when a
 committed table differs from what its files give."""
 
 from __future__ import annotations
 
+import argparse
+import importlib.util
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -14,19 +18,25 @@ import pytest
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig, evaluate
 from myoexo.evaluation.config import load_config
-from myoexo.evaluation.results import (
-    RESULTS_DIR,
-    Block,
-    collect,
-    command_of,
-    render,
-    write_tables,
-)
-
-README_SET = "eval_1000"
-BLOCK = Block("README.md", README_SET, ("sac",))
+from myoexo.evaluation.results import collect, command_of, render
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def _tool():
+    """tools/render_tables.py, the repository's tool (not a module of the package)."""
+    spec = importlib.util.spec_from_file_location("render_tables", REPO / "tools/render_tables.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+tool = _tool()
+RESULTS_DIR = tool.RESULTS_DIR
+README_SET = "eval_1000"
+BLOCK = tool.Block("README.md", README_SET, ("sac",))
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +61,7 @@ def test_a_result_set_holds_the_tables_inputs_and_its_provenance(evaluation, tmp
     assert list(red.controller) == ["sac", "sac"] and {"peak_reduction_pct_low"} <= set(red)
     heads = pd.read_csv(dest / "headline.csv", dtype={"levels": str})
     assert list(heads.scope) == ["study", "all"] and heads.levels.iloc[0] == "1, 2"
-    assert command_of(load_config(evaluation)).endswith("--set episode_duration_s=0.5")
+    assert command_of(load_config(evaluation)).endswith("--episode-duration-s 0.5")
 
 
 def _evaluation(out: Path, controllers: tuple[str, ...], subjects: int = 3) -> Path:
@@ -80,7 +90,7 @@ def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, 
     assert list(red.controller) == ["sac", "sac", "pid:ramp_s=0.2", "pid:ramp_s=0.2"]
     meta = json.loads((dest / "meta.json").read_text())
     assert len(meta["commands"]) == 2 and meta["commands"][1].endswith(
-        "pid:ramp_s=0.2 --levels 1 2 --subjects 3 --set episode_duration_s=0.5"
+        "pid:ramp_s=0.2 --levels 1 2 --subjects 3 --episode-duration-s 0.5"
     )
     assert meta["episodes"] == 18
     assert "Commands: `myoexo evaluate --controllers pid sac" in render(dest)
@@ -102,6 +112,7 @@ def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):
     collect(evaluation, root / RESULTS_DIR / README_SET)
     (root / "README.md").write_text(f"intro\n{BLOCK.start}\nold\n{BLOCK.end}\nrest\n")
     blocks = (BLOCK,)
+    write_tables = tool.write_tables
     assert write_tables(root, check=True, blocks=blocks) == [
         f"{RESULTS_DIR}/{README_SET}/tables.md",
         "README.md",
@@ -113,9 +124,9 @@ def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):
     tables = root / RESULTS_DIR / README_SET / "tables.md"
     tables.write_text(tables.read_text().replace("| 1 |", "| 1 (edited) |", 1))
     assert write_tables(root, True, blocks) == [f"{RESULTS_DIR}/{README_SET}/tables.md"]
-    absent = Block("NOTES.md", README_SET, ("student_exo",))
+    absent = tool.Block("NOTES.md", README_SET, ("student_exo",))
     (root / "NOTES.md").write_text(f"{absent.start}\n{absent.end}\n")
-    with pytest.raises(ValueError, match="has no \\['student_exo'\\]"):
+    with pytest.raises(ValueError, match=r"NOTES\.md: .* has no \['student_exo'\]"):
         write_tables(root, True, (absent,))
     (root / "README.md").write_text("no markers\n")
     with pytest.raises(ValueError, match="lacks the markers"):
@@ -126,15 +137,37 @@ def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):
         write_tables(root, True, ())
 
 
-def test_every_committed_results_table_is_what_its_files_give():
-    """The docs' and the README's generated results tables (run `myoexo results tables`
-    after `myoexo results collect` to refresh them)."""
-    assert (REPO / RESULTS_DIR).is_dir(), "no committed result set"
-    assert write_tables(REPO, check=True) == []
+def test_myoexo_results_collects_into_the_folder_named_and_prints_the_tables(
+    evaluation, tmp_path, capsys
+):
+    """``myoexo results``: collect writes the set into the folder the user names and nowhere
+    else; ``tables`` prints what the repository's tool writes into ``tables.md`` and between
+    a block's markers."""
+    from myoexo.evaluation import results
+
+    parser = argparse.ArgumentParser()
+    results.add_arguments(parser)
+    work = tmp_path / "work"
+    work.mkdir()
+    dest = work / "my_set"
+    assert results.run(parser.parse_args(["collect", str(evaluation), str(dest)])) == 0
+    assert [p.name for p in work.iterdir()] == ["my_set"]
+    capsys.readouterr()
+    assert results.run(parser.parse_args(["tables", str(dest)])) == 0
+    assert capsys.readouterr().out == render(dest)
+    assert results.run(parser.parse_args(["tables", str(dest), "--controllers", "sac"])) == 0
+    printed = capsys.readouterr().out
+    root = tmp_path / "repo"
+    shutil.copytree(dest, root / RESULTS_DIR / README_SET)
+    (root / "README.md").write_text(f"{BLOCK.start}\n{BLOCK.end}\n")
+    tool.write_tables(root, blocks=(BLOCK,))
+    block = BLOCK.render(root).removeprefix(f"{BLOCK.start}\n").removesuffix(f"\n{BLOCK.end}")
+    label = f"{RESULTS_DIR.as_posix()}/{README_SET}"
+    assert printed == block.replace(label, dest.as_posix()) + "\n"
 
 
 def test_the_committed_calibrations_are_the_constants_the_twin_uses():
-    """docs/studies/calibration_*: the output of `myoexo calibrate` on the calibration root,
+    """docs/studies/calibration_*: the output of `myoexo twin calibrate` on the calibration root,
     whose fitted values and provenance are the package's constants."""
     from myoexo.spasticity import CALIBRATION, PERSISTENT
     from myoexo.spasticity.spindle import SPINDLE_CALIBRATION
@@ -163,11 +196,31 @@ def test_the_command_names_a_seeds_folder_once():
         "pid",
         "sbx_sac:runs/s5/seed_0/checkpoints/step_0000000100/model.zip",
         "sbx_sac:runs/s5/seed_1/checkpoints/step_0000000200/model.zip",
+        "guard:sbx_sac:runs/s5/seed_1/checkpoints/step_0000000200/model.zip",
     ]
     config = {"config": {"controllers": specs, "levels": [0], "subjects": 5}}
     assert command_of(config) == (
-        "myoexo evaluate --controllers pid --seeds-dir runs/s5 --levels 0 --subjects 5"
+        "myoexo evaluate --controllers pid guard:sbx_sac:runs/s5/seed_1/checkpoints/"
+        "step_0000000200/model.zip --seeds-dir runs/s5 --levels 0 --subjects 5"
     )
+
+
+def test_an_episode_table_without_seed_groups_gets_them_from_its_labels(tmp_path):
+    """An evaluation folder written before the ``seed_group`` column: the groups come from
+    the members' labels, once, at load."""
+    from myoexo.evaluation.storage import load_table
+
+    labels = [
+        "pid",
+        "s5-seed_0-step_0000000100",
+        "guard:s5-seed_1-step_2",
+        "st_3seeds-seed_2-round_04",
+    ]
+    pd.DataFrame({"controller": labels, "level": 0}).to_parquet(tmp_path / "episodes.parquet")
+    table = load_table(tmp_path)
+    assert list(table.columns) == ["controller", "seed_group", "level"]
+    assert table.seed_group.isna().tolist() == [True, False, False, False]
+    assert list(table.seed_group[1:]) == ["s5", "guard:s5", "st_3seeds"]
 
 
 def test_the_goals_table_judges_by_the_intervals_and_the_tails(tmp_path):

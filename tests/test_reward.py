@@ -4,6 +4,7 @@ env's parameters), and the weighted sum under the default and overridden weights
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import gymnasium as gym
@@ -179,7 +180,7 @@ def _still_knee_run(offset_rad: float, n: int, start_deg: float = HANG_DEG):
     task = TaskParams(
         start_angle_deg=start_deg, target_angle_deg=target_deg, start_angle_noise_deg=0
     )
-    env = gym.make("MyoExoKnee-v0", task=task)
+    env = gym.make("MyoExoKnee-v0", **dataclasses.asdict(task))
     actions = (0.0,) * n
     reset_info, steps = _run(env, actions, seed=0)
     env.close()
@@ -222,17 +223,17 @@ def test_bonus_error_bound_is_005_rad(offset_rad, bonus):
     "weights",
     [
         {"pose": 2.0, "bonus": 0.0, "inter": -0.25, "vel": -1.0, "act": -3.0},
-        {"pose": 1.0, "act": -10.0},  # keys left out do not count
+        {"pose": 1.0, "act": -10.0},  # keys left out keep their default weight
     ],
     ids=["all-keys", "subset"],
 )
-def test_weighted_reward_keys_override_the_weights(default_run, weights):
-    env = gym.make("MyoExoKnee-v1", weighted_reward_keys=weights)
-    assert env.unwrapped.rwd_keys_wt == weights
+def test_reward_weights_override_the_weights(default_run, weights):
+    env = gym.make("MyoExoKnee-v1", reward_weights=weights)
+    assert env.unwrapped.rwd_keys_wt == {**DEFAULT_REWARD_WEIGHTS, **weights}
     reset_info, steps = _run(env, ACTIONS, seed=4)
     env.close()
     expected = _expected_terms(ACTIONS, reset_info, steps, TaskParams().target_angle_deg)
-    _check_terms(steps, expected, weights)
+    _check_terms(steps, expected, {**DEFAULT_REWARD_WEIGHTS, **weights})
     # the weights change the sum only: the same seed and actions give the same terms
     _, default_steps = default_run
     for (_, info), (_, info_default) in zip(steps, default_steps, strict=True):

@@ -1,5 +1,6 @@
-"""Tail risk and intervals of an evaluation (myoexo.evaluation.risk), with expectations
-worked out by hand on small tables, not by the code under test."""
+"""Tail risk, paired reductions and intervals of an evaluation (myoexo.evaluation.stats), and
+the verdicts of an interval (myoexo.evaluation.criteria), with expectations worked out by
+hand on small tables, not by the code under test."""
 
 from __future__ import annotations
 
@@ -9,14 +10,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from myoexo.evaluation.report import MEMBER, headline, reductions, seed_groups
-from myoexo.evaluation.risk import (
-    catastrophic_lines,
-    crossed_interval,
-    reduction_pct,
-    tail_risk,
+from myoexo.evaluation.criteria import (
+    combined_verdict,
     verdict,
     verdict_against,
+    verdict_by_level,
+)
+from myoexo.evaluation.stats import (
+    MEMBER,
+    catastrophic_lines,
+    crossed_interval,
+    headline,
+    mean_interval,
+    pool_seed_groups,
+    reduction_pct,
+    reductions,
+    tail_risk,
 )
 
 
@@ -73,6 +82,23 @@ def test_an_interval_against_another_is_a_tie_where_they_overlap():
     assert verdict_against(0.9, 1.1, math.nan, 1.2) == "n/a"
 
 
+def test_verdicts_join_into_one():
+    assert combined_verdict(["met", "met"]) == "met"
+    assert combined_verdict(["met", "tie", "missed"]) == "missed"
+    assert combined_verdict(["met", "tie"]) == "tie"
+    assert verdict_by_level([0, 1], ["met", "met"]) == "met"
+    calls = ["met", "tie", "missed", "n/a"]
+    assert verdict_by_level([0, 1, 2, 3], calls) == "missed at level 2, tie at levels 1, 3"
+
+
+def test_the_interval_of_a_mean_from_its_summary():
+    low, high = mean_interval(5.0, 1.0, 100)  # t(99) at 97.5 % = 1.984
+    assert low == pytest.approx(5.0 - 0.1984, abs=1e-4) and high == pytest.approx(
+        5.0 + 0.1984, abs=1e-4
+    )
+    assert all(math.isnan(v) for v in mean_interval(5.0, 1.0, 1))
+
+
 def test_a_paired_interval_keeps_the_pairs_together():
     ref = np.array([100.0, 120.0, 80.0, 110.0, 90.0])
     # the same 10 % lower on every subject: every resample gives exactly 10 %
@@ -93,10 +119,17 @@ def _mean(x, axis=-1):
     return np.mean(x, axis=axis)
 
 
-def test_the_interval_over_seeds_and_subjects_covers_95_percent():
+def test_the_interval_over_seeds_and_subjects_covers_95_percent(monkeypatch):
     """Crossed data: value = seed effect + subject effect + noise, true mean 0. A 95 %
     interval must contain 0 in about 95 % of repetitions (a binomial 95 % band for 200
-    repetitions is about 92-98 %); resampling the seeds alone with 5 of them covers less."""
+    repetitions is about 92-98 %); resampling the seeds alone with 5 of them covers less.
+
+    The coverage is the method's (a t interval on two bootstrap variances), not the resample
+    count's: 500 resamples a stage instead of the tables' 2000 (each standard error then
+    within about 3 % instead of 1.6 %) check it in a quarter of the time."""
+    from myoexo.evaluation import stats
+
+    monkeypatch.setattr(stats, "N_RESAMPLES", 500)
     hits = seeds_only_hits = 0
     repetitions = 200
     for r in range(repetitions):
@@ -121,19 +154,24 @@ def test_a_seed_spread_widens_the_interval():
     assert lo2 < reduction_pct(ref, spread.ravel()) < hi2
 
 
-def test_a_seeds_folder_is_one_controller_over_its_seeds_and_subjects():
+def test_a_seed_group_is_one_controller_over_its_seeds_and_subjects():
     rows = []
     for subject in range(6):
-        rows.append(("pid", 2, subject, 100.0))
-        rows.append(("s5-seed_0-step_100", 2, subject, 80.0))
-        rows.append(("s5-seed_1-step_250", 2, subject, 90.0))
-    table = pd.DataFrame(rows, columns=["controller", "level", "subject", "peak"])
+        rows.append(("pid", None, 2, subject, 100.0))
+        rows.append(("s5-seed_0-step_100", "s5", 2, subject, 80.0))
+        rows.append(("s5-seed_1-step_250", "s5", 2, subject, 90.0))
+    cols = ["controller", "seed_group", "level", "subject", "peak"]
+    table = pd.DataFrame(rows, columns=cols)
     table["peak_interaction_torque_nm"] = table["peak"]
     table["rms_interaction_torque_nm"] = table["peak"] / 2
     table["settling_time_s"] = 1.0
     table["abs_final_error_deg"] = table["peak"] / 10
     table["unstable"] = False
-    grouped = seed_groups(table)
+    # the group is the column's, not the labels': a table without it has no groups
+    assert set(pool_seed_groups(table.drop(columns="seed_group")).controller) == set(
+        table.controller
+    )
+    grouped = pool_seed_groups(table)
     assert list(dict.fromkeys(grouped.controller)) == ["pid", "s5"]
     assert set(grouped.loc[grouped.controller == "s5", MEMBER]) == {
         "s5-seed_0-step_100",
@@ -184,7 +222,7 @@ def test_the_study_aggregation_is_the_mean_of_levels_1_and_2_and_settling_is_a_r
 
 def test_the_studys_headline_is_its_levels_1_2_mean():
     from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
-    from myoexo.evaluation.report import HEADLINE_LEVELS
+    from myoexo.evaluation.stats import HEADLINE_LEVELS
 
     assert HEADLINE_LEVELS == (1, 2)
     peak = np.mean([PAPER_RESULTS[lv].peak_reduction_pct for lv in HEADLINE_LEVELS])

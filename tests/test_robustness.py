@@ -92,13 +92,17 @@ def test_noise_has_its_documented_spread_and_the_pid_reads_it():
         diffs.append(info["measured_knee_angle_deg"] - info["knee_angle_deg"])
     assert np.std(diffs) == pytest.approx(std_deg, rel=0.15)
     assert abs(np.mean(diffs)) < 0.1
-    # the PID acts on the measured angle
+    # the PID acts on the measured angle: its knee angle sensor's reading, not the true one
+    from myoexo.envs.sensors import read_sensors
+
     pid = PID.from_env(env)
+    record = read_sensors(info, pid.sensors)
+    assert record.knee_angle_deg == info["measured_knee_angle_deg"] != info["knee_angle_deg"]
     pid.reset()
-    near = {"target_angle_deg": 7.0, "knee_angle_deg": 7.0}
-    u_measured = pid.act(None, {**near, "measured_knee_angle_deg": 9.0})
+    near = {**info, "target_angle_deg": 7.0, "knee_angle_deg": 7.0}
+    u_measured = pid.act(None, read_sensors({**near, "measured_knee_angle_deg": 9.0}, pid.sensors))
     pid.reset()
-    u_true = pid.act(None, {**near, "measured_knee_angle_deg": 7.0})
+    u_true = pid.act(None, read_sensors({**near, "measured_knee_angle_deg": 7.0}, pid.sensors))
     assert u_true[0] == 0.0 and u_measured[0] < -0.1
 
 

@@ -1,8 +1,9 @@
 """The twin's scene, named cameras, muscle colours and videos.
 
 The scene is visual only (same sizes, bit-identical trajectory without it); each named
-camera frames the leg; muscles turn red with activation; MyoSuite's ``examine_env`` runs
-offscreen on a ``myoexo:`` id; ``myoexo video`` writes a GIF.
+camera frames the leg; muscles turn red with activation; ``myoexo video`` writes a GIF
+(MyoSuite's ``examine_env`` renders each ``myoexo:`` id offscreen on a named camera in
+tests/test_ecosystem.py).
 
 Renders run in child processes with ``MUJOCO_GL=egl`` (MuJoCo picks its OpenGL backend
 when it is first imported, long before these tests run) and with this checkout first on
@@ -205,40 +206,12 @@ def test_renders_from_every_named_camera_show_the_leg(tmp_path) -> None:
 
 
 @pytest.mark.slow
-def test_examine_env_runs_offscreen_on_a_named_camera(tmp_path) -> None:
-    pytest.importorskip("imageio_ffmpeg")  # examine_env writes its frames as MP4
-    proc = _run_child(
-        [
-            sys.executable,
-            "-m",
-            "myosuite.utils.examine_env",
-            "-e",
-            "myoexo:MyoExoKnee-v1",
-            "-r",
-            "offscreen",
-            "-n",
-            "1",
-            "-c",
-            "knee_side",
-            "-o",
-            str(tmp_path / "out"),
-            "--env_args",
-            "{'max_episode_steps': 2}",
-        ],
-        tmp_path,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    video = tmp_path / "out" / "random_policy0.mp4"
-    assert video.is_file() and video.stat().st_size > 1000
-
-
-@pytest.mark.slow
 def test_video_command_writes_a_gif(tmp_path) -> None:
     from PIL import Image
 
     out = tmp_path / "episode.gif"
-    args = ["--level", "0", "--out", str(out), "--width", "64", "--height", "48"]
-    args += ["--fps", "20", "--duration", "0.1", "--camera", "knee_side", "--cuff-force"]
+    args = ["--level", "0", "--out", str(out), "--width-px", "64", "--height-px", "48"]
+    args += ["--fps", "20", "--duration-s", "0.1", "--camera", "knee_side", "--cuff-force"]
     proc = _run_child([sys.executable, "-m", "myoexo.cli", "video", *args], tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "wrote" in proc.stdout and "3 frames" in proc.stdout

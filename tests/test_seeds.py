@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from myoexo.evaluation.stats import bootstrap_ci, summarize_seeds, wilson_interval
 from myoexo.training import seeds as S
 
 
@@ -32,7 +33,7 @@ def _per_seed(values_by_seed: dict[int, float], passed: set[int]) -> pd.DataFram
 
 def test_summary_has_mean_iqm_and_a_ci_that_contains_the_mean():
     per_seed = _per_seed({0: 0.1, 1: 0.2, 2: 0.3, 3: 0.4, 4: 5.0}, passed={1, 2, 3})
-    summary = S.summarize(per_seed)
+    summary = summarize_seeds(per_seed, S.AGGREGATED)
     row = summary.loc[0]
     assert row["abs_final_error_deg_mean"] == pytest.approx(np.mean([0.1, 0.2, 0.3, 0.4, 5.0]))
     # the IQM drops the outlier seed 4 (and the best one): the middle three
@@ -51,18 +52,18 @@ def test_summary_has_mean_iqm_and_a_ci_that_contains_the_mean():
 
 
 def test_bootstrap_is_reproducible_and_degenerate_inputs_are_handled():
-    a = S.bootstrap_ci([1.0, 2.0, 3.0, 4.0])
-    assert a == S.bootstrap_ci([1.0, 2.0, 3.0, 4.0]) and a[0] < 2.5 < a[1]
-    assert S.bootstrap_ci([2.0, 2.0]) == (2.0, 2.0)
-    low, high = S.bootstrap_ci([1.0])
+    a = bootstrap_ci([1.0, 2.0, 3.0, 4.0])
+    assert a == bootstrap_ci([1.0, 2.0, 3.0, 4.0]) and a[0] < 2.5 < a[1]
+    assert bootstrap_ci([2.0, 2.0]) == (2.0, 2.0)
+    low, high = bootstrap_ci([1.0])
     assert low == high == 1.0
-    assert all(math.isnan(v) for v in S.bootstrap_ci([]))
+    assert all(math.isnan(v) for v in bootstrap_ci([]))
 
 
 def test_wilson_interval():
-    low, high = S.wilson_interval(0, 5)
+    low, high = wilson_interval(0, 5)
     assert low == pytest.approx(0.0, abs=1e-12) and 0.4 < high < 0.5
-    low, high = S.wilson_interval(5, 5)
+    low, high = wilson_interval(5, 5)
     assert 0.5 < low < 0.6 and high == pytest.approx(1.0)
 
 
@@ -74,30 +75,66 @@ def test_the_ship_rule_picks_the_typical_seed_not_the_best():
 def test_train_command_starts_resumes_or_restarts(tmp_path):
     from myoexo.training import checkpoints as ck
 
-    new = S.train_command(tmp_path, 3, "cpu", ["algorithm=sbx_sac"], 1000)
-    assert "--seed" in new and "3" in new and "algorithm=sbx_sac" in new
+    new = S.train_command(tmp_path, 3, 1000)
+    assert new[-6:] == [
+        "--config", str(tmp_path / S.SEEDS_FILE), "--seed", "3", "--run-dir",
+        str(S.seed_dir(tmp_path, 3)),
+    ]  # fmt: skip
+    assert "--total-timesteps" not in new  # a new seed's budget is the folder's config's
     run_dir = S.seed_dir(tmp_path, 3)
     run_dir.mkdir()
     (run_dir / ck.CONFIG_FILE).write_text("{}")
-    assert "--restart" in S.train_command(tmp_path, 3, "cpu", [], None)  # no checkpoint yet
+    assert "--restart" in S.train_command(tmp_path, 3, 1000)  # no checkpoint yet
     step = run_dir / ck.CHECKPOINTS_DIR / ck.checkpoint_name(100)
     step.mkdir(parents=True)
     (step / ck.REPLAY_FILE).write_bytes(b".")
     (step / ck.STATE_FILE).write_text("{}")
     assert ck.resumable_checkpoints(run_dir) == [step]
-    assert "--resume" in S.train_command(tmp_path, 3, "cpu", [], None)
+    assert S.train_command(tmp_path, 3, None)[-2:] == ["--resume", str(run_dir)]
+    assert S.train_command(tmp_path, 3, 2000)[-2:] == ["--total-timesteps", "2000"]
 
 
 def test_a_seeds_folder_refuses_another_configuration(tmp_path):
+    import json
+
+    from myoexo.training import get_preset
+    from myoexo.training.config import read_config_file
+
+    config = get_preset("cpu", algorithm="sbx_sac")
+    S._record_config(tmp_path, config, [0, 1])
+    S._record_config(tmp_path, config.replace(total_timesteps=10), [2])  # a new budget
+    saved = json.loads((tmp_path / S.SEEDS_FILE).read_text())
+    assert saved["seeds"] == [0, 1, 2]
+    assert read_config_file(tmp_path / S.SEEDS_FILE).total_timesteps == 10
+    with pytest.raises(ValueError, match=r"another configuration \(it differs in \['algorithm'\]"):
+        S._record_config(tmp_path, get_preset("cpu"), [0])
+    # a seeds.json of an earlier version (a preset name and --set items) is its config
+    (tmp_path / S.SEEDS_FILE).write_text(
+        json.dumps({"preset": "cpu", "set": ["algorithm=sbx_sac", "train_freq=16"], "seeds": [0]})
+    )
+    S._record_config(tmp_path, config.replace(algorithm_kwargs={"train_freq": 16}), [1])
+    saved = json.loads((tmp_path / S.SEEDS_FILE).read_text())
+    assert set(saved) == {"config", "seeds"} and saved["seeds"] == [0, 1]
+
+
+def test_the_seeds_train_options_are_the_train_options(tmp_path):
     import argparse
 
-    args = argparse.Namespace(preset="cpu", set=["algorithm=sbx_sac"], seeds=[0, 1])
-    S._record_config(tmp_path, args)
-    S._record_config(
-        tmp_path, argparse.Namespace(preset="cpu", set=["algorithm=sbx_sac"], seeds=[2])
+    from myoexo.training import get_preset
+    from myoexo.training.cli import config_from_args
+
+    parser = argparse.ArgumentParser()
+    S.add_arguments(parser)
+    args = parser.parse_args(
+        ["train", str(tmp_path), "--seeds", "0", "2", "--algorithm", "sbx_sac",
+         "--algorithm-kwargs", "train_freq=16", "--reward-weights", "inter:-0.1"]
+    )  # fmt: skip
+    assert S.from_options(S.SeedRuns, args) == S.SeedRuns(seeds=(0, 2), workers=2)
+    assert config_from_args(args) == get_preset(
+        "cpu", algorithm="sbx_sac", algorithm_kwargs={"train_freq": 16}, reward_weights="inter:-0.1"
     )
-    with pytest.raises(ValueError, match="another configuration"):
-        S._record_config(tmp_path, argparse.Namespace(preset="cpu", set=[], seeds=[0]))
+    with pytest.raises(ValueError, match="repeats a seed"):
+        S.SeedRuns(seeds=(1, 1))
 
 
 def _fake_seed_run(out, seed, algorithm, wall_s, steps, updates, preset_extra=None):
@@ -123,7 +160,7 @@ def test_compare_reads_speed_from_checkpoints_and_criteria_from_the_aggregate(tm
         out = tmp_path / name
         for seed in (0, 1):
             _fake_seed_run(out, seed, algorithm, 600.0, 60_000 * (seed + 1), 1_000, extra)
-        summary = S.summarize(_per_seed({0: 1.0, 1: 3.0}, passed={1}))
+        summary = summarize_seeds(_per_seed({0: 1.0, 1: 3.0}, passed={1}), S.AGGREGATED)
         summary.to_csv(out / "aggregate.csv")
     table = S.compare_configurations([tmp_path / "sac", tmp_path / "ppo"])
     sac, ppo = table.iloc[0], table.iloc[1]

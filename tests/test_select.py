@@ -1,6 +1,6 @@
 """Checkpoint selection against the acceptance criteria: the criterion logic on crafted
 tables, the candidate choice on a run folder written the way training writes it (with
-policies whose actions are known), ``myoexo select`` and its ``--table`` mode, and a tiny
+policies whose actions are known), ``myoexo policy select`` and its ``--table`` mode, and a tiny
 real training run."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 
 from myoexo.cli import main
 from myoexo.envs.options import TwinOptions
-from myoexo.evaluation.criteria import Criteria, compare, level_means, shortfall
+from myoexo.evaluation.criteria import Criteria, compare_with_pid, level_means, shortfall
 from myoexo.training import checkpoints as ck
 from myoexo.training.select import (
     compare_evaluation,
@@ -86,7 +86,7 @@ def test_compare_reductions_and_per_level_flags():
             3: (bound[3] - 0.45, 60.0, 90.0),  # level 3: 11 deg is fine, the RMS is not
         }
     )
-    table = compare(sac, PID)
+    table = compare_with_pid(sac, PID)
     assert table.index.tolist() == [0, 1, 2, 3]
     # reductions in % of the PID, positive = less torque than the PID
     assert table.peak_reduction_pct.tolist() == pytest.approx([20.0, 20.0, -20.0, 10.0])
@@ -109,9 +109,9 @@ def test_final_error_bounds_are_per_level_and_strict():
     bound = Criteria().final_error_deg
     # 5 deg passes at level 3 only; exactly on a bound fails; above 11.45 fails at level 3
     sac = _means({0: (5.0, 40.0, 80.0), 1: (bound[1], 40.0, 80.0), 3: (5.0, 40.0, 80.0)})
-    table = compare(sac, PID.loc[[0, 1, 3]])
+    table = compare_with_pid(sac, PID.loc[[0, 1, 3]])
     assert table.final_error_ok.tolist() == [False, False, True]
-    table = compare(_means({3: (bound[3] + 0.5, 40.0, 80.0)}), PID.loc[[3]])
+    table = compare_with_pid(_means({3: (bound[3] + 0.5, 40.0, 80.0)}), PID.loc[[3]])
     assert not table.loc[3, "final_error_ok"] and not table.loc[3, "pass"]
     assert shortfall(table) == pytest.approx(0.5 / bound[3])
 
@@ -119,18 +119,18 @@ def test_final_error_bounds_are_per_level_and_strict():
 def test_other_criteria_change_the_flags():
     sac = _means({0: (1.5, 60.0, 120.0), 3: (1.5, 60.0, 120.0)})
     pid = PID.loc[[0, 3]]
-    assert not compare(sac, pid)["pass"].any()
+    assert not compare_with_pid(sac, pid)["pass"].any()
     lenient = Criteria(
         final_error_deg=dict.fromkeys(range(4), 2.0), rms_levels=(), peak_levels=(3,)
     )
-    table = compare(sac, pid, lenient)
+    table = compare_with_pid(sac, pid, lenient)
     assert table["pass"].tolist() == [True, False]
     assert shortfall(table, lenient) == pytest.approx(0.2)
 
 
 def test_markdown_table_names_the_failed_criteria():
     sac = _means({0: (0.5, 40.0, 80.0), 2: (3.0, 60.0, 120.0)})
-    text = markdown_table(compare(sac, PID.loc[[0, 2]]))
+    text = markdown_table(compare_with_pid(sac, PID.loc[[0, 2]]))
     lines = text.splitlines()
     assert len(lines) == 2 + 2
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
@@ -163,7 +163,7 @@ def test_paper_checks_read_subjects_and_the_papers_reductions():
                 }
             )
     episodes = pd.DataFrame(rows)
-    table = paper_checks(compare(level_means(episodes), PID.loc[[0, 1]]), episodes)
+    table = paper_checks(compare_with_pid(level_means(episodes), PID.loc[[0, 1]]), episodes)
     assert table.loc[0, "final_error_ok"] and not table.loc[0, "p95_ok"]
     assert table.loc[0, "sac_p95_abs_final_error_deg"] == pytest.approx(
         np.quantile([0.0] * 18 + [9.0, 9.0], 0.95)
@@ -193,9 +193,13 @@ def crafted_run(tmp_path_factory):
 
     run_dir = tmp_path_factory.mktemp("select") / "run"
     run_dir.mkdir()
-    preset = get_preset("cpu", n_envs=1, buffer_size=1_000, batch_size=16, learning_starts=10)
-    venv = make_vec_env(preset, seed=0)
-    model = build_model(preset, venv, seed=0)
+    preset = get_preset(
+        "cpu",
+        n_envs=1,
+        algorithm_kwargs={"buffer_size": 1_000, "batch_size": 16, "learning_starts": 10},
+    )
+    venv = make_vec_env(preset)
+    model = build_model(preset, venv)
     ck.write_json_atomic(run_dir / ck.CONFIG_FILE, {"seed": 0, "env_id": preset.env_id})
     mu = model.policy.actor.mu
     for step, (action, _) in CRAFTED.items():
@@ -228,9 +232,9 @@ def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_s
     assert {"final_error_ok", "peak_ok", "rms_ok", "pass", "peak_reduction_pct"} <= set(table)
     # the table is the comparison of the chosen checkpoint with the PID on the same subject
     pid = evaluate_pid(1, (0,))
-    expected = compare(evaluate_checkpoint(chosen, 1, (0,)), pid)
+    expected = compare_with_pid(evaluate_checkpoint(chosen, 1, (0,)), pid)
     pd.testing.assert_frame_equal(table, expected)
-    idle = compare(
+    idle = compare_with_pid(
         evaluate_checkpoint(crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300", 1, (0,)), pid
     )
     assert shortfall(table) < shortfall(idle)
@@ -241,7 +245,7 @@ def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_s
 
 def test_select_cli_writes_the_chosen_checkpoint_and_its_table(crafted_run, tmp_path, capsys):
     out = tmp_path / "sel" / "selection.csv"
-    argv = ["select", str(crafted_run), "--subjects", "1", "--levels", "3", "--last", "1"]
+    argv = ["policy", "select", str(crafted_run), "--subjects", "1", "--levels", "3", "--last", "1"]
     assert main([*argv, "--top", "0", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert _printed_candidates(printed) == ["step_0000000300"]
@@ -262,24 +266,27 @@ def test_select_cli_writes_the_chosen_checkpoint_and_its_table(crafted_run, tmp_
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--subjects", "0"], "--subjects 0"),
-        (["--last", "0", "--top", "0"], "at least one candidate"),
+        (["--subjects", "0"], "--subjects = 0 must be >= 1"),
+        (["--last", "0", "--top", "0"], "--top = 0 names no candidate checkpoint"),
+        (["--root-seed", "0"], "evaluation"),
         (["--out", "table.txt"], "must end in .md or .csv"),
     ],
 )
 def test_select_cli_refuses_bad_arguments(crafted_run, args, message, capsys):
-    assert main(["select", str(crafted_run), *args]) == 2
+    assert main(["policy", "select", str(crafted_run), *args]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("myoexo select: error: ") and message in err
+    assert err.startswith("myoexo policy select: error: ") and message in err
 
 
 def test_select_cli_on_a_folder_without_checkpoints(tmp_path, capsys):
-    assert main(["select", str(tmp_path), "--levels", "0"]) == 2
+    assert main(["policy", "select", str(tmp_path), "--levels", "0"]) == 2
     assert "holds no checkpoint" in capsys.readouterr().err
-    assert main(["select", str(tmp_path), "--last", "0"]) == 2  # --top alone needs eval.csv
+    assert (
+        main(["policy", "select", str(tmp_path), "--last", "0"]) == 2
+    )  # --top alone needs eval.csv
     assert "eval.csv" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # argparse: not a level
-        main(["select", str(tmp_path), "--levels", "4"])
+        main(["policy", "select", str(tmp_path), "--levels", "4"])
 
 
 def test_table_mode_on_an_evaluation_folder(tmp_path, capsys):
@@ -313,7 +320,7 @@ def test_table_mode_on_an_evaluation_folder(tmp_path, capsys):
         compare_evaluation(out, sac="nope")
 
     md = tmp_path / "criteria.md"
-    assert main(["select", str(out), "--table", "--levels", "3", "--out", str(md)]) == 0
+    assert main(["policy", "select", str(out), "--table", "--levels", "3", "--out", str(md)]) == 0
     printed = capsys.readouterr().out
     assert re.search(r"\|\s+3 \|", printed) and not re.search(r"\|\s+0 \|", printed)
     assert md.read_text() == markdown_table(table.loc[[3]]) + "\n"
@@ -329,9 +336,7 @@ def test_selection_on_a_tiny_training_run(tmp_path, capsys):
         episode_duration_s=0.5,
         total_timesteps=200,
         n_envs=1,
-        buffer_size=1_000,
-        batch_size=16,
-        learning_starts=100,
+        algorithm_kwargs={"buffer_size": 1_000, "batch_size": 16, "learning_starts": 100},
         checkpoint_every_s=0.0,
         checkpoint_every_steps=100,
         eval_every_steps=100,
@@ -339,7 +344,7 @@ def test_selection_on_a_tiny_training_run(tmp_path, capsys):
         eval_levels=(0,),
     )
     run_dir = tmp_path / "run"
-    train(preset, run_dir, seed=0, verbose=0)
+    train(preset, run_dir, verbose=0)
     ckpts = ck.list_checkpoints(run_dir)
     assert [c.name for c in ckpts] == ["step_0000000100", "step_0000000200"]
     evals = pd.read_csv(run_dir / ck.EVAL_FILE)

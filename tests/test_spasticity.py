@@ -62,13 +62,6 @@ def test_table_one_values() -> None:
         LEVELS[1].k = 1.0  # type: ignore[misc]
 
 
-def test_spastic_muscles() -> None:
-    assert SPASTIC_MUSCLES == (
-        "gaslat_r", "gasmed_r", "semimem_r", "semiten_r", "bflh_r", "bfsh_r",
-        "grac_r", "vasmed_r", "vaslat_r", "vasint_r", "recfem_r",
-    )  # fmt: skip
-
-
 # ------------------------------------------------------------------------------ the model
 
 

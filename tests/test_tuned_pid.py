@@ -38,14 +38,24 @@ def test_each_tuned_pid_is_its_file_with_provenance(name):
 
 def test_tune_pid_write_records_its_provenance(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(fits, "fits_dir", lambda: tmp_path)
-    argv = ["tune-pid", "--feedback", "exo", "--rel-tol", "0.3", "--quiet", "--write", "mine"]
+    argv = [
+        "twin",
+        "tune-pid",
+        "--feedback",
+        "exo",
+        "--rel-tol",
+        "0.3",
+        "--quiet",
+        "--write",
+        "mine",
+    ]
     assert cli.main(argv) == 0
     assert (tmp_path / "pid_tuned_mine.json").is_file()
     entry = tuned.TunedPID.from_fit("mine")
     assert entry.name == "mine" and entry.feedback == "exo"
-    assert entry.command == "myoexo tune-pid --feedback exo --rel-tol 0.3 --write mine"
+    assert entry.command == "myoexo twin tune-pid --feedback exo --rel-tol 0.3 --write mine"
     assert entry.twin_version == TWIN_VERSION
-    assert cli.main(["tune-pid", "--rel-tol", "0.3", "--quiet", "--write", "no good"]) == 2
+    assert cli.main(["twin", "tune-pid", "--rel-tol", "0.3", "--quiet", "--write", "no good"]) == 2
     assert "must be a word" in capsys.readouterr().err
 
 

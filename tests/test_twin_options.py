@@ -33,7 +33,7 @@ def test_the_record_parses_validates_and_round_trips():
     assert TwinOptions.from_dict(twin.to_dict()) == twin
     assert twin.to_dict()["reflex_parameters"]["class"].endswith("PersistentReflex")
     assert twin.env_kwargs() == {
-        "task": {"episode_duration_s": 4.0},
+        "episode_duration_s": 4.0,
         "reward_weights": {"inter": -0.5},
         "obs_preset": "exo",
         "reflex": "persistent",
@@ -43,7 +43,7 @@ def test_the_record_parses_validates_and_round_trips():
     assert twin.replace(episode_duration_s=None).task == ()
     for bad, match in (
         ("reflex=clonus", "registered: persistent, spindle, stretch, tsrt, uniform"),
-        ("episode_duration_s=-1", "outside the accepted range"),
+        ("episode_duration_s=-1", r"is outside \[0.001, 3600\] s"),
         ("reward_weights=nope:1", "accepted"),
         ("obs_preset=nope", "accepted"),
         ("robustness=maybe", "true or false"),
@@ -75,8 +75,8 @@ def test_the_options_reach_any_env_id_that_takes_them_and_are_refused_by_one_tha
     make_env_fn("CartPole-v1", 0)().close()  # the default twin: any id
 
 
-def _myoexo(*args: str, cwd) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MYOEXO_DEBUG": "1"}
+def _myoexo(*args: str, cwd, debug: bool = True) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MYOEXO_DEBUG": "1" if debug else ""}
     return subprocess.run(
         [sys.executable, "-m", "myoexo.cli", *args],
         capture_output=True,
@@ -95,19 +95,18 @@ def test_a_policy_trains_checkpoints_and_evaluates_on_the_persistent_twin_throug
 
     run_dir = tmp_path / "run"
     settings = [
-        "env_id=MyoExoKneeRandom-v0", "total_timesteps=300", "n_envs=2", "buffer_size=2000",
-        "batch_size=32", "learning_starts=100", "checkpoint_every_s=0",
-        "checkpoint_every_steps=200", "eval_every_steps=200", "eval_subjects=1",
-        "eval_levels=2", "reflex=persistent", "episode_duration_s=0.5", "obs_preset=exo",
+        "--env-id", "MyoExoKneeRandom-v0", "--total-timesteps", "300", "--n-envs", "2",
+        "--algorithm-kwargs", "buffer_size=2000,batch_size=32,learning_starts=100",
+        "--checkpoint-every-s", "0", "--checkpoint-every-steps", "200",
+        "--eval-every-steps", "200", "--eval-subjects", "1", "--eval-levels", "2",
+        "--reflex", "persistent", "--episode-duration-s", "0.5", "--obs-preset", "exo",
     ]  # fmt: skip
-    args = ["train", "--run-dir", str(run_dir), "--no-progress", "-v", "0"]
-    for s in settings:
-        args += ["--set", s]
-    out = _myoexo(*args, cwd=tmp_path)
+    args = ["policy", "train", "--run-dir", str(run_dir), "--no-progress", "-v", "0"]
+    out = _myoexo(*args, *settings, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "reflex=persistent" in out.stdout
     config = json.loads((run_dir / "config.json").read_text())
-    assert config["preset"]["twin"]["reflex"] == "persistent"
+    assert config["config"]["twin"]["reflex"] == "persistent"
     checkpoint = sorted((run_dir / "checkpoints").glob("step_*"))[-1]
     state = json.loads((checkpoint / "state.json").read_text())
     assert TwinOptions.from_dict(state["twin"]) == TwinOptions(
@@ -126,7 +125,7 @@ def test_a_policy_trains_checkpoints_and_evaluates_on_the_persistent_twin_throug
         "--subjects", "1", "--workers", "1", "--no-progress",
     ]  # fmt: skip
     same = _myoexo(
-        *evaluation, "--reflex", "persistent", "--episode-duration", "0.5",
+        *evaluation, "--reflex", "persistent", "--episode-duration-s", "0.5",
         "--out", str(tmp_path / "same"), cwd=tmp_path,
     )  # fmt: skip
     assert same.returncode == 0, same.stderr
@@ -137,7 +136,7 @@ def test_a_policy_trains_checkpoints_and_evaluates_on_the_persistent_twin_throug
     assert entry["trained_on"]["reflex"] == "persistent"
 
     other = _myoexo(
-        *evaluation, "--episode-duration", "0.5", "--out", str(tmp_path / "other"), cwd=tmp_path
+        *evaluation, "--episode-duration-s", "0.5", "--out", str(tmp_path / "other"), cwd=tmp_path
     )
     assert other.returncode == 0, other.stderr
     assert (
@@ -167,27 +166,37 @@ def test_the_evaluation_warns_in_the_api_too(tmp_path):
 
 @pytest.mark.slow
 def test_a_checkpoint_chosen_by_select_is_refused_on_its_selection_root(tmp_path):
-    """The real path: train, `myoexo select` on the selection root, then `myoexo evaluate`
+    """The real path: train, `myoexo policy select` on the selection root, then `myoexo evaluate`
     of the chosen model.zip there (exit 2, nothing written) and on the evaluation root."""
     run_dir = tmp_path / "run"
     settings = [
-        "env_id=MyoExoKneeRandom-v0", "total_timesteps=300", "n_envs=2", "buffer_size=2000",
-        "batch_size=32", "learning_starts=100", "checkpoint_every_s=0",
-        "checkpoint_every_steps=200", "eval_every_steps=0", "episode_duration_s=0.3",
+        "--env-id", "MyoExoKneeRandom-v0", "--total-timesteps", "300", "--n-envs", "2",
+        "--algorithm-kwargs", "buffer_size=2000,batch_size=32,learning_starts=100",
+        "--checkpoint-every-s", "0", "--checkpoint-every-steps", "200",
+        "--eval-every-steps", "0", "--episode-duration-s", "0.3",
     ]  # fmt: skip
-    args = ["train", "--run-dir", str(run_dir), "--no-progress", "-v", "0"]
-    for s in settings:
-        args += ["--set", s]
-    assert _myoexo(*args, cwd=tmp_path).returncode == 0
+    args = ["policy", "train", "--run-dir", str(run_dir), "--no-progress", "-v", "0"]
+    assert _myoexo(*args, *settings, cwd=tmp_path).returncode == 0
     picked = _myoexo(
-        "select", str(run_dir), "--subjects", "1", "--levels", "1", "--last", "1", cwd=tmp_path
+        "policy",
+        "select",
+        str(run_dir),
+        "--subjects",
+        "1",
+        "--levels",
+        "1",
+        "--last",
+        "1",
+        cwd=tmp_path,
     )
     assert picked.returncode == 0, picked.stderr
     chosen = next(line for line in picked.stdout.splitlines() if line.startswith("chosen:"))
     model = chosen.split(":", 1)[1].strip() + "/model.zip"
     evaluation = ["evaluate", "--controllers", model, "--levels", "1", "--subjects", "1"]
-    evaluation += ["--workers", "1", "--no-progress", "--episode-duration", "0.3"]
-    refused = _myoexo(*evaluation, "--seed", "1", "--out", str(tmp_path / "on1"), cwd=tmp_path)
+    evaluation += ["--workers", "1", "--no-progress", "--episode-duration-s", "0.3"]
+    refused = _myoexo(
+        *evaluation, "--seed", "1", "--out", str(tmp_path / "on1"), cwd=tmp_path, debug=False
+    )
     assert refused.returncode == 2
     assert "was selected on the subjects of root seed 1" in refused.stderr
     assert not (tmp_path / "on1").exists()

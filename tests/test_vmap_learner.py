@@ -5,29 +5,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("sbx")
-
 from myoexo.training import get_preset
 from myoexo.training.train import build_model, make_vec_env
 from myoexo.training.vmap import SeedBatchedSAC, learn_seed_batched
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _needs_sbx():
+    """The JAX learners (``myoexo[jax]``); imported when the tests run, not when pytest
+    collects them (the import takes seconds, in every pytest-xdist worker)."""
+    pytest.importorskip("sbx")
+
+
 def _models(n: int, **overrides):
     from stable_baselines3.common.logger import configure
 
-    fields = dict(
-        algorithm="sbx_sac",
-        n_envs=2,
-        train_freq=4,
-        gradient_steps=8,
-        batch_size=32,
-        learning_starts=0,
+    kwargs = dict(train_freq=4, gradient_steps=8, batch_size=32, learning_starts=0)
+    preset = get_preset(
+        "cpu", algorithm="sbx_sac", n_envs=2, algorithm_kwargs={**kwargs, **overrides}
     )
-    preset = get_preset("cpu", **{**fields, **overrides})
     out = []
     for seed in range(n):
         venv = make_vec_env(preset, seed)
-        model = build_model(preset, venv, seed)
+        model = build_model(preset.replace(seed=seed), venv)
         model.set_logger(configure(None, []))
         rng = np.random.default_rng(seed)
         obs = venv.reset()

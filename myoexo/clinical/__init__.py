@@ -3,20 +3,20 @@
 Each test is a function returning a result (``table()`` per level, ``traces``), a figure
 function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
 
-* ``myoexo tardieu``: :func:`~myoexo.clinical.tardieu.run_tardieu`, catch angle R1 at a
+* ``myoexo clinic tardieu``: :func:`~myoexo.clinical.tardieu.run_tardieu`, catch angle R1 at a
   fast stretch, passive range R2 at a slow one (:mod:`myoexo.clinical.tardieu`);
-* ``myoexo pendulum``: :func:`~myoexo.clinical.pendulum.run_pendulum`, Wartenberg's
+* ``myoexo clinic pendulum``: :func:`~myoexo.clinical.pendulum.run_pendulum`, Wartenberg's
   pendulum test, relaxation index (:mod:`myoexo.clinical.pendulum`);
-* ``myoexo mas-exam``: :func:`~myoexo.clinical.mas.run_mas_exam`, the Modified Ashworth
+* ``myoexo clinic mas``: :func:`~myoexo.clinical.mas.run_mas_exam`, the Modified Ashworth
   examination's resistance profile (:mod:`myoexo.clinical.mas`);
-* :func:`~myoexo.clinical.hold.run_stretch_hold` (``myoexo stretch-hold``): a
+* :func:`~myoexo.clinical.hold.run_stretch_hold` (``myoexo clinic hold``): a
   fast and a slow stretch, each then held: does the resistance outlast the stretch
   (:mod:`myoexo.clinical.hold`)?
 
 Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
 :class:`~myoexo.spasticity.ReflexModel`) so the reflex models can be compared side by side,
 and runs the nominal Table I subject of each level unless ``subjects`` gives individual ones.
-The shared machinery (the exo-driven knee, checks, CLI options) is
+The shared machinery (the exo-driven knee, the options the commands share) is
 :mod:`myoexo.clinical.common`, which :mod:`myoexo.clinical.stretch` uses too.
 
 The submodules are imported on first use (``myoexo.clinical.run_tardieu`` works), so
@@ -25,8 +25,7 @@ importing this package stays cheap and free of import cycles with :mod:`myoexo.c
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from myoexo.runtime.lazy import lazy_exports
 
 __all__ = [
     "MASExamParams",
@@ -64,8 +63,4 @@ _HOMES = {
     "run_stretch_hold": "hold",
 }
 
-
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)

@@ -1,5 +1,5 @@
 """Machinery shared by the clinical tests: the twin, the reflex host, an exo-driven (or
-released) knee, option checks, the CLI options and the output files.
+released) knee, the options every examination command shares and the output files.
 
 The core is :func:`simulate_drive`: the relaxed twin (muscles get the spastic reflex only,
 :class:`~myoexo.spasticity.SpasticityStage` in the muscle-command pipeline, at every 10 ms
@@ -23,9 +23,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from myoexo.envs.twin import Twin
-from myoexo.model.exo import EXO_ACTUATOR
+from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
 from myoexo.model.leg import KNEE_JOINT
-from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams, sample_subject
+from myoexo.runtime.fields import add_options, check_fields, option
+from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams, check_level, sample_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, add_reflex_argument
 from myoexo.spasticity.stage import SpasticityStage
@@ -39,13 +40,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DRIVE_COLUMNS",
+    "FEEDBACK_JOINTS",
     "DriveParams",
+    "ExamOptions",
     "PoseFn",
-    "add_common_arguments",
-    "check_extension_angles",
-    "check_levels",
-    "check_positive",
-    "check_two_speeds",
+    "add_exam_arguments",
     "default_twin",
     "draw_subjects",
     "interp_on_angle",
@@ -70,6 +69,27 @@ DRIVE_COLUMNS: tuple[str, ...] = (
     "feedback_deg",
 )
 
+#: Joints whose angle the exo's PD can control: the human knee (the clinician imposes the
+#: limb's motion) or the exo hinge (what a real device's encoder measures).
+FEEDBACK_JOINTS: tuple[str, ...] = (KNEE_JOINT, EXO_JOINT)
+
+
+def levels_option() -> Any:
+    """The ``levels`` field of a clinical test's parameters (``--levels``): spasticity levels
+    of :data:`~myoexo.spasticity.VALID_LEVELS`, all by default."""
+    return option(VALID_LEVELS, "spasticity levels to test", choices=VALID_LEVELS, metavar="L")
+
+
+def normalise_levels(params: Any) -> None:
+    """After :func:`~myoexo.runtime.fields.check_fields` (each level is valid): *params*'
+    ``levels`` as a tuple of ``int`` (a list or numpy integers are accepted), or a
+    ``ValueError`` if there is none."""
+    if not params.levels:
+        raise ValueError(
+            f"{type(params).__name__}.levels is empty; accepted levels: {list(VALID_LEVELS)}"
+        )
+    object.__setattr__(params, "levels", tuple(int(level) for level in params.levels))
+
 
 @dataclasses.dataclass(frozen=True)
 class DriveParams:
@@ -86,80 +106,22 @@ class DriveParams:
             clinician imposes the limb's motion) or the exo hinge (``"exo_knee"``).
     """
 
-    kp_nm_per_rad: float = 400.0
-    kd_nm_s_per_rad: float = 5.0
-    control_period_s: float = 0.01
-    feedback_joint: str = KNEE_JOINT
+    kp_nm_per_rad: float = option(
+        400.0, "proportional gain of the exo's position controller", low=0.0, unit="Nm/rad"
+    )
+    kd_nm_s_per_rad: float = option(
+        5.0, "derivative gain of the exo's position controller", low=0.0, unit="Nm s/rad"
+    )
+    control_period_s: float = option(
+        0.01, "control period (the reflex stage and the PD run once per period)",
+        low=0.0, above=True, unit="s",
+    )  # fmt: skip
+    feedback_joint: str = option(
+        KNEE_JOINT, "joint whose angle the PD controls", choices=FEEDBACK_JOINTS, metavar="JOINT"
+    )
 
     def __post_init__(self) -> None:
-        for name in ("kp_nm_per_rad", "kd_nm_s_per_rad"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"DriveParams.{name} must be >= 0, got {value!r}.")
-        check_positive("DriveParams.control_period_s", self.control_period_s, "s")
-
-
-# ----------------------------------------------------------------------------- checks
-def check_positive(name: str, value: Any, unit: str) -> float:
-    """*value* as a float if it is a positive finite number, else a ``ValueError`` that names
-    the value and the accepted range."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = math.nan
-    if not (math.isfinite(number) and number > 0.0):
-        raise ValueError(f"{name} = {value!r} is not accepted: it must lie in (0, inf) {unit}.")
-    return number
-
-
-def check_two_speeds(owner: str, slow_rad_s: float, fast_rad_s: float) -> None:
-    """A slow and a fast stretch speed (rad/s): both positive, the fast one faster, else a
-    ``ValueError`` naming ``<owner>.<field>`` and the accepted range."""
-    check_positive(f"{owner}.slow_rad_s", slow_rad_s, "rad/s")
-    check_positive(f"{owner}.fast_rad_s", fast_rad_s, "rad/s")
-    if not fast_rad_s > slow_rad_s:
-        raise ValueError(
-            f"{owner}.fast_rad_s = {fast_rad_s!r} must exceed slow_rad_s = "
-            f"{slow_rad_s!r}: accepted range ({slow_rad_s!r}, inf) rad/s."
-        )
-
-
-def check_extension_angles(
-    owner: str,
-    start_deg: float,
-    end_deg: float,
-    why: str = "the test extends the knee (stretches the flexors)",
-) -> None:
-    """Start and end knee angles (deg) of an extension inside the knee's [0, 120] deg range,
-    the end below the start, else a ``ValueError`` naming ``<owner>.<field>``."""
-    for name, value in (("start_deg", start_deg), ("end_deg", end_deg)):
-        if not (math.isfinite(value) and 0.0 <= value <= 120.0):
-            raise ValueError(
-                f"{owner}.{name} = {value!r} is outside the knee's range [0, 120] deg."
-            )
-    if not end_deg < start_deg:
-        raise ValueError(
-            f"{owner}.end_deg = {end_deg!r} must be below start_deg = {start_deg!r}: {why}."
-        )
-
-
-def check_levels(levels: Iterable[Any]) -> tuple[int, ...]:
-    """The levels as a tuple of ints of :data:`~myoexo.spasticity.VALID_LEVELS`, or a
-    ``ValueError`` that names the first unknown one and the accepted levels."""
-    checked = []
-    for level in levels:
-        if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer)):
-            raise ValueError(
-                f"Unknown spasticity level {level!r}; accepted levels: {list(VALID_LEVELS)}."
-            )
-        if int(level) not in VALID_LEVELS:
-            raise ValueError(
-                f"Unknown spasticity level {level!r}; accepted levels: {list(VALID_LEVELS)}."
-            )
-        checked.append(int(level))
-    if not checked:
-        raise ValueError(f"No level given; accepted levels: {list(VALID_LEVELS)}.")
-    return tuple(checked)
+        check_fields(self)
 
 
 def draw_subjects(levels: Iterable[int], seed: int) -> dict[int, SpasticityParams]:
@@ -167,7 +129,7 @@ def draw_subjects(levels: Iterable[int], seed: int) -> dict[int, SpasticityParam
     :func:`~myoexo.spasticity.sample_subject`), drawn in the order of *levels* from one
     generator seeded with *seed*."""
     rng = np.random.default_rng(seed)
-    return {level: sample_subject(level, rng) for level in check_levels(levels)}
+    return {level: sample_subject(level, rng) for level in map(check_level, levels)}
 
 
 # ----------------------------------------------------------------------------- the twin
@@ -265,7 +227,7 @@ def simulate_drive(
     """
     import mujoco
 
-    level = check_levels([level])[0]
+    level = check_level(level)
     n_steps = len(ref_deg)
     powered_steps = np.ones(n_steps, dtype=bool) if powered is None else np.asarray(powered)
     if len(ref_vel_rad_s) != n_steps or len(powered_steps) != n_steps:
@@ -322,30 +284,46 @@ def interp_on_angle(angle_deg: Any, values: Any, at_deg: Any) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- CLI
-def add_common_arguments(parser: argparse.ArgumentParser, levels: Iterable[int]) -> None:
-    """``--levels``, ``--reflex``, ``--subject-seed``, ``--out`` and ``--dpi``."""
-    parser.add_argument(
-        "--levels", type=int, nargs="+", default=list(levels),
-        help=f"spasticity levels among {list(VALID_LEVELS)} (default: %(default)s)",
-    )  # fmt: skip
+@dataclasses.dataclass(frozen=True)
+class ExamOptions:
+    """What an examination command (``myoexo clinic tardieu|pendulum|mas``) runs on and
+    writes, besides its test parameters: each field is an option of its own name
+    (``--reflex`` is :func:`~myoexo.spasticity.registry.add_reflex_argument`'s)."""
+
+    reflex: str = option(DEFAULT_REFLEX, "reflex model of the twin", flag="")
+    subject_seed: int | None = option(
+        None,
+        "draw one individual subject per level with this seed (default: the nominal Table I "
+        "subjects)",
+        low=0,
+        metavar="N",
+    )
+    out: Path | None = option(
+        None,
+        "folder for the CSV tables and the PNG figure (default: print only)",
+        folder=True,
+        metavar="DIR",
+    )
+    dpi: int = option(120, "resolution of the PNG figure", low=1)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    def subjects(self, levels: Iterable[int]) -> Mapping[int, SpasticityParams] | None:
+        """The individual subjects of *levels* (:func:`draw_subjects` with
+        ``subject_seed``; ``None``: the nominal Table I subjects)."""
+        if self.subject_seed is None:
+            return None
+        return draw_subjects(levels, self.subject_seed)
+
+
+def add_exam_arguments(parser: argparse.ArgumentParser, params: type) -> None:
+    """The options of an examination command: one per field of its test parameters
+    (*params*, a dataclass declared with :func:`~myoexo.runtime.fields.option`), then
+    ``--reflex`` and :class:`ExamOptions`' fields."""
+    add_options(parser, params)
     add_reflex_argument(parser, default=DEFAULT_REFLEX)
-    parser.add_argument(
-        "--subject-seed", type=int, default=None,
-        help="draw one individual subject per level with this seed (default: the nominal "
-        "Table I subjects)",
-    )  # fmt: skip
-    parser.add_argument(
-        "--out", type=Path, default=None,
-        help="folder for the CSV tables and the PNG figure (default: print only)",
-    )  # fmt: skip
-    parser.add_argument("--dpi", type=int, default=120, help="resolution of the PNG figure")
-
-
-def subjects_from_args(args: argparse.Namespace) -> Mapping[int, SpasticityParams] | None:
-    """The individual subjects the CLI options ask for (``None``: nominal Table I)."""
-    if args.subject_seed is None:
-        return None
-    return draw_subjects(args.levels, args.subject_seed)
+    add_options(parser, ExamOptions)
 
 
 def print_table(table: pd.DataFrame) -> None:

@@ -1,11 +1,11 @@
 """Figures of the spasticity model and of the clinical tests: the paper's Fig. 2b (the
 spasticity coefficient's angle and velocity terms per level, the Table I curve and the 5-95 %
 band of sampled subjects: :func:`plot_sc_curves`), the stretch-test torque curves, and
-``myoexo plot-spasticity``, which draws both.
+``myoexo clinic plot``, which draws both.
 
 CLI::
 
-    myoexo plot-spasticity --out DIR [--subjects 200] [--seed 0] [--no-stretch]
+    myoexo clinic plot --out DIR [--subjects 200] [--seed 0] [--no-stretch] [--dpi 150]
 
 writes ``DIR/fig2b_spasticity.png`` (the angle term ``sc_a`` vs knee angle and the velocity
 term ``sc_v`` vs knee velocity per level: Table I curve and the 5-95 % band of sampled
@@ -16,11 +16,13 @@ knee angle per level and speed, and the peak torques).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from myoexo.runtime.fields import add_options, check_fields, from_options, option
 from myoexo.spasticity.coefficients import sc_angle, sc_velocity
 from myoexo.spasticity.levels import LEVELS, sample_subject
 from myoexo.viz.colors import LEVEL_COLORS
@@ -32,6 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "LEVEL_COLORS",
+    "PlotConfig",
     "add_arguments",
     "plot_sc_curves",
     "plot_stretch_test",
@@ -153,31 +156,45 @@ def plot_stretch_test(result: StretchTestResult) -> Figure:
     return fig
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo plot-spasticity``."""
-    parser.add_argument("--out", type=Path, required=True, help="output folder for the PNGs")
-    parser.add_argument("--subjects", type=int, default=200, help="subjects per level in the band")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the subject draws")
-    parser.add_argument(
-        "--no-stretch", action="store_true", help="skip the stretch-test simulation and figure"
+@dataclasses.dataclass(frozen=True)
+class PlotConfig:
+    """What ``myoexo clinic plot`` draws and where (each field is an option of its own name;
+    ``--out`` is required)."""
+
+    out: Path = option(
+        doc="output folder for the PNGs (required, no default)", folder=True, metavar="DIR"
     )
-    parser.add_argument("--dpi", type=int, default=150, help="resolution of the PNGs")
+    subjects: int = option(200, "subjects per level in the band", low=2)
+    seed: int = option(0, "seed of the subject draws", low=0)
+    stretch: bool = option(True, "simulate the stretch test and draw its figure")
+    dpi: int = option(150, "resolution of the PNGs", low=1)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo clinic plot``: :class:`PlotConfig`'s fields."""
+    add_options(parser, PlotConfig)
+    # the field has no default: its option is required
+    next(a for a in parser._actions if a.dest == "out").required = True
 
 
 def run(args: argparse.Namespace) -> int:
-    """Write the figures to ``args.out``."""
-    args.out.mkdir(parents=True, exist_ok=True)
-    fig = plot_sc_curves(n_subjects=args.subjects, seed=args.seed)
-    path = args.out / "fig2b_spasticity.png"
-    fig.savefig(path, dpi=args.dpi)
+    """Write the figures to ``--out``."""
+    config = from_options(PlotConfig, args)
+    config.out.mkdir(parents=True, exist_ok=True)
+    fig = plot_sc_curves(n_subjects=config.subjects, seed=config.seed)
+    path = config.out / "fig2b_spasticity.png"
+    fig.savefig(path, dpi=config.dpi)
     print(f"wrote {path}")
-    if not args.no_stretch:
+    if config.stretch:
         from myoexo.clinical.stretch import run_stretch_test
 
         result = run_stretch_test(progress=True)
         fig = plot_stretch_test(result)
-        path = args.out / "stretch_test.png"
-        fig.savefig(path, dpi=args.dpi)
-        result.summary.to_csv(args.out / "stretch_summary.csv", index=False)
-        print(f"wrote {path} and {args.out / 'stretch_summary.csv'}")
+        path = config.out / "stretch_test.png"
+        fig.savefig(path, dpi=config.dpi)
+        result.summary.to_csv(config.out / "stretch_summary.csv", index=False)
+        print(f"wrote {path} and {config.out / 'stretch_summary.csv'}")
     return 0

@@ -19,7 +19,9 @@ stretch in each window::
 (0 for a reflex without memory; > 0 while an after-discharge lasts), plus the flexors' reflex
 excitation at the end of each hold (``*_end_sc``; for ``"persistent"`` ``SC_total + G r``).
 
-API (``myoexo stretch-hold --reflex persistent`` on the command line)::
+On the command line, ``myoexo clinic hold --reflex persistent``: every field of
+:class:`StretchHoldParams` is an option of its own name (``--hold-s``, ``--end-deg``, ...).
+API::
 
     from myoexo.clinical.hold import run_stretch_hold
     run_stretch_hold(reflex="persistent").table()
@@ -29,19 +31,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from myoexo.clinical.common import (
-    check_extension_angles,
-    check_levels,
-    check_two_speeds,
+    levels_option,
+    normalise_levels,
     print_table,
     resolve_twin,
 )
 from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
-from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.runtime.fields import add_options, check_fields, from_options, option
+from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, add_reflex_argument, reflex_label
 
@@ -56,7 +57,8 @@ __all__ = ["StretchHoldParams", "StretchHoldResult", "run_stretch_hold"]
 
 @dataclasses.dataclass(frozen=True)
 class StretchHoldParams:
-    """Parameters of the stretch-and-hold test.
+    """Parameters of the stretch-and-hold test (each field is an option of ``myoexo clinic
+    hold``).
 
     Attributes:
         start_deg: Knee flexion at the start, deg (90: the seated rest).
@@ -68,19 +70,34 @@ class StretchHoldParams:
         levels: Spasticity levels to test.
     """
 
-    start_deg: float = 90.0
-    end_deg: float = 30.0
-    slow_rad_s: float = 0.2
-    fast_rad_s: float = 3.0
-    hold_s: float = 3.0
-    levels: tuple[int, ...] = VALID_LEVELS
+    start_deg: float = option(90.0, "knee flexion at the start", low=0.0, high=120.0, unit="deg")
+    end_deg: float = option(
+        30.0, "knee flexion held after the stretch", low=0.0, high=120.0, unit="deg"
+    )
+    slow_rad_s: float = option(
+        0.2, "the slow stretch's speed", low=0.0, above=True, unit="rad/s", metavar="RAD_S"
+    )
+    fast_rad_s: float = option(
+        3.0, "the fast stretch's speed", low=0.0, above=True, unit="rad/s", metavar="RAD_S"
+    )
+    hold_s: float = option(
+        3.0, "time held at the end after the stretch", low=1.5, high=60.0, unit="s"
+    )
+    levels: tuple[int, ...] = levels_option()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", check_levels(self.levels))
-        check_two_speeds("StretchHoldParams", self.slow_rad_s, self.fast_rad_s)
-        if not (math.isfinite(self.hold_s) and 1.5 <= self.hold_s <= 60.0):
-            raise ValueError(f"StretchHoldParams.hold_s = {self.hold_s!r} is outside [1.5, 60] s.")
-        check_extension_angles("StretchHoldParams", self.start_deg, self.end_deg)
+        check_fields(self)
+        normalise_levels(self)
+        if not self.fast_rad_s > self.slow_rad_s:
+            raise ValueError(
+                f"StretchHoldParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
+                f"{self.slow_rad_s!r}"
+            )
+        if not self.end_deg < self.start_deg:
+            raise ValueError(
+                f"StretchHoldParams.end_deg = {self.end_deg!r} must be below start_deg = "
+                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)"
+            )
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one stretch and its hold."""
@@ -185,16 +202,13 @@ def run_stretch_hold(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo stretch-hold``."""
-    d = StretchHoldParams()
-    parser.add_argument("--levels", type=int, nargs="+", default=list(d.levels))
+    """Options of ``myoexo clinic hold``: :class:`StretchHoldParams`' fields and ``--reflex``."""
+    add_options(parser, StretchHoldParams)
     add_reflex_argument(parser, default=DEFAULT_REFLEX)
-    parser.add_argument("--hold-s", type=float, default=d.hold_s, help="hold after the stretch")
-    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="held angle, deg")
 
 
 def run(args: argparse.Namespace) -> int:
-    """``myoexo stretch-hold [--reflex NAME] [--levels ...] [--hold-s 3]``: the table."""
-    params = StretchHoldParams(levels=tuple(args.levels), hold_s=args.hold_s, end_deg=args.end_deg)
+    """``myoexo clinic hold [--reflex NAME] [--levels ...] [--hold-s 3]``: the table."""
+    params = from_options(StretchHoldParams, args)
     print_table(run_stretch_hold(params, reflex=args.reflex).table())
     return 0

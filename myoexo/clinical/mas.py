@@ -34,8 +34,12 @@ same knee angle: ``excess_nm`` = resisting torque minus level 0's. Per level (ra
 
 CLI::
 
-    myoexo mas-exam [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
+    myoexo clinic mas [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
                     [--duration-s 1.0] [--subject-seed N] [--out DIR]
+
+Every field of :class:`MASExamParams` but ``drive`` is an option of its own name
+(``--onset-threshold-nm``, ...), and so is every field of
+:class:`~myoexo.clinical.common.ExamOptions`.
 """
 
 from __future__ import annotations
@@ -50,19 +54,19 @@ import numpy as np
 
 from myoexo.clinical.common import (
     DriveParams,
-    add_common_arguments,
-    check_extension_angles,
-    check_levels,
-    check_positive,
+    ExamOptions,
+    add_exam_arguments,
     control_substeps,
     interp_on_angle,
+    levels_option,
+    normalise_levels,
     print_table,
     resolve_twin,
     simulate_drive,
-    subjects_from_args,
     write_outputs,
 )
-from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.runtime.fields import check_fields, from_options, option
+from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, reflex_label
 
@@ -91,7 +95,8 @@ _RANGE_GRID_POINTS = 201
 
 @dataclasses.dataclass(frozen=True)
 class MASExamParams:
-    """Parameters of the simulated MAS examination (defaults: the seated clinical exam).
+    """Parameters of the simulated MAS examination (defaults: the seated clinical exam; each
+    field but ``drive`` is an option of ``myoexo clinic mas``).
 
     Attributes:
         start_deg: Knee flexion at the start, deg (90: the seated rest).
@@ -106,29 +111,28 @@ class MASExamParams:
         drive: The exo PD's gains and the control period.
     """
 
-    start_deg: float = 90.0
-    end_deg: float = 10.0
-    duration_s: float = 1.0
-    hold_s: float = 0.5
-    end_hold_s: float = 0.2
-    onset_threshold_nm: float = 10.0
-    levels: tuple[int, ...] = VALID_LEVELS
+    start_deg: float = option(90.0, "knee flexion at the start", low=0.0, high=120.0, unit="deg")
+    end_deg: float = option(
+        10.0, "commanded knee flexion at the end", low=0.0, high=120.0, unit="deg"
+    )
+    duration_s: float = option(1.0, "time through the range", low=0.0, above=True, unit="s")
+    hold_s: float = option(0.5, "time held at the start before the motion", low=0.0, unit="s")
+    end_hold_s: float = option(0.2, "time held at the end", low=0.0, unit="s")
+    onset_threshold_nm: float = option(
+        10.0, "excess over level 0 that counts as felt resistance",
+        low=0.0, above=True, unit="Nm",
+    )  # fmt: skip
+    levels: tuple[int, ...] = levels_option()
     drive: DriveParams = dataclasses.field(default_factory=DriveParams)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", check_levels(self.levels))
-        check_extension_angles(
-            "MASExamParams",
-            self.start_deg,
-            self.end_deg,
-            why="the exam extends the knee (moves the flexors)",
-        )
-        check_positive("MASExamParams.duration_s", self.duration_s, "s")
-        check_positive("MASExamParams.onset_threshold_nm", self.onset_threshold_nm, "Nm")
-        for name in ("hold_s", "end_hold_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"MASExamParams.{name} = {value!r} must lie in [0, inf) s.")
+        check_fields(self)
+        normalise_levels(self)
+        if not self.end_deg < self.start_deg:
+            raise ValueError(
+                f"MASExamParams.end_deg = {self.end_deg!r} must be below start_deg = "
+                f"{self.start_deg!r}: the exam extends the knee (moves the flexors)"
+            )
 
     @property
     def span_deg(self) -> float:
@@ -329,25 +333,21 @@ def plot_mas_exam(result: MASExamResult) -> Figure:
 
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo mas-exam``."""
-    d = MASExamParams()
-    add_common_arguments(parser, d.levels)
-    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="commanded end angle")
-    parser.add_argument(
-        "--duration-s", type=float, default=d.duration_s, help="time through the range in s"
-    )
+    """Options of ``myoexo clinic mas``: :class:`MASExamParams`' fields, ``--reflex`` and
+    :class:`~myoexo.clinical.common.ExamOptions`' fields."""
+    add_exam_arguments(parser, MASExamParams)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the exam, print the per-level table, optionally write CSVs and the figure."""
-    params = MASExamParams(
-        end_deg=args.end_deg, duration_s=args.duration_s, levels=tuple(args.levels)
-    )
-    result = run_mas_exam(params, reflex=args.reflex, subjects=subjects_from_args(args))
+    params = from_options(MASExamParams, args)
+    options = from_options(ExamOptions, args, reflex=args.reflex)
+    result = run_mas_exam(params, reflex=options.reflex, subjects=options.subjects(params.levels))
     print_table(result.table())
-    if args.out is not None:
+    if options.out is not None:
         paths = write_outputs(
-            args.out, "mas_exam", result.table(), result.traces, plot_mas_exam(result), args.dpi
-        )
+            options.out, "mas_exam", result.table(), result.traces, plot_mas_exam(result),
+            options.dpi,
+        )  # fmt: skip
         print("wrote " + ", ".join(str(path) for path in paths))
     return 0

@@ -50,14 +50,18 @@ hamstrings are slack. With the exo worn, its 95 deg stop caps the first swing ne
 of knee flexion (the straps give a few degrees): level 0 gives ``R`` = 1.40 seated and 1.43
 reclined on twin 3. With the exo's stop moved out of the way (``--device freed``,
 ``twin=TwinParams(exo_knee_range_deg=(-15, 130))``) the healthy leg gives 1.77 seated and
-1.70 reclined, the latter within Kim et al.'s 1.678 +- 0.090 (twin 2, whose passive knee was
-its muscles' passive fibres, gave 1.57 and 1.38).
+1.70 reclined, the latter within Kim et al.'s 1.678 +- 0.090 (``TwinParams.of_version(2)``,
+whose passive knee is its muscles' passive fibres, gives 1.57 and 1.38).
 
 CLI::
 
-    myoexo pendulum [--levels 0 1 2 3] [--reflex NAME]
+    myoexo clinic pendulum [--levels 0 1 2 3] [--reflex NAME]
                     [--posture seated|reclined] [--start-deg D] [--swing-s 10]
                     [--device worn|freed] [--subject-seed N] [--out DIR]
+
+``--posture`` picks the preset (:data:`POSTURES`); every field of :class:`PendulumParams` but
+``drive`` is an option of its own name that changes it (``--hip-flexion-deg``, ...), and so is
+every field of :class:`PendulumSetup` and :class:`~myoexo.clinical.common.ExamOptions`.
 """
 
 from __future__ import annotations
@@ -73,20 +77,20 @@ import numpy as np
 
 from myoexo.clinical.common import (
     DriveParams,
-    add_common_arguments,
-    check_levels,
-    check_positive,
+    ExamOptions,
     control_substeps,
+    levels_option,
+    normalise_levels,
     print_table,
     simulate_drive,
-    subjects_from_args,
     twin_model,
     write_outputs,
 )
 from myoexo.model.exo import EXO_JOINT
-from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_fields
+from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
-from myoexo.spasticity.registry import ReflexModel, reflex_label
+from myoexo.spasticity.registry import ReflexModel, add_reflex_argument, reflex_label
 
 if TYPE_CHECKING:
     import mujoco
@@ -108,6 +112,7 @@ __all__ = [
     "SEATED",
     "PendulumParams",
     "PendulumResult",
+    "PendulumSetup",
     "add_arguments",
     "analyse_swing",
     "plot_pendulum",
@@ -140,7 +145,8 @@ _THIGH_HORIZONTAL_HIP_DEG = 90.0
 
 @dataclasses.dataclass(frozen=True)
 class PendulumParams:
-    """Parameters of the simulated pendulum test (defaults: the seated twin).
+    """Parameters of the simulated pendulum test (defaults: the seated twin; each field but
+    ``drive`` is an option of ``myoexo clinic pendulum``, on top of ``--posture``).
 
     Attributes:
         start_deg: Knee flexion the exo holds before the release, deg (20 seated: the
@@ -159,36 +165,49 @@ class PendulumParams:
         drive: The hold PD's gains and the control period.
     """
 
-    start_deg: float = 20.0
-    hip_flexion_deg: float = _THIGH_HORIZONTAL_HIP_DEG
-    hold_s: float = 1.0
-    swing_s: float = 10.0
-    rest_window_s: float = 1.0
-    min_oscillation_deg: float = 1.0
-    stop_margin_deg: float = 1.0
-    levels: tuple[int, ...] = VALID_LEVELS
+    start_deg: float = option(
+        20.0,
+        "knee flexion the exo holds before the release (default: the posture's, 20 seated, "
+        "0 reclined)",
+        low=0.0,
+        high=90.0,
+        unit="deg",
+    )
+    hip_flexion_deg: float = option(
+        _THIGH_HORIZONTAL_HIP_DEG,
+        "hip flexion of the twin; below 90 the trunk reclines, the thigh stays horizontal "
+        "(default: the posture's, 90 seated, 40 reclined)",
+        low=0.0,
+        high=90.0,
+        unit="deg",
+    )
+    hold_s: float = option(
+        1.0, "time the exo holds the knee before the release", low=0.0, above=True, unit="s"
+    )
+    swing_s: float = option(10.0, "free swing after the release", low=0.0, above=True, unit="s")
+    rest_window_s: float = option(
+        1.0, "last part of the swing whose mean is the resting angle",
+        low=0.0, above=True, unit="s",
+    )  # fmt: skip
+    min_oscillation_deg: float = option(
+        1.0, "rise of a flexion peak above the resting angle that counts as an oscillation",
+        low=0.0, above=True, unit="deg",
+    )  # fmt: skip
+    stop_margin_deg: float = option(
+        1.0, "the exo's flexion stop counts as hit this close to it",
+        low=0.0, above=True, unit="deg",
+    )  # fmt: skip
+    levels: tuple[int, ...] = levels_option()
     drive: DriveParams = dataclasses.field(default_factory=DriveParams)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", check_levels(self.levels))
-        if not (math.isfinite(self.start_deg) and 0.0 <= self.start_deg <= 90.0):
-            raise ValueError(
-                f"PendulumParams.start_deg = {self.start_deg!r} is outside [0, 90] deg "
-                "(the leg is released from extension)."
-            )
-        if not (math.isfinite(self.hip_flexion_deg) and 0.0 <= self.hip_flexion_deg <= 90.0):
-            raise ValueError(
-                f"PendulumParams.hip_flexion_deg = {self.hip_flexion_deg!r} is outside [0, 90] deg."
-            )
-        for name in ("hold_s", "swing_s", "rest_window_s"):
-            check_positive(f"PendulumParams.{name}", getattr(self, name), "s")
+        check_fields(self)
+        normalise_levels(self)
         if self.rest_window_s >= self.swing_s:
             raise ValueError(
                 f"PendulumParams.rest_window_s = {self.rest_window_s!r} must be shorter than "
-                f"swing_s = {self.swing_s!r}: accepted range (0, {self.swing_s!r}) s."
+                f"swing_s = {self.swing_s!r}"
             )
-        for name in ("min_oscillation_deg", "stop_margin_deg"):
-            check_positive(f"PendulumParams.{name}", getattr(self, name), "deg")
 
     @property
     def recline_deg(self) -> float:
@@ -204,7 +223,7 @@ RECLINED = PendulumParams(start_deg=0.0, hip_flexion_deg=40.0)
 #: Named postures of the CLI.
 POSTURES: Mapping[str, PendulumParams] = MappingProxyType({"seated": SEATED, "reclined": RECLINED})
 #: The exo's knee range with its flexion stop out of the way (``--device freed``): the exo's
-#: mass and straps stay, its motor is off during the swing, its 95 deg stop no longer caps it:
+#: mass and straps stay, its motor is off during the swing, its stop is past the swing:
 #: as close to the clinic's test without the device as the strapped twin gets.
 FREED_EXO_RANGE_DEG = (-15.0, 130.0)
 #: ``--device`` choices: the exo as worn, or with its range freed.
@@ -446,50 +465,70 @@ def plot_pendulum(result: PendulumResult) -> Figure:
 
 
 # ----------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo pendulum``."""
-    add_common_arguments(parser, SEATED.levels)
-    parser.add_argument(
-        "--posture", choices=sorted(POSTURES), default="seated",
-        help="seated (hip 90 deg, the twin as built) or reclined (hip 40 deg, thigh "
-        "horizontal, as in clinics); default: %(default)s",
-    )  # fmt: skip
-    parser.add_argument(
-        "--start-deg", type=float, default=None,
-        help="knee flexion at the release (default: the posture's, 20 seated, 0 reclined)",
-    )  # fmt: skip
-    parser.add_argument(
-        "--swing-s", type=float, default=SEATED.swing_s, help="free swing duration in s"
+@dataclasses.dataclass(frozen=True)
+class PendulumSetup:
+    """The posture and the device of ``myoexo clinic pendulum`` (each field an option)."""
+
+    posture: str = option(
+        "seated",
+        "the preset test, which the options below change (seated: hip 90 deg, the twin as "
+        "built; reclined: hip 40 deg, thigh horizontal, as in clinics)",
+        choices=sorted(POSTURES),
     )
-    parser.add_argument(
-        "--device", choices=DEVICES, default="worn",
-        help="worn: the exo as built (its 95 deg stop caps the first swing); freed: its range "
-        "freed and its motor off, the clinic's test without the device (default: %(default)s)",
-    )  # fmt: skip
+    device: str = option(
+        "worn",
+        "the exo (worn: as built, its 95 deg stop caps the first swing; freed: its range freed "
+        "and its motor off, the clinic's test without the device)",
+        choices=DEVICES,
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    def params(self, **changes: Any) -> PendulumParams:
+        """The posture's :class:`PendulumParams` (:data:`POSTURES`) with *changes*."""
+        return dataclasses.replace(POSTURES[self.posture], **changes)
+
+    def twin(self) -> TwinParams | None:
+        """The twin of the device (``None``: the default twin, the exo as built)."""
+        if self.device == "worn":
+            return None
+        from myoexo.model import TwinParams
+
+        return TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo clinic pendulum``: :class:`PendulumSetup`'s fields, the fields of
+    :class:`PendulumParams` (each given one changes the posture's preset), ``--reflex`` and
+    :class:`~myoexo.clinical.common.ExamOptions`' fields."""
+    add_options(parser, PendulumSetup)
+    add_options(parser, PendulumParams, given_only=True)
+    add_reflex_argument(parser, default=DEFAULT_REFLEX)
+    add_options(parser, ExamOptions)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the test, print the per-level table and the published values, optionally write
     CSVs and the figure."""
-    preset = POSTURES[args.posture]
-    params = dataclasses.replace(
-        preset,
-        start_deg=preset.start_deg if args.start_deg is None else args.start_deg,
-        swing_s=args.swing_s,
-        levels=tuple(args.levels),
+    setup = from_options(PendulumSetup, args)
+    given = {  # the options given (add_options(given_only=True) leaves the others unset)
+        f.name: getattr(args, f.name)
+        for f in option_fields(PendulumParams)
+        if hasattr(args, f.name)
+    }
+    params = setup.params(**{k: tuple(v) if isinstance(v, list) else v for k, v in given.items()})
+    options = from_options(ExamOptions, args, reflex=args.reflex)
+    result = run_pendulum(
+        params, reflex=options.reflex, subjects=options.subjects(params.levels), twin=setup.twin()
     )
-    twin = None
-    if args.device == "freed":
-        from myoexo.model import TwinParams
-
-        twin = TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG)
-    result = run_pendulum(params, reflex=args.reflex, subjects=subjects_from_args(args), twin=twin)
     print_table(result.table())
     print("published:")
     print(published_values().to_string(index=False))
-    if args.out is not None:
+    if options.out is not None:
         paths = write_outputs(
-            args.out, "pendulum", result.table(), result.traces, plot_pendulum(result), args.dpi
-        )
+            options.out, "pendulum", result.table(), result.traces, plot_pendulum(result),
+            options.dpi,
+        )  # fmt: skip
         print("wrote " + ", ".join(str(path) for path in paths))
     return 0

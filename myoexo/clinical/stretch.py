@@ -24,7 +24,10 @@ joint equalities, and the quadriceps act through the patella, so the torque is `
 
 CLI::
 
-    myoexo stretch-test [--levels 0 1 2 3] [--velocities 0.2 3.0] [--out DIR]
+    myoexo clinic stretch [--levels 0 1 2 3] [--velocities-rad-s 0.2 3.0] [--out DIR]
+
+Every field of :class:`StretchTestParams` is an option of its own name (``--start-deg``,
+``--kp-nm-per-rad``, ``--feedback-joint exo_knee``, ...).
 """
 
 from __future__ import annotations
@@ -39,14 +42,18 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from myoexo.clinical.common import (
+    FEEDBACK_JOINTS,
     DriveParams,
     PoseFn,
     control_substeps,
+    levels_option,
+    normalise_levels,
     resolve_twin,
     simulate_drive,
 )
 from myoexo.model.leg import KNEE_JOINT
-from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
+from myoexo.runtime.fields import add_options, check_fields, from_options, option
+from myoexo.spasticity.levels import LEVELS, SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel
 
@@ -57,6 +64,7 @@ if TYPE_CHECKING:
 __all__ = [
     "MOVING_PHASES",
     "PHASES",
+    "StretchOutput",
     "StretchTestParams",
     "StretchTestResult",
     "add_arguments",
@@ -75,7 +83,8 @@ MOVING_PHASES: tuple[str, ...] = PHASES[1:4]
 
 @dataclasses.dataclass(frozen=True)
 class StretchTestParams:
-    """Parameters of the simulated stretch test.
+    """Parameters of the simulated stretch test (each field is an option of ``myoexo clinic
+    stretch``).
 
     Attributes:
         start_deg: Knee angle at the start of the stretch, deg (flexion positive).
@@ -94,47 +103,50 @@ class StretchTestParams:
             exo hinge (``"exo_knee"``, what a real device's encoder measures).
     """
 
-    start_deg: float = 90.0
-    end_deg: float = 20.0
-    velocities_rad_s: tuple[float, ...] = (0.2, 3.0)
-    levels: tuple[int, ...] = VALID_LEVELS
-    kp_nm_per_rad: float = 400.0
-    kd_nm_s_per_rad: float = 5.0
-    accel_time_s: float = 0.05
-    hold_s: float = 0.5
-    end_hold_s: float = 0.2
-    control_period_s: float = 0.01
-    feedback_joint: str = KNEE_JOINT
+    start_deg: float = option(
+        90.0, "knee flexion at the start of the stretch", low=0.0, high=120.0, unit="deg"
+    )
+    end_deg: float = option(
+        20.0, "knee flexion at the end of the stretch", low=0.0, high=120.0, unit="deg"
+    )
+    velocities_rad_s: tuple[float, ...] = option(
+        (0.2, 3.0), "stretch speeds", low=0.0, above=True, unit="rad/s", metavar="RAD_S"
+    )
+    levels: tuple[int, ...] = levels_option()
+    kp_nm_per_rad: float = option(
+        400.0, "proportional gain of the exo's position controller",
+        low=0.0, unit="Nm/rad", metavar="GAIN",
+    )  # fmt: skip
+    kd_nm_s_per_rad: float = option(
+        5.0, "derivative gain of the exo's position controller",
+        low=0.0, unit="Nm s/rad", metavar="GAIN",
+    )  # fmt: skip
+    accel_time_s: float = option(
+        0.05, "time to reach (and to leave) the stretch speed", low=0.0, unit="s"
+    )
+    hold_s: float = option(
+        0.5, "time held at the start angle before the stretch", low=0.0, unit="s"
+    )
+    end_hold_s: float = option(
+        0.2, "time held at the end angle after the stretch", low=0.0, unit="s"
+    )
+    control_period_s: float = option(
+        0.01, "control period (the reflex stage and the PD run once per period)",
+        low=0.0, above=True, unit="s",
+    )  # fmt: skip
+    feedback_joint: str = option(
+        KNEE_JOINT, "joint whose angle the PD controls", choices=FEEDBACK_JOINTS, metavar="JOINT"
+    )
 
     def __post_init__(self) -> None:
+        check_fields(self)
+        normalise_levels(self)
+        if not self.velocities_rad_s:
+            raise ValueError("StretchTestParams.velocities_rad_s is empty: give at least one speed")
         object.__setattr__(self, "velocities_rad_s", tuple(float(v) for v in self.velocities_rad_s))
-        object.__setattr__(self, "levels", tuple(int(lv) for lv in self.levels))
-        for name in ("start_deg", "end_deg"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(
-                    f"StretchTestParams.{name} must be finite, got {getattr(self, name)!r}."
-                )
         if self.start_deg == self.end_deg:
-            raise ValueError("StretchTestParams.start_deg and end_deg must differ.")
-        if not self.velocities_rad_s or not all(
-            math.isfinite(v) and v > 0 for v in self.velocities_rad_s
-        ):
             raise ValueError(
-                "StretchTestParams.velocities_rad_s must be positive finite speeds, got "
-                f"{self.velocities_rad_s!r}."
-            )
-        unknown = [lv for lv in self.levels if lv not in LEVELS]
-        if not self.levels or unknown:
-            raise ValueError(
-                f"StretchTestParams.levels must be among {sorted(LEVELS)}, got {self.levels!r}."
-            )
-        for name in ("kp_nm_per_rad", "kd_nm_s_per_rad", "accel_time_s", "hold_s", "end_hold_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"StretchTestParams.{name} must be >= 0, got {value!r}.")
-        if not (math.isfinite(self.control_period_s) and self.control_period_s > 0):
-            raise ValueError(
-                f"StretchTestParams.control_period_s must be > 0, got {self.control_period_s!r}."
+                f"StretchTestParams.start_deg and end_deg must differ (both {self.start_deg!r})."
             )
 
     @property
@@ -423,45 +435,41 @@ def run_stretch_test(
 
 
 # ----------------------------------------------------------------------------- CLI
+@dataclasses.dataclass(frozen=True)
+class StretchOutput:
+    """Where ``myoexo clinic stretch`` writes (its ``--out`` option)."""
+
+    out: Path | None = option(
+        None,
+        "folder for stretch_summary.csv and stretch_traces.csv (default: print only)",
+        folder=True,
+        metavar="DIR",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo stretch-test``."""
-    d = StretchTestParams()
-    parser.add_argument("--levels", type=int, nargs="+", default=list(d.levels), help="levels")
-    parser.add_argument(
-        "--velocities", type=float, nargs="+", default=list(d.velocities_rad_s),
-        help="stretch speeds in rad/s (default: %(default)s)",
-    )  # fmt: skip
-    parser.add_argument("--start-deg", type=float, default=d.start_deg, help="start knee angle")
-    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="end knee angle")
-    parser.add_argument(
-        "--out", type=Path, default=None,
-        help="folder for stretch_summary.csv and stretch_traces.csv (default: print only)",
-    )  # fmt: skip
-
-
-def params_from_args(args: argparse.Namespace) -> StretchTestParams:
-    """:class:`StretchTestParams` from the parsed CLI options."""
-    return StretchTestParams(
-        start_deg=args.start_deg,
-        end_deg=args.end_deg,
-        velocities_rad_s=tuple(args.velocities),
-        levels=tuple(args.levels),
-    )
+    """Options of ``myoexo clinic stretch``: :class:`StretchTestParams`' fields and
+    :class:`StretchOutput`'s."""
+    add_options(parser, StretchTestParams)
+    add_options(parser, StretchOutput)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the stretch test, print the peak resisting torques, optionally write CSVs."""
-    result = run_stretch_test(params_from_args(args), progress=True)
+    params = from_options(StretchTestParams, args)
+    out = from_options(StretchOutput, args).out
+    result = run_stretch_test(params, progress=True)
     cols = [
         "level", "vel_rad_s", "peak_resisting_torque_nm", "mean_resisting_torque_nm",
         "peak_sc_total", "max_tracking_error_deg", "saturated_fraction",
     ]  # fmt: skip
     print(result.summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
-    if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        result.summary.to_csv(args.out / "stretch_summary.csv", index=False)
-        result.traces.to_csv(args.out / "stretch_traces.csv", index=False)
-        print(f"wrote {args.out / 'stretch_summary.csv'} and {args.out / 'stretch_traces.csv'}")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        result.summary.to_csv(out / "stretch_summary.csv", index=False)
+        result.traces.to_csv(out / "stretch_traces.csv", index=False)
+        print(f"wrote {out / 'stretch_summary.csv'} and {out / 'stretch_traces.csv'}")
     return 0

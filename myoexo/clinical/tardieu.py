@@ -45,8 +45,11 @@ reflex), as far as the posture allows without saturating the 100 Nm motor.
 
 CLI::
 
-    myoexo tardieu [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
-                   [--slow 0.2] [--fast 3.0] [--subject-seed N] [--out DIR]
+    myoexo clinic tardieu [--levels 0 1 2 3] [--reflex NAME] [--end-deg 10]
+                   [--slow-rad-s 0.2] [--fast-rad-s 3.0] [--subject-seed N] [--out DIR]
+
+Every field of :class:`TardieuParams` is an option of its own name (``--catch-threshold-nm``,
+...), and so is every field of :class:`~myoexo.clinical.common.ExamOptions`.
 """
 
 from __future__ import annotations
@@ -60,19 +63,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from myoexo.clinical.common import (
-    add_common_arguments,
-    check_extension_angles,
-    check_levels,
-    check_positive,
-    check_two_speeds,
+    ExamOptions,
+    add_exam_arguments,
     interp_on_angle,
+    levels_option,
+    normalise_levels,
     print_table,
     resolve_twin,
-    subjects_from_args,
     write_outputs,
 )
 from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
-from myoexo.spasticity.levels import VALID_LEVELS, SpasticityParams
+from myoexo.runtime.fields import check_fields, from_options, option
+from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, reflex_label
 
@@ -96,7 +98,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class TardieuParams:
-    """Parameters of the simulated Tardieu test (defaults: the seated clinical test).
+    """Parameters of the simulated Tardieu test (defaults: the seated clinical test; each
+    field is an option of ``myoexo clinic tardieu``).
 
     Attributes:
         start_deg: Knee flexion at the start, deg (90: the seated rest).
@@ -119,23 +122,44 @@ class TardieuParams:
         end_hold_s: Time held at the end after the stretch, s.
     """
 
-    start_deg: float = 90.0
-    end_deg: float = 10.0
-    slow_rad_s: float = 0.2
-    fast_rad_s: float = 3.0
-    catch_threshold_nm: float = 10.0
-    end_feel_torque_nm: float = 25.0
-    levels: tuple[int, ...] = VALID_LEVELS
-    accel_time_s: float = 0.05
-    hold_s: float = 0.5
-    end_hold_s: float = 0.2
+    start_deg: float = option(90.0, "knee flexion at the start", low=0.0, high=120.0, unit="deg")
+    end_deg: float = option(
+        10.0, "commanded knee flexion at the end", low=0.0, high=120.0, unit="deg"
+    )
+    slow_rad_s: float = option(
+        0.2, "V1, the slow stretch's speed", low=0.0, above=True, unit="rad/s", metavar="RAD_S"
+    )
+    fast_rad_s: float = option(
+        3.0, "V3, the fast stretch's speed", low=0.0, above=True, unit="rad/s", metavar="RAD_S"
+    )
+    catch_threshold_nm: float = option(
+        10.0, "excess of the fast over the slow resisting torque that marks the catch (R1)",
+        low=0.0, above=True, unit="Nm",
+    )  # fmt: skip
+    end_feel_torque_nm: float = option(
+        25.0, "resisting torque of the slow stretch that marks the end of the range (R2)",
+        low=0.0, above=True, unit="Nm",
+    )  # fmt: skip
+    levels: tuple[int, ...] = levels_option()
+    accel_time_s: float = option(
+        0.05, "time to reach (and to leave) each stretch speed", low=0.0, unit="s"
+    )
+    hold_s: float = option(0.5, "time held at the start before each stretch", low=0.0, unit="s")
+    end_hold_s: float = option(0.2, "time held at the end after each stretch", low=0.0, unit="s")
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", check_levels(self.levels))
-        check_two_speeds("TardieuParams", self.slow_rad_s, self.fast_rad_s)
-        for name in ("catch_threshold_nm", "end_feel_torque_nm"):
-            check_positive(f"TardieuParams.{name}", getattr(self, name), "Nm")
-        check_extension_angles("TardieuParams", self.start_deg, self.end_deg)
+        check_fields(self)
+        normalise_levels(self)
+        if not self.fast_rad_s > self.slow_rad_s:
+            raise ValueError(
+                f"TardieuParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
+                f"{self.slow_rad_s!r}"
+            )
+        if not self.end_deg < self.start_deg:
+            raise ValueError(
+                f"TardieuParams.end_deg = {self.end_deg!r} must be below start_deg = "
+                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)"
+            )
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one of the two stretches."""
@@ -318,27 +342,21 @@ def plot_tardieu(result: TardieuResult) -> Figure:
 
 # ----------------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo tardieu``."""
-    d = TardieuParams()
-    add_common_arguments(parser, d.levels)
-    parser.add_argument("--end-deg", type=float, default=d.end_deg, help="commanded end angle")
-    parser.add_argument("--slow", type=float, default=d.slow_rad_s, help="V1 in rad/s")
-    parser.add_argument("--fast", type=float, default=d.fast_rad_s, help="V3 in rad/s")
+    """Options of ``myoexo clinic tardieu``: :class:`TardieuParams`' fields, ``--reflex`` and
+    :class:`~myoexo.clinical.common.ExamOptions`' fields."""
+    add_exam_arguments(parser, TardieuParams)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the test, print the per-level table, optionally write CSVs and the figure."""
-    params = TardieuParams(
-        end_deg=args.end_deg,
-        slow_rad_s=args.slow,
-        fast_rad_s=args.fast,
-        levels=tuple(args.levels),
-    )
-    result = run_tardieu(params, reflex=args.reflex, subjects=subjects_from_args(args))
+    params = from_options(TardieuParams, args)
+    options = from_options(ExamOptions, args, reflex=args.reflex)
+    result = run_tardieu(params, reflex=options.reflex, subjects=options.subjects(params.levels))
     print_table(result.table())
-    if args.out is not None:
+    if options.out is not None:
         paths = write_outputs(
-            args.out, "tardieu", result.table(), result.traces, plot_tardieu(result), args.dpi
-        )
+            options.out, "tardieu", result.table(), result.traces, plot_tardieu(result),
+            options.dpi,
+        )  # fmt: skip
         print("wrote " + ", ".join(str(path) for path in paths))
     return 0

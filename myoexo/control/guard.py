@@ -18,10 +18,11 @@ the rest of the episode, it adds an integral term to the controller's command,
 ``I += -ki * error * dt`` (error in rad, knee minus target; a negative command extends),
 with conditional integration (the term stops growing while the summed command is saturated
 in the same direction) and the sum clipped to the motor's range. It reads the knee as the
-PID does (``info["measured_knee_angle_deg"]``, noisy and late on a perturbed twin, else
-``info["knee_angle_deg"]``), so it needs what the wrapped full-state policy already needs; a
+PID does, through the knee angle sensor it declares (its record's ``knee_angle_deg``, noisy
+and late on a perturbed twin), so it needs what the wrapped full-state policy already needs; a
 controller that reads only the exoskeleton's sensors gets a guard on the exo encoder
-(``feedback="exo"``, :func:`exo_guard`), the one angle it has. The encoder is not the knee:
+(``feedback="exo"``, :func:`exo_guard`; the record's ``exo_angle_deg``), the one angle it
+has, and declares no sensor beyond the device's own. The encoder is not the knee:
 the straps and cuffs give under the motor's torque, and a knee held by spastic muscles
 against 70-100 Nm stays 5-8 deg more flexed than the encoder reads, in proportion to the
 command (:func:`exo_strap_lag_deg_per_command`). An encoder guard that took the encoder's error
@@ -33,14 +34,18 @@ beyond ``engage_error_deg`` is unchanged, command for command.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from myoexo.control.pid import FEEDBACK_KEYS, sensed_angle_deg
-from myoexo.control.protocol import Controller
+from myoexo.control.pid import FEEDBACK_SENSORS, feedback_angle_deg
+from myoexo.control.protocol import Controller, declared_sensors
+from myoexo.envs.sensors import (
+    KNEE_ANGLE_SENSOR,
+    KneeAngleMeasurements,
+    Measurements,
+    device_measurements,
+)
 from myoexo.runtime.fits import read_fit
 
 
@@ -79,8 +84,8 @@ class StallGuardConfig:
     strap_lag_deg_per_command: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.feedback not in FEEDBACK_KEYS:
-            raise ValueError(f"feedback = {self.feedback!r}; accepted: {sorted(FEEDBACK_KEYS)}")
+        if self.feedback not in FEEDBACK_SENSORS:
+            raise ValueError(f"feedback = {self.feedback!r}; accepted: {sorted(FEEDBACK_SENSORS)}")
         if self.feedback != "exo" and self.strap_lag_deg_per_command != 0.0:
             raise ValueError(
                 f"strap_lag_deg_per_command = {self.strap_lag_deg_per_command!r} needs "
@@ -101,24 +106,25 @@ class StallGuardConfig:
 
 
 #: The package's fit of the straps' lag (:mod:`myoexo.runtime.fits`), written by
-#: ``myoexo strap-lag --write`` (:mod:`myoexo.studies.strap_lag`).
+#: ``myoexo twin strap-lag --write`` (:mod:`myoexo.studies.strap_lag`).
 STRAP_LAG_FIT = "strap_lag"
 
 #: The guard of a controller that reads only the exoskeleton's sensors (``guard:student_exo``),
 #: but for its strap lag (:func:`exo_guard` adds the fitted one): on the encoder, engaging at
 #: 12 deg of estimated knee error. Chosen on root seed 3 (levels 2-3, nominal; the subjects
-#: where the earlier encoder guard left ``student_exo`` more than 12 deg short, 75 at level 2
-#: and 377 at level 3 of 1000, and 92 others): engaging at 17 deg their mean error was 13.4 /
-#: 13.6 deg (worst 16.8 / 16.8), at 12 deg 11.6 / 11.1 deg (worst 16.8 / 15.0) for an RMS
-#: interaction torque of 89.3 / 93.3 Nm instead of 90.5 / 89.9; on the other subjects the two
-#: ran alike. The student stops short of the PID more often than the full-state policy does,
-#: so its guard waits for less than the 17 deg that suits ``guard:sac``.
+#: where an encoder guard without the strap lag left ``student_exo`` more than 12 deg
+#: short, 75 at level 2 and 377 at level 3 of 1000, and 92 others): engaging at 17 deg
+#: their mean error was 13.4 / 13.6 deg (worst 16.8 / 16.8), at 12 deg 11.6 / 11.1 deg
+#: (worst 16.8 / 15.0) for an RMS interaction torque of 89.3 / 93.3 Nm instead of 90.5 /
+#: 89.9; on the other subjects the two ran alike. The student stops short of the PID more
+#: often than the full-state policy does, so its guard waits for less than the 17 deg that
+#: suits ``guard:sac``.
 _EXO_GUARD_ENGAGE_DEG = 12.0
 
 
 def exo_strap_lag_deg_per_command() -> float:
     """The twin's knee lag behind the exo encoder per unit of command at rest (deg): the
-    package's fit (``myoexo strap-lag``: a line through the origin of knee minus encoder
+    package's fit (``myoexo twin strap-lag``: a line through the origin of knee minus encoder
     against constant commands held on subjects of levels 2-3 of a root of its own). On a
     perturbed twin the straps are 0.5-2x as stiff, so the lag is up to twice (or half) this.
 
@@ -190,7 +196,9 @@ class StallIntegrator:
 
 class StallGuard(StallIntegrator):
     """*controller* with the stall guard on top (see the module docstring): its
-    :class:`StallIntegrator` fed the error of the angle it reads from ``info``."""
+    :class:`StallIntegrator` fed the error of the angle it reads from its sensor record.
+    It declares its own feedback's sensors and those of *controller*, and hands
+    *controller* only the sensors *controller* declares."""
 
     def __init__(self, controller: Controller, config: StallGuardConfig | None = None) -> None:
         super().__init__(config)
@@ -201,16 +209,21 @@ class StallGuard(StallIntegrator):
         self.controller.reset(seed)
         super().reset(seed)
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+    @property
+    def sensors(self) -> frozenset[str]:
+        """The sensors of its feedback and those the wrapped controller declares."""
+        return FEEDBACK_SENSORS[self.config.feedback] | declared_sensors(self.controller)
+
+    def act(self, obs: np.ndarray, measurements: Measurements) -> np.ndarray:
         """The wrapped controller's command, plus the integral term once engaged."""
-        u = self.controller.act(obs, info)
-        try:
-            angle_deg = sensed_angle_deg(info, self.config.feedback)
-            error_rad = math.radians(angle_deg - float(info["target_angle_deg"]))
-        except KeyError as exc:
-            raise ValueError(
-                f"StallGuard.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict)"
-            ) from None
+        inner = measurements
+        if isinstance(measurements, KneeAngleMeasurements) and (
+            KNEE_ANGLE_SENSOR not in declared_sensors(self.controller)
+        ):  # the knee angle sensor is the guard's own: the controller gets the device's
+            inner = device_measurements(measurements)
+        u = self.controller.act(obs, inner)
+        angle_deg = feedback_angle_deg(measurements, self.config.feedback)
+        error_rad = math.radians(angle_deg - measurements.setpoint_deg)
         return self.correct(u, error_rad)
 
     def __repr__(self) -> str:

@@ -21,11 +21,16 @@ the muscles more slowly, so the reflex pushes back less). Sweeping ``ramp_s`` an
 ``peak_weight`` (``myoexo frontier --oracle``) traces the twin's frontier with a planner that
 knows everything.
 
-It knows the subject (its reflex parameters are in the copied stage) and the exact dynamics,
-which no real controller does; what it reaches is what the 100 Nm motor can reach on this
-twin. The paper never computed such a bound. It is slow (a few hundred rollouts per second of
-simulated time: ~15 s per 8-s episode on a quiet core, 5 s in the frontier's cheap setting,
-~40 s under load), so it is evaluated on a few subjects per level (``myoexo evaluate
+It is the one controller with privileged access: it ignores its sensor record
+(:class:`~myoexo.envs.sensors.Measurements`, it declares no sensor) and reads the true state
+from the env it was built on (its MuJoCo state, the reflex's memory, the true interaction
+torque :attr:`MyoExoKneeEnv.interaction_torque_nm
+<myoexo.envs.knee_exo.MyoExoKneeEnv.interaction_torque_nm>`). It knows the subject (its reflex
+parameters are in the copied stage) and the exact dynamics, which no real controller does;
+what it reaches is what the 100 Nm motor can reach on this twin. The paper never computed
+such a bound. It is slow (a few hundred rollouts per second of simulated time: 15-65 s of a core per
+8-s episode, quiet to loaded machine, a third of that in the frontier's cheap setting), so it is
+evaluated on a few subjects per level (``myoexo evaluate
 --controllers oracle --subjects 10``).
 
     from myoexo.control.oracle import OracleMPC
@@ -36,13 +41,13 @@ simulated time: ~15 s per 8-s episode on a quiet core, 5 s in the frontier's che
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from myoexo.envs.sensors import Measurements
 from myoexo.envs.twin import Twin
 from myoexo.spasticity.stage import SpasticityStage
 
@@ -139,12 +144,15 @@ class OracleMPC:
 
     Args:
         env: The MyoExoKnee env it controls (wrappers allowed); it reads the true state
-            from ``env.unwrapped.data`` at every plan.
+            from ``env.unwrapped`` (privileged: ``data``, the reflex stage, the interaction
+            torque) at every step.
         config: Planner settings.
         seed: Seed of the sampling (``reset(seed)`` reseeds it).
     """
 
     name = "oracle"
+    #: No sensor: its privileged access to the env replaces them.
+    sensors: frozenset[str] = frozenset()
 
     def __init__(self, env: Any, config: OracleConfig | None = None, seed: int = 0) -> None:
         self.env = env.unwrapped
@@ -252,12 +260,12 @@ class OracleMPC:
         self._step_in_plan = 0
         self.plans += 1
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
-        """The next command of the current plan (a new plan every ``replan`` steps)."""
-        del obs
-        tau = info.get("interaction_torque_nm") if self._torque_aware else None
-        if tau is not None:  # the env's own reading of the last step
-            self._peak_nm = max(self._peak_nm, float(tau))
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
+        """The next command of the current plan (a new plan every ``replan`` steps), from the
+        env's true state (the record is not read)."""
+        del obs, measurements
+        if self._torque_aware:  # the env's true interaction torque of the last step
+            self._peak_nm = max(self._peak_nm, self.env.interaction_torque_nm)
         if self._step_in_plan % self.config.replan == 0 or self._step_in_plan >= self._steps:
             self._plan_now()
         u = float(self._plan[min(self._step_in_plan, self._steps - 1)])

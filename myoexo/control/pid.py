@@ -39,32 +39,41 @@ first step of an episode (no previous sample).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from myoexo.envs.sensors import KNEE_ANGLE_SENSOR, KneeAngleMeasurements, Measurements
+
 #: Accepted anti-windup schemes.
 ANTI_WINDUP_SCHEMES: tuple[str, ...] = ("clamping", "back_calculation", "none")
 
-#: Accepted feedback signals: ``info`` key of the angle (deg). The PID reads the sensed value
-#: ``info["measured_<key>"]`` where the env gives it (with sensor noise and latency on a
-#: perturbed twin, :mod:`myoexo.envs.robustness`), else the true one.
-FEEDBACK_KEYS: dict[str, str] = {"knee": "knee_angle_deg", "exo": "exo_angle_deg"}
+#: Accepted feedback signals -> the sensors (beyond the exoskeleton's own) each needs: the
+#: human knee's angle sensor (:data:`~myoexo.envs.sensors.KNEE_ANGLE_SENSOR`) or none (the
+#: exo encoder is the device's own).
+FEEDBACK_SENSORS: dict[str, frozenset[str]] = {
+    "knee": frozenset({KNEE_ANGLE_SENSOR}),
+    "exo": frozenset(),
+}
 
 
-def sensed_angle_deg(info: Mapping[str, Any], feedback: str) -> float:
-    """The *feedback* angle (``"knee"`` or ``"exo"``, deg) a controller reads from the env's
-    ``info``: the sensed one (``measured_*``, noisy and late on a perturbed twin) when the
-    env gives one, else the true one.
+def feedback_angle_deg(measurements: Measurements, feedback: str) -> float:
+    """The *feedback* angle (deg) in a sensor record: the knee angle sensor's reading
+    (``"knee"``) or the exo encoder's (``"exo"``), as the sensors report them (noisy and late
+    on a perturbed twin, :mod:`myoexo.envs.robustness`).
 
     Raises:
-        KeyError: ``info`` holds neither.
+        ValueError: ``"knee"`` and the record has no knee angle sensor.
     """
-    key = FEEDBACK_KEYS[feedback]
-    measured = info.get("measured_" + key)
-    return float(info[key] if measured is None else measured)
+    if feedback == "exo":
+        return measurements.exo_angle_deg
+    if not isinstance(measurements, KneeAngleMeasurements):
+        raise ValueError(
+            f"knee feedback needs the knee angle sensor ({KNEE_ANGLE_SENSOR!r}); the record "
+            f"holds the exoskeleton's sensors only ({type(measurements).__name__})"
+        )
+    return measurements.knee_angle_deg
 
 
 @dataclass(frozen=True)
@@ -99,9 +108,9 @@ class PIDConfig:
         tracking_time_s: Back-calculation tracking time ``Tt`` (s); ``None`` = ``sqrt(Ti Td)``
             (``Ti`` alone when Kd = 0). Ignored by the other schemes.
         output_limit: Saturation of the command (the env's action bound, 1 = 100 Nm).
-        feedback: ``"knee"`` (human knee angle, what the simulation knows; the paper's
-            reading) or ``"exo"`` (the exo joint encoder, what a real device measures; it
-            differs from the human knee by the strap misalignment).
+        feedback: ``"knee"`` (the human knee angle, read by a knee angle sensor the PID
+            declares; the paper's reading) or ``"exo"`` (the exo joint encoder, what a real
+            device measures; it differs from the human knee by the strap misalignment).
         ramp_s: Duration (s) of the setpoint's linear ramp from the first measured angle to
             the target (0: the paper's step).
     """
@@ -121,9 +130,9 @@ class PIDConfig:
             raise ValueError(
                 f"PIDConfig.anti_windup = {self.anti_windup!r}; accepted: {ANTI_WINDUP_SCHEMES}"
             )
-        if self.feedback not in FEEDBACK_KEYS:
+        if self.feedback not in FEEDBACK_SENSORS:
             raise ValueError(
-                f"PIDConfig.feedback = {self.feedback!r}; accepted: {tuple(FEEDBACK_KEYS)}"
+                f"PIDConfig.feedback = {self.feedback!r}; accepted: {tuple(FEEDBACK_SENSORS)}"
             )
         if not (math.isfinite(self.output_limit) and 0.0 < self.output_limit <= 1.0):
             raise ValueError(
@@ -174,7 +183,7 @@ class PID:
         >>> pid = PID.from_env(env)
         >>> pid.reset()
         >>> obs, info = env.reset(seed=0)
-        >>> obs, *_, info = env.step(pid.act(obs, info))
+        >>> obs, *_, info = env.step(pid.act(obs, read_sensors(info, pid.sensors)))
     """
 
     def __init__(self, config: PIDConfig | None = None, dt_s: float = 0.01) -> None:
@@ -228,17 +237,17 @@ class PID:
         self.last_terms = {"p": p, "i": integral, "d": d, "unsaturated": unsaturated}
         return u
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
-        """Command from ``info["target_angle_deg"]`` and the feedback angle (deg) of ``info``."""
+    @property
+    def sensors(self) -> frozenset[str]:
+        """The sensors it declares: the knee angle sensor with ``feedback="knee"``, none
+        (the exo encoder is the device's own) with ``"exo"``."""
+        return FEEDBACK_SENSORS[self.config.feedback]
+
+    def act(self, obs: np.ndarray, measurements: Measurements) -> np.ndarray:
+        """Command from the record's setpoint and feedback angle (deg)."""
         del obs
-        try:
-            target_deg = float(info["target_angle_deg"])
-            measured_deg = sensed_angle_deg(info, self.config.feedback)
-        except KeyError as exc:
-            raise ValueError(
-                f"PID.act needs info[{exc.args[0]!r}] (the MyoExoKnee info dict); got keys "
-                f"{sorted(info)}"
-            ) from None
+        target_deg = measurements.setpoint_deg
+        measured_deg = feedback_angle_deg(measurements, self.config.feedback)
         setpoint_rad = self.setpoint_rad(math.radians(target_deg), math.radians(measured_deg))
         u = self.update(setpoint_rad, math.radians(measured_deg))
         return np.array([u], dtype=np.float32)

@@ -6,18 +6,20 @@
   ONNX session wrapper, a hand-written law).
 * :func:`as_controller`: picks the right one.
 
-All of them return a float32 array of shape ``(1,)`` clipped to the action bounds [-1, 1];
+All of them act on the observation alone (the sensor record is not read; they declare no
+sensors) and return a float32 array of shape ``(1,)`` clipped to the action bounds [-1, 1];
 a NaN / non-finite action raises ``ValueError`` naming the controller.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from myoexo.control.protocol import Controller
+from myoexo.envs.sensors import Measurements
 
 #: Bounds of the normalized exo command.
 ACTION_LOW, ACTION_HIGH = -1.0, 1.0
@@ -50,9 +52,9 @@ class CallableController:
         """Stateless: nothing to clear."""
         del seed
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """``fn(obs)``, clipped to [-1, 1]."""
-        del info
+        del measurements
         return _to_action(self.fn(obs), self.name)
 
 
@@ -92,9 +94,9 @@ class SB3Controller:
             if callable(set_seed):
                 set_seed(int(seed))
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """``model.predict(obs)``, clipped to [-1, 1]."""
-        del info
+        del measurements
         if self.obs_normalizer is not None:
             obs = self.obs_normalizer.normalize_obs(obs)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
@@ -112,5 +114,6 @@ def as_controller(obj: Any, name: str | None = None) -> Controller:
         return CallableController(obj, name=name)
     raise ValueError(
         f"cannot use {type(obj).__name__} as a controller: expected an object with "
-        "reset(seed) and act(obs, info), an SB3 model with predict(), or a callable(obs)"
+        "reset(seed) and act(obs, measurements), an SB3 model with predict(), or a "
+        "callable(obs)"
     )

@@ -3,8 +3,10 @@
 Everything that runs episodes (the evaluation, the Ziegler-Nichols tuner, the training's
 periodic evaluation, the renderer) goes through :func:`rollout`, so an episode means the same
 thing everywhere: ``env.reset(seed)`` and ``controller.reset(seed)`` with the same seed, then
-``controller.act(obs, info)`` -> ``env.step`` until the env terminates or truncates it (its
-episode length, or a physics blow-up flagged in ``info["unstable"]``).
+``controller.act(obs, measurements)`` -> ``env.step`` until the env terminates or truncates it
+(its episode length, or a physics blow-up flagged in ``info["unstable"]``). The controller
+gets the observation and the record of the sensors it declares
+(:func:`~myoexo.envs.sensors.read_sensors`), never ``info``.
 
     from myoexo.control import PID, rollout
     from myoexo.envs import make_env
@@ -23,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.control.protocol import Controller
+from myoexo.control.protocol import Controller, declared_sensors
+from myoexo.envs.sensors import read_sensors
 
 #: Called at the reset (step 0) and after every step with ``(step, info)``.
 StepHook = Callable[[int, Mapping[str, Any]], None]
@@ -67,7 +70,8 @@ def rollout(
     """Run one episode of ``controller`` on ``env`` from ``env.reset(seed=seed)``.
 
     Args:
-        env: A MyoExoKnee env (wrappers allowed) or any env whose ``info`` has the channels.
+        env: A MyoExoKnee env (wrappers allowed) or any env whose ``info`` has the channels
+            and the sensor readings (:func:`~myoexo.envs.sensors.read_sensors`).
         controller: Any :class:`~myoexo.control.protocol.Controller`; reset with ``seed``.
         seed: Episode seed.
         channels: ``info`` keys to record (default: every scalar key of the reset's info).
@@ -75,10 +79,12 @@ def rollout(
         on_step: Called with ``(step, info)`` at the reset (step 0) and after every step.
 
     Raises:
-        ValueError: ``until_s`` not a positive time; a channel missing from ``info``.
+        ValueError: ``until_s`` not a positive time; a channel missing from ``info``; the
+            controller declares an unknown sensor.
     """
     if until_s is not None and not (math.isfinite(until_s) and until_s > 0.0):
         raise ValueError(f"until_s = {until_s!r} must be a positive time in s or None")
+    sensors = declared_sensors(controller)
     base = env.unwrapped
     max_steps = int(getattr(base, "episode_steps", 0)) or 10_000
     obs, info = env.reset(seed=int(seed))
@@ -93,7 +99,8 @@ def rollout(
         on_step(0, info)
     n, unstable = 0, False
     while n < max_steps:
-        obs, _, terminated, truncated, info = env.step(controller.act(obs, info))
+        action = controller.act(obs, read_sensors(info, sensors))
+        obs, _, terminated, truncated, info = env.step(action)
         n += 1
         buf[n] = [info[k] for k in keys]
         unstable = unstable or bool(info.get("unstable", False))

@@ -27,21 +27,25 @@ spec                               controller
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
                                    and the torque-aware ``interaction_weight``,
-                                   ``peak_weight``, ``ramp_s``
+                                   ``peak_weight``, ``ramp_s``; about 65 s of a core per
+                                   episode (2 subjects x 4 levels: ~4.5 min on 2 cores)
 ``guard:SPEC``                      any controller above with the stall guard on top: integral
                                    action once the knee stalls far from the target
                                    (:mod:`myoexo.control.guard`), e.g. ``guard:sac``
-``path/to/actor.npz``              an exported numpy actor (``myoexo export-policy``), with
+``path/to/actor.npz``              an exported numpy actor (``myoexo policy export``), with
                                    its ``.json`` beside it
 ``path/to/model.zip``              a stable-baselines3 SAC model (``SAC.load``); prefix
-                                   ``td3:``, ``ppo:``, ``ddpg:``, ``a2c:``, ``tqc:``,
-                                   ``crossq:``, ``sbx_sac:``, ... (any alias of
+                                   ``ppo:``, ``sbx_sac:``, ``sbx_tqc:``, ``sbx_crossq:``
+                                   (any alias of
                                    :data:`~myoexo.policies.algorithms.ALGORITHMS`)
 =================================  ==========================================================
 
 Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
 ``controller``) is the spec itself for ``pid``/``sac``/``oracle``, the file stem for a model
-file. A controller may need its own env (:func:`spec_env_kwargs`: the observation preset a
+file. Controllers of one *seed group* (the checkpoints ``myoexo policy seeds`` selected in one
+folder, a distillation's seed copies: :attr:`ControllerSpec.seed_group`, table column
+``seed_group``) are one controller of the tables, over seeds and subjects. A controller may
+need its own env (:func:`spec_env_kwargs`: the observation preset a
 policy was trained on).
 """
 
@@ -102,6 +106,11 @@ class ControllerSpec:
             :class:`~myoexo.control.oracle.OracleConfig` fields (``oracle``).
         guard: The controller runs with the stall guard on top (``guard:SPEC``,
             :class:`~myoexo.control.guard.StallGuard`); ``kind`` and the rest describe SPEC.
+        seed_group: The seed group the controller is one member of: the folder's name for
+            a checkpoint of a ``myoexo policy seeds`` folder
+            (``<seeds>/seed_<N>/checkpoints/<step>/model.zip``), the ``seed_group`` an
+            exported actor's metadata records (a distillation seed's copy), ``guard:<group>``
+            for a guarded member; ``None`` for a controller of its own.
     """
 
     kind: str
@@ -111,6 +120,7 @@ class ControllerSpec:
     algorithm: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
     guard: bool = False
+    seed_group: str | None = None
 
     @property
     def slug(self) -> str:
@@ -133,7 +143,10 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         inner = parse_controller_spec(tail)
         if inner.guard:
             raise ValueError(f"controller {text!r} guards a guarded controller")
-        return dataclasses.replace(inner, label=f"guard:{inner.label}", text=text, guard=True)
+        group = f"guard:{inner.seed_group}" if inner.seed_group else None
+        return dataclasses.replace(
+            inner, label=f"guard:{inner.label}", text=text, guard=True, seed_group=group
+        )
     if head.lower() == "pid":
         return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
     from myoexo.policies import SHIPPED_POLICIES
@@ -152,7 +165,13 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         algorithm, path_text = head.lower(), tail
     path = Path(path_text).expanduser()
     if path.suffix == ".npz" and path.with_suffix(".json").is_file():  # an exported actor
-        return ControllerSpec(kind="actor", label=path.stem, text=text, path=str(path.resolve()))
+        return ControllerSpec(
+            kind="actor",
+            label=path.stem,
+            text=text,
+            path=str(path.resolve()),
+            seed_group=_actor_seed_group(path),
+        )
     if path.suffix != ".zip":
         raise ValueError(
             f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'student_exo', "
@@ -161,52 +180,74 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         )
     if not path.is_file():
         raise ValueError(f"controller {text!r}: policy file {str(path)!r} does not exist")
+    seeds = _seeds_folder(path)
     return ControllerSpec(
         kind="sb3",
         label=_model_label(path),
         text=text,
         path=str(path.resolve()),
         algorithm=algorithm,
+        seed_group=seeds.name if seeds is not None else None,
     )
 
 
-#: A ``myoexo seeds`` run folder's name, and the label of one of its checkpoints.
-_SEED_RUN = re.compile(r"seed_\d+")
-_SEED_CHECKPOINT_LABEL = re.compile(r"(?P<seeds>.+)-seed_\d+-(?:step|round)_\d+")
+def _seeds_folder(path: Path) -> Path | None:
+    """The ``myoexo policy seeds`` folder of a checkpoint's model file
+    (``<seeds>/seed_<N>/checkpoints/<step>/model.zip``), as *path* names it; ``None`` for
+    any other file."""
+    if path.name != MODEL_FILE or path.parent.parent.name != CHECKPOINTS_DIR:
+        return None
+    run = path.parent.parent.parent
+    prefix, _, number = run.name.partition("_")
+    return run.parent if prefix == "seed" and number.isdigit() else None
+
+
+def seeds_folder_of_spec(text: str) -> str | None:
+    """The ``myoexo policy seeds`` folder, as the spec writes it, of a spec naming one of its
+    checkpoints (``[ALGORITHM:]<seeds>/seed_<N>/checkpoints/<step>/model.zip``, what
+    :func:`seeds_controllers` gives); ``None`` for any other spec. Reads no file."""
+    head, _, tail = text.strip().partition(":")
+    if tail and head.isidentifier():  # a prefix: an algorithm's, or guard:, pid:, oracle:
+        if head.lower() not in ALGORITHMS:
+            return None
+        text = tail
+    folder = _seeds_folder(Path(text))
+    return folder.as_posix() if folder is not None else None
 
 
 def _model_label(path: Path) -> str:
     """A model file's label: its stem, or ``<run>-<checkpoint>`` for the ``model.zip`` of a
-    ``myoexo train`` checkpoint (``<run>/checkpoints/<step>/model.zip``), prefixed with the
-    seeds folder for a ``myoexo seeds`` run (``<seeds>-seed_<N>-<checkpoint>``)."""
+    ``myoexo policy train`` checkpoint (``<run>/checkpoints/<step>/model.zip``), prefixed
+    with the seeds folder for a ``myoexo policy seeds`` run (``<seeds>-seed_<N>-<step>``)."""
     if path.name == MODEL_FILE and path.parent.parent.name == CHECKPOINTS_DIR:
         run = path.parent.parent.parent
         label = f"{run.name}-{path.parent.name}"
-        return f"{run.parent.name}-{label}" if _SEED_RUN.fullmatch(run.name) else label
+        return f"{run.parent.name}-{label}" if _seeds_folder(path) is not None else label
     return path.stem
 
 
-def seeds_folder_of(label: str) -> str | None:
-    """The seeds folder of a checkpoint label written by :func:`_model_label`
-    (``<seeds>-seed_<N>-step_<k>``) or of a distillation seed's student
-    (``<seeds>-seed_<N>-round_<r>``, :func:`myoexo.studies.distill.seed_copy_stem`), or
-    ``None`` for any other label."""
-    m = _SEED_CHECKPOINT_LABEL.fullmatch(label)
-    return m.group("seeds") if m else None
+def _actor_seed_group(path: Path) -> str | None:
+    """The ``seed_group`` an exported actor's metadata (``.json`` beside its ``.npz``)
+    records, or ``None``."""
+    try:
+        group = json.loads(path.with_suffix(".json").read_text()).get("seed_group")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return str(group) if group else None
 
 
 def seeds_controllers(seeds_dir: str | Path) -> list[str]:
-    """The checkpoints ``myoexo seeds aggregate`` selected in *seeds_dir*, as controller
+    """The checkpoints ``myoexo policy seeds aggregate`` selected in *seeds_dir*, as controller
     specs (``<algorithm>:<checkpoint>/model.zip``, the algorithm from each checkpoint's
     state), one per seed in seed order: evaluated together they are one controller of the
     tables, over seeds and subjects (their labels share the folder's name).
 
     Raises:
-        ValueError: *seeds_dir* has no aggregate (run ``myoexo seeds aggregate``).
+        ValueError: *seeds_dir* has no aggregate (run ``myoexo policy seeds aggregate``).
     """
     path = Path(seeds_dir) / AGGREGATE_FILE
     if not path.is_file():
-        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
+        raise ValueError(f"{str(path)!r} does not exist: run `myoexo policy seeds aggregate` first")
     chosen = json.loads(path.read_text())["selected_checkpoints"]
     specs = []
     for seed in sorted(chosen, key=int):
@@ -286,7 +327,7 @@ def load_obs_normalizer(model_path: str) -> Any:
     """The ``VecNormalize`` statistics saved beside an SB3 model file (``None`` if none).
 
     A model trained with observation normalization (the ``cpu`` preset) must see the same
-    normalization at evaluation; ``myoexo train`` checkpoints keep it in
+    normalization at evaluation; ``myoexo policy train`` checkpoints keep it in
     ``vecnormalize.pkl`` next to ``model.zip``.
     """
     import pickle

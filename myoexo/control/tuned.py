@@ -4,10 +4,10 @@ The paper's gains (Kp = 7, Ki = 40, Kd = 0.05) were tuned on the human knee, rea
 A device reads its own encoder, behind the compliant straps, and a perturbed twin reads its
 sensors 10 ms late; running the paper's gains there compares a controller with a PID tuned
 for another plant. Each entry is the classic Ziegler-Nichols table applied to the ultimate
-gain and period that ``myoexo tune-pid`` measured on the twin (level 1, nominal subject, as
+gain and period that ``myoexo twin tune-pid`` measured on the twin (level 1, nominal subject, as
 the paper tuned), with that setting's feedback and latency.
 
-The entries are data, not code: ``myoexo tune-pid ... --write NAME`` writes the tuner's
+The entries are data, not code: ``myoexo twin tune-pid ... --write NAME`` writes the tuner's
 record with its provenance (the command, the twin version, the package versions, the date)
 to ``myoexo/assets/fits/pid_tuned_NAME.json``, and :data:`TUNED_PIDS` reads every such file.
 

@@ -1,4 +1,4 @@
-"""Ziegler-Nichols tuning of the knee PID on the digital twin (``myoexo tune-pid``).
+"""Ziegler-Nichols tuning of the knee PID on the digital twin (``myoexo twin tune-pid``).
 
 The paper tuned its PID "to a spasticity level of 1 following the Ziegler-Nichols method"
 and reports Kp = 7, Ki = 40, Kd = 0.05 (docs/reference.md section 4). This module runs the
@@ -41,6 +41,15 @@ import numpy as np
 
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.rollout import rollout
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    flag_of,
+    from_options,
+    option,
+    option_fields,
+)
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Classic Ziegler-Nichols closed-loop PID table: Kp = a Ku, Ti = Tu / b, Td = Tu / c.
@@ -51,7 +60,9 @@ ZN_TD_FRACTION = 0.125
 
 @dataclass(frozen=True)
 class ZieglerNicholsSettings:
-    """Settings of the ultimate-gain search.
+    """Settings of the ultimate-gain search (``level``, ``nominal_subject``, ``seed``,
+    ``feedback``, ``latency_s``, ``target_angle_deg`` and ``rel_tol`` are options of
+    ``myoexo twin tune-pid``).
 
     Attributes:
         level: Spasticity level of the tuning (paper: 1).
@@ -76,38 +87,60 @@ class ZieglerNicholsSettings:
         sustain_ratio: Minimum ratio of last to first half-cycle amplitude.
     """
 
-    level: int = 1
-    nominal_subject: bool = True
-    seed: int = 0
-    feedback: str = "knee"
-    latency_s: float = 0.0
-    target_angle_deg: float | None = None
-    kp_start: float = 1.0
-    kp_max: float = 2000.0
-    rel_tol: float = 0.03
-    analysis_start_s: float = 3.0
-    episode_duration_s: float | None = None
-    min_half_cycles: int = 6
-    min_amplitude_deg: float = 0.05
-    sustain_ratio: float = 0.9
+    level: int = option(1, "spasticity level of the tuning (paper: 1)", choices=VALID_LEVELS)
+    nominal_subject: bool = option(
+        True,
+        "tune on the level's nominal Table I subject (--no-nominal-subject: an individual "
+        "subject drawn from --seed)",
+    )
+    seed: int = option(0, "episode seed (the start angle; the subject if not nominal)", low=0)
+    feedback: str = option("knee", "feedback signal of the P controller", choices=("knee", "exo"))
+    latency_s: float = option(
+        0.0,
+        "sensor latency of the tuning twin, a whole number of 10-ms control periods (0: exact "
+        "sensors)",
+        low=0.0,
+        high=1.0,
+        unit="s",
+    )
+    target_angle_deg: float | None = option(
+        None, "target knee angle of the test (default: the task's, 7 deg)", unit="deg"
+    )
+    kp_start: float = option(1.0, "first gain tried, 1/rad", low=0.0, above=True, flag="")
+    kp_max: float = option(2000.0, "give up above this gain, 1/rad", low=0.0, above=True, flag="")
+    rel_tol: float = option(
+        0.03, "bisection tolerance (stop when hi / lo - 1 < it)", low=0.0, above=True, high=1.0
+    )
+    analysis_start_s: float = option(
+        3.0, "start of the analysis window", low=0.0, unit="s", flag=""
+    )
+    episode_duration_s: float | None = option(
+        None, "episode length (default: the env's)", unit="s", flag=""
+    )
+    min_half_cycles: int = option(
+        6, "minimum zero crossings in the window for an oscillation", low=2, flag=""
+    )
+    min_amplitude_deg: float = option(
+        0.05, "minimum amplitude of the last half cycle", low=0.0, unit="deg", flag=""
+    )
+    sustain_ratio: float = option(
+        0.9,
+        "minimum ratio of last to first half-cycle amplitude",
+        low=0.0,
+        above=True,
+        high=1.5,
+        flag="",
+    )
 
     def __post_init__(self) -> None:
-        if self.level not in VALID_LEVELS:
-            raise ValueError(f"level = {self.level!r}; accepted: {VALID_LEVELS}")
-        if not (math.isfinite(self.latency_s) and 0.0 <= self.latency_s <= 1.0):
-            raise ValueError(
-                f"latency_s = {self.latency_s!r} is outside the accepted range [0, 1] s"
-            )
-        if not 0.0 < self.kp_start < self.kp_max:
-            raise ValueError(f"need 0 < kp_start ({self.kp_start}) < kp_max ({self.kp_max})")
-        if not 0.0 < self.rel_tol < 1.0:
-            raise ValueError(f"rel_tol = {self.rel_tol} must be in (0, 1)")
-        if not 0.0 < self.sustain_ratio <= 1.5:
-            raise ValueError(f"sustain_ratio = {self.sustain_ratio} must be in (0, 1.5]")
-        if self.min_half_cycles < 2:
-            raise ValueError(f"min_half_cycles = {self.min_half_cycles} must be >= 2")
-        if self.analysis_start_s < 0.0:
-            raise ValueError(f"analysis_start_s = {self.analysis_start_s} must be >= 0")
+        from myoexo.envs.config import TaskParams
+
+        check_fields(self)
+        if not self.kp_start < self.kp_max:
+            raise ValueError(f"need kp_start ({self.kp_start}) < kp_max ({self.kp_max})")
+        task = {"target_angle_deg": self.target_angle_deg}
+        task["episode_duration_s"] = self.episode_duration_s
+        TaskParams(**{k: v for k, v in task.items() if v is not None})  # the task's ranges
 
 
 @dataclass(frozen=True)
@@ -222,22 +255,22 @@ class ZieglerNicholsResult:
 def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
     """The level's env; with ``nominal_subject`` its reflex keeps Table I's values; with a
     ``latency_s`` its sensors are that late (and exact)."""
-    from myoexo.envs import TaskParams, make_env
+    from myoexo.envs import make_env
     from myoexo.envs.robustness import RobustnessParams
 
-    task = TaskParams()
-    if settings.episode_duration_s is not None:
-        task = dataclasses.replace(task, episode_duration_s=settings.episode_duration_s)
-    if settings.target_angle_deg is not None:
-        task = dataclasses.replace(task, target_angle_deg=settings.target_angle_deg)
+    task = {
+        name: value
+        for name in ("episode_duration_s", "target_angle_deg")
+        if (value := getattr(settings, name)) is not None
+    }
     robustness = None
     if settings.latency_s > 0.0:
         robustness = dataclasses.replace(RobustnessParams.nominal(), latency_s=settings.latency_s)
     return make_env(
         settings.level,
-        task=task,
         subject_noise=not settings.nominal_subject,
         robustness=robustness,
+        **task,
     )
 
 
@@ -366,101 +399,94 @@ def format_result(result: ZieglerNicholsResult) -> str:
 
 
 # ----------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo tune-pid``."""
-    d = ZieglerNicholsSettings()
-    parser.add_argument("--level", type=int, default=d.level, help="spasticity level (0-3)")
-    parser.add_argument(
-        "--individual-subject",
-        action="store_true",
-        help="tune on an individual subject drawn from --seed instead of the nominal one",
+@dataclass(frozen=True)
+class TuningOutput:
+    """What ``myoexo twin tune-pid`` writes and prints (options of the command)."""
+
+    out: Path | None = option(
+        None, "write the result as JSON to this file (default: none)", metavar="FILE"
     )
-    parser.add_argument("--seed", type=int, default=d.seed, help="episode seed")
-    parser.add_argument("--feedback", choices=("knee", "exo"), default=d.feedback)
-    parser.add_argument(
-        "--latency-ms",
-        type=float,
-        default=1000 * d.latency_s,
-        help="sensor latency of the tuning twin (ms, a multiple of the 10-ms control period; "
-        "default 0: exact sensors)",
-    )
-    parser.add_argument(
-        "--target", type=float, default=None, help="target knee angle of the test (deg)"
-    )
-    parser.add_argument("--rel-tol", type=float, default=d.rel_tol, help="bisection tolerance")
-    parser.add_argument("--out", type=Path, default=None, help="write the result as JSON here")
-    parser.add_argument(
-        "--write",
+    write: str | None = option(
+        None,
+        "write the result with its provenance as the package's tuned PID NAME "
+        "(myoexo/assets/fits/pid_tuned_NAME.json), which pid:tuned=NAME then runs (default: "
+        "none)",
         metavar="NAME",
-        default=None,
-        help="write the result with its provenance as the package's tuned PID NAME "
-        "(myoexo/assets/fits/pid_tuned_NAME.json), which pid:tuned=NAME then runs",
     )
-    parser.add_argument("--quiet", action="store_true", help="no line per trial")
+    quiet: bool = option(False, "no line per trial")
+
+    def __post_init__(self) -> None:
+        from myoexo.runtime.fits import fit_path
+
+        check_fields(self)
+        if self.write is not None:
+            try:
+                fit_path(self.write)
+            except ValueError:
+                raise FieldError(
+                    type(self).__name__, "write", self.write, "must be a word (letters, digits, _)"
+                ) from None
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo twin tune-pid``: the options of :class:`ZieglerNicholsSettings`
+    and :class:`TuningOutput`."""
+    add_options(parser, ZieglerNicholsSettings)
+    add_options(parser, TuningOutput)
 
 
 def run(args: argparse.Namespace) -> int:
-    """``myoexo tune-pid``: print Ku, Tu, the table's gains and the paper's."""
+    """``myoexo twin tune-pid``: print Ku, Tu, the table's gains and the paper's."""
     import sys
 
+    settings = from_options(ZieglerNicholsSettings, args)
+    output = from_options(TuningOutput, args)
     try:
-        settings = ZieglerNicholsSettings(
-            level=args.level,
-            nominal_subject=not args.individual_subject,
-            seed=args.seed,
-            feedback=args.feedback,
-            latency_s=args.latency_ms / 1000.0,
-            target_angle_deg=args.target,
-            rel_tol=args.rel_tol,
-        )
-        result = tune(settings, log=None if args.quiet else print)
+        result = tune(settings, log=None if output.quiet else print)
     except (ValueError, RuntimeError) as exc:
-        print(f"myoexo tune-pid: error: {exc}", file=sys.stderr)
+        print(f"myoexo twin tune-pid: error: {exc}", file=sys.stderr)
         return 2
     print(format_result(result))
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result.to_dict(), indent=2))
-        print(f"written: {args.out}")
-    if args.write is not None:
+    if output.out is not None:
+        output.out.parent.mkdir(parents=True, exist_ok=True)
+        output.out.write_text(json.dumps(result.to_dict(), indent=2))
+        print(f"written: {output.out}")
+    if output.write is not None:
         from myoexo.control.tuned import write_tuned_pid
 
         try:
-            path = write_tuned_pid(args.write, result.to_dict(), _provenance(args))
+            path = write_tuned_pid(
+                output.write, result.to_dict(), _provenance(settings, output.write)
+            )
         except ValueError as exc:
-            print(f"myoexo tune-pid: error: {exc}", file=sys.stderr)
+            print(f"myoexo twin tune-pid: error: {exc}", file=sys.stderr)
             return 2
         print(f"written: {path}")
     return 0
 
 
-def _provenance(args: argparse.Namespace) -> dict[str, Any]:
-    """What a ``--write`` file records of how it was made (:func:`myoexo.runtime.fits
-    .provenance`): the command (its options as given, ``--out`` and ``--quiet`` left out),
-    the subject, the twin version, the package versions and the date."""
+def _provenance(settings: ZieglerNicholsSettings, name: str) -> dict[str, Any]:
+    """What a ``--write NAME`` file records of how it was made (:func:`myoexo.runtime.fits
+    .provenance`): the command (the options that differ from their defaults, ``--out`` and
+    ``--quiet`` left out), the subject, the twin version, the package versions and the date."""
     from myoexo.model import TWIN_VERSION
     from myoexo.runtime.fits import provenance
 
-    d = ZieglerNicholsSettings()
-    parts = ["myoexo tune-pid"]
-    if args.level != d.level:
-        parts.append(f"--level {args.level}")
-    if args.individual_subject:
-        parts.append("--individual-subject")
-    if args.seed != d.seed:
-        parts.append(f"--seed {args.seed}")
-    if args.feedback != d.feedback:
-        parts.append(f"--feedback {args.feedback}")
-    if args.latency_ms:
-        parts.append(f"--latency-ms {args.latency_ms:g}")
-    if args.target is not None:
-        parts.append(f"--target {args.target:g}")
-    if args.rel_tol != d.rel_tol:
-        parts.append(f"--rel-tol {args.rel_tol:g}")
-    parts.append(f"--write {args.write}")
+    default = ZieglerNicholsSettings()
+    parts = ["myoexo twin tune-pid"]
+    for f in option_fields(ZieglerNicholsSettings):
+        value = getattr(settings, f.name)
+        if value == getattr(default, f.name):
+            continue
+        flag = flag_of(f)
+        if isinstance(value, bool):
+            parts.append(flag if value else f"--no-{flag[2:]}")
+        else:
+            parts.append(f"{flag} {value:g}" if isinstance(value, float) else f"{flag} {value}")
+    parts.append(f"--write {name}")
     subject = (
-        f"an individual subject of level {args.level}, seed {args.seed}"
-        if args.individual_subject
-        else f"the nominal (Table I) subject of level {args.level}"
+        f"the nominal (Table I) subject of level {settings.level}"
+        if settings.nominal_subject
+        else f"an individual subject of level {settings.level}, seed {settings.seed}"
     )
     return provenance(" ".join(parts), TWIN_VERSION, subject=subject)

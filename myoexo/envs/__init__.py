@@ -8,6 +8,7 @@ twin in :mod:`~myoexo.envs.robustness`.
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, RewardParams, TaskParams
 from myoexo.envs.registration import ENV_LEVELS, RANDOM_ENV_ID, env_id, make_env, register_envs
+from myoexo.runtime.lazy import lazy_exports
 
 __all__ = [
     "DEFAULT_REWARD_WEIGHTS",
@@ -21,14 +22,8 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    # The env class imports MyoSuite's env base: load it only when asked for.
-    if name == "MyoExoKneeEnv":
-        from myoexo.envs.knee_exo import MyoExoKneeEnv
-
-        return MyoExoKneeEnv
-    if name in ("DEFAULT_OBS_KEYS", "OBS_PRESETS"):
-        from myoexo.envs import observation
-
-        return getattr(observation, name)
-    raise AttributeError(name)
+# the env class imports MyoSuite's env base: loaded when first read
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {"MyoExoKneeEnv": "knee_exo", "DEFAULT_OBS_KEYS": "observation", "OBS_PRESETS": "observation"},
+)

@@ -2,14 +2,17 @@
 
 Everything the task needs is a frozen dataclass with the paper's values (or, where the paper
 is silent, the project's documented choice) as defaults. The env constructor takes them as
-keyword arguments, so ``gymnasium.make("MyoExoKnee-v1", task=TaskParams(target_angle_deg=10))``
+keyword arguments, one per field, so ``gymnasium.make("MyoExoKnee-v1", target_angle_deg=10)``
 changes the task without touching code.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
+
+from myoexo.runtime.fields import check_fields, option
 
 #: Weighted reward terms and their default weights (MyoSuite ``weighted_reward_keys``
 #: convention: the dense reward is the weighted sum of these keys of ``rwd_dict``; penalties
@@ -40,23 +43,28 @@ class TaskParams:
             assignment. Must be a whole multiple of the physics timestep.
     """
 
-    start_angle_deg: float = 90.0
-    start_angle_noise_deg: float = 2.0
-    target_angle_deg: float = 7.0
-    episode_duration_s: float = 8.0
-    control_period_s: float = 0.01
+    start_angle_deg: float = option(90.0, "initial knee flexion", low=-15.0, high=95.0, unit="deg")
+    start_angle_noise_deg: float = option(
+        2.0, "half-width of the seeded perturbation of the start angle", low=0.0, high=10.0,
+        unit="deg",
+    )  # fmt: skip
+    target_angle_deg: float = option(7.0, "target knee flexion", low=-15.0, high=95.0, unit="deg")
+    episode_duration_s: float = option(
+        8.0, "simulated seconds per episode", low=1e-3, high=3600.0, unit="s"
+    )
+    control_period_s: float = option(0.01, "time between two actions", low=1e-4, high=0.1, unit="s")
 
     def __post_init__(self) -> None:
-        _check_range("start_angle_deg", self.start_angle_deg, -15.0, 95.0)
-        _check_range("start_angle_noise_deg", self.start_angle_noise_deg, 0.0, 10.0)
-        _check_range("target_angle_deg", self.target_angle_deg, -15.0, 95.0)
-        _check_range("episode_duration_s", self.episode_duration_s, 1e-3, 3600.0)
-        _check_range("control_period_s", self.control_period_s, 1e-4, 0.1)
+        check_fields(self)
 
     @property
     def episode_steps(self) -> int:
         """Number of control steps per episode."""
         return round(self.episode_duration_s / self.control_period_s)
+
+
+#: Names of the :class:`TaskParams` fields: each is an env keyword argument of its own name.
+TASK_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(TaskParams))
 
 
 @dataclass(frozen=True)
@@ -76,28 +84,23 @@ class RewardParams:
         weights: ``weighted_reward_keys``: reward key -> weight.
     """
 
-    sigma_rad: float = 0.1
+    sigma_rad: float = option(0.1, "width of the pose kernel", low=1e-6, high=math.pi, unit="rad")
     bonus: float = 0.01
-    bonus_error_rad: float = 0.05
-    bonus_vel_rad_s: float = 0.05
-    torque_threshold_nm: float = 75.0
-    torque_scale_nm: float = 100.0
+    bonus_error_rad: float = option(0.05, "error bound of the bonus", low=0.0, high=math.pi)
+    bonus_vel_rad_s: float = option(0.05, "knee-speed bound of the bonus", low=0.0, high=100.0)
+    torque_threshold_nm: float = option(
+        75.0, "interaction torque where the quadratic penalty starts", low=0.0, high=1e4
+    )
+    torque_scale_nm: float = option(
+        100.0, "normalization of the interaction-torque terms", low=1e-6, high=1e4
+    )
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_REWARD_WEIGHTS))
 
     def __post_init__(self) -> None:
-        _check_range("sigma_rad", self.sigma_rad, 1e-6, math.pi)
-        _check_range("bonus_error_rad", self.bonus_error_rad, 0.0, math.pi)
-        _check_range("bonus_vel_rad_s", self.bonus_vel_rad_s, 0.0, 100.0)
-        _check_range("torque_threshold_nm", self.torque_threshold_nm, 0.0, 1e4)
-        _check_range("torque_scale_nm", self.torque_scale_nm, 1e-6, 1e4)
+        check_fields(self)
         unknown = set(self.weights) - set(DEFAULT_REWARD_WEIGHTS)
         if unknown:
             raise ValueError(
                 f"RewardParams.weights has unknown keys {sorted(unknown)}; "
                 f"accepted keys: {sorted(DEFAULT_REWARD_WEIGHTS)}"
             )
-
-
-def _check_range(name: str, value: float, low: float, high: float) -> None:
-    if not (math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"{name} = {value!r} is outside the accepted range [{low}, {high}]")

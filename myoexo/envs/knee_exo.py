@@ -46,7 +46,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import mujoco
@@ -56,7 +56,7 @@ from gymnasium.utils import EzPickle
 from myosuite.envs.gymnasium_env import CpuEnvAccessor, MyoGymnasiumEnv
 from myosuite.envs.muscle_stages import CtrlStage, CtrlStageHost, ResetStage
 
-from myoexo.envs.config import RewardParams, TaskParams
+from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TASK_FIELDS, RewardParams, TaskParams
 from myoexo.envs.observation import (
     CUFF_OBS_KEYS,
     DEFAULT_OBS_KEYS,
@@ -90,18 +90,6 @@ __all__ = [
     "MyoExoKneeEnv",
 ]
 
-_P = TypeVar("_P", TaskParams, RewardParams, TwinParams)
-
-
-def _params(cls: type[_P], value: _P | Mapping[str, Any] | None) -> _P:
-    """*value* as a *cls*: the defaults for ``None``, ``cls(**value)`` for a mapping."""
-    if value is None:
-        return cls()
-    if isinstance(value, Mapping):
-        return cls(**value)
-    return value
-
-
 #: The exo-sensed entries of :meth:`MyoExoKneeEnv.get_proprioception`.
 _PROPRIOCEPTION_KEYS = ("exo_angle_rad", "exo_vel_rad_s", "exo_torque_nm", *CUFF_OBS_KEYS)
 
@@ -113,31 +101,39 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         spasticity_level: Modified Ashworth level 0..3, or ``"random"`` (uniform per reset,
             as the paper trains). A new subject (parameters with 10 % variability) is
             drawn from the env's seeded RNG at every reset.
-        task: Task parameters (start/target angle, duration, control period).
-        reward: Reward shape and ``weights`` (the ``weighted_reward_keys``).
-        twin: Parameters of the human + exo digital twin. ``task``, ``reward`` and ``twin``
-            may also be mappings of the dataclass's fields, for the tools whose env
-            arguments are literals (``examine_env --env_args``, rl_zoo3's YAML
-            ``env_kwargs``, RLlib's ``env_config``): ``task={"episode_duration_s": 4.0}``.
-        obs_keys: Observation entries (default: those of ``obs_preset``).
+        reward_weights: Overrides of the reward weights, by key
+            (:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`: MyoSuite's
+            ``weighted_reward_keys``); an unknown key raises ``ValueError``.
         obs_preset: Named set of ``obs_keys`` (:data:`OBS_PRESETS`): ``"full"`` (default,
             :data:`DEFAULT_OBS_KEYS`: the twin's whole state, muscles included) or ``"exo"``
             (:data:`EXO_SENSOR_OBS_KEYS`: what the exoskeleton itself measures). Ignored
             when ``obs_keys`` is given.
-        weighted_reward_keys: Shortcut overriding ``reward.weights``.
+        obs_keys: Observation entries (default: those of ``obs_preset``).
         subject_noise: Draw an individual subject (10 % variability) at every reset;
             ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
         reflex: Reflex model: a registered name (:func:`~myoexo.spasticity.reflex_names`;
-            ``"stretch"``, the calibrated stretch reflex with a 20 ms delay, default;
-            ``"uniform"``, the paper's ``SC_total`` on all 11 muscles, no delay: the first
-            reading; ``"persistent"``, with the flexors' after-discharge; any the user
+            ``"spindle"``, the default: the calibrated stretch reflex read on each muscle's
+            own fibre length and speed, 20 ms delay; ``"stretch"``, the same on the knee
+            angle; ``"uniform"``, the paper's ``SC_total`` on all 11 muscles, no delay;
+            ``"persistent"``, with the flexors' after-discharge; ``"tsrt"``; any the user
             registered) or a :class:`~myoexo.spasticity.ReflexModel` instance.
         robustness: Draw the twin's uncertain parts (strap stiffness and damping, masses,
             slide friction, motor torque constant) and sensor noise and latency at every
             reset (:class:`~myoexo.envs.robustness.RobustnessParams`; ``True``: the default
             ranges; ``None``/``False``: the nominal twin, exact sensors).
+        reward: The reward's shape (:class:`~myoexo.envs.config.RewardParams`; default: the
+            study's).
+        twin: The human + exo model (:class:`~myoexo.model.TwinParams`; default: today's
+            twin version).
         seed: Seed of the env's RNG (``reset(seed=...)`` reseeds it).
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+        **task: Task fields, each by its own name (:class:`~myoexo.envs.config.TaskParams`:
+            ``start_angle_deg``, ``start_angle_noise_deg``, ``target_angle_deg``,
+            ``episode_duration_s``, ``control_period_s``), e.g.
+            ``gym.make("MyoExoKnee-v1", episode_duration_s=4.0)``. Every argument is a
+            literal or a record, so tools whose env arguments are literals
+            (``examine_env --env_args``, rl_zoo3's YAML ``env_kwargs``, RLlib's
+            ``env_config``) pass them unchanged.
 
     An unknown keyword argument raises Python's own ``TypeError`` (``__init__() got an
     unexpected keyword argument 'x'``), the message other libraries' env builders look for.
@@ -158,41 +154,55 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     def __init__(
         self,
         spasticity_level: int | str = 0,
-        task: TaskParams | Mapping[str, Any] | None = None,
-        reward: RewardParams | Mapping[str, Any] | None = None,
-        twin: TwinParams | Mapping[str, Any] | None = None,
-        obs_keys: list[str] | tuple[str, ...] | None = None,
+        *,
+        reward_weights: Mapping[str, float] | None = None,
         obs_preset: str = "full",
-        weighted_reward_keys: dict[str, float] | None = None,
-        subject_noise: bool = True,
+        obs_keys: list[str] | tuple[str, ...] | None = None,
         reflex: str | ReflexModel = DEFAULT_REFLEX,
         robustness: RobustnessParams | bool | None = None,
+        subject_noise: bool = True,
+        reward: RewardParams | None = None,
+        twin: TwinParams | None = None,
         seed: int | None = None,
         render_mode: str | None = None,
+        **task: float,
     ) -> None:
-        self.task = _params(TaskParams, task)
-        reward = _params(RewardParams, reward)
-        if weighted_reward_keys is not None:
-            reward = RewardParams(**{**reward.__dict__, "weights": dict(weighted_reward_keys)})
+        unknown = sorted(set(task) - set(TASK_FIELDS))
+        if unknown:  # Python's own wording, which other libraries' env builders look for
+            raise TypeError(
+                f"{type(self).__name__}.__init__() got an unexpected keyword argument "
+                f"{unknown[0]!r}"
+            )
+        self.task = TaskParams(**task)
+        reward = reward if reward is not None else RewardParams()
+        if reward_weights is not None:
+            unknown = sorted(set(reward_weights) - set(DEFAULT_REWARD_WEIGHTS))
+            if unknown:
+                raise ValueError(
+                    f"reward_weights has unknown keys {unknown}; accepted: "
+                    f"{sorted(DEFAULT_REWARD_WEIGHTS)}"
+                )
+            weights = {**reward.weights, **{k: float(v) for k, v in reward_weights.items()}}
+            reward = dataclasses.replace(reward, weights=weights)
         self.reward_params = reward
-        self.twin_params = _params(TwinParams, twin)
+        self.twin_params = twin if twin is not None else TwinParams()
 
         frame_skip = frame_skip_of(self.task.control_period_s, self.twin_params.timestep_s)
         MyoGymnasiumEnv.__init__(self, frame_skip=frame_skip, render_mode=render_mode)
         EzPickle.__init__(
             self,
-            spasticity_level=spasticity_level,
-            task=task,
-            reward=reward,
-            twin=twin,
-            obs_keys=obs_keys,
+            spasticity_level,
+            reward_weights=reward_weights,
             obs_preset=obs_preset,
-            weighted_reward_keys=weighted_reward_keys,
-            subject_noise=subject_noise,
+            obs_keys=obs_keys,
             reflex=reflex,
             robustness=robustness,
+            subject_noise=subject_noise,
+            reward=reward,
+            twin=twin,
             seed=seed,
             render_mode=render_mode,
+            **task,
         )
 
         self.model, self._mj_spec = build_model(self.twin_params)
@@ -285,6 +295,13 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
     def episode_steps(self) -> int:
         """Control steps per episode."""
         return self.task.episode_steps
+
+    @property
+    def interaction_torque_nm(self) -> float:
+        """The true interaction torque of the last reset or step (Nm), the value of its
+        ``info["interaction_torque_nm"]``: part of the twin's state, which no sensor record
+        holds (:mod:`myoexo.envs.sensors`); the privileged oracle reads it here."""
+        return float(self._prev_tau_knee)
 
     @property
     def spec(self) -> EnvSpec | None:
@@ -532,16 +549,15 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
                 cuff sensors) as python floats.
             unstable: Whether MuJoCo reset the data during the step.
             sensed: The raw buffer as the sensors report it (the true one unless
-                ``robustness`` adds noise and latency): ``measured_*`` entries.
+                ``robustness`` adds noise and latency): ``measured_*`` entries, what
+                :func:`~myoexo.envs.sensors.read_sensors` gives a controller.
         """
         at = self.obs_layout.at
         knee_deg = math.degrees(values[at["knee_angle_rad"]])
         exo_deg = math.degrees(values[at["exo_angle_rad"]])
-        if self._sensor is None:
-            measured_knee_deg, measured_exo_deg = knee_deg, exo_deg
-        else:
-            measured_knee_deg = math.degrees(sensed.item(at["knee_angle_rad"]))
-            measured_exo_deg = math.degrees(sensed.item(at["exo_angle_rad"]))
+        measured = values if self._sensor is None else sensed[: len(values)].tolist()
+        measured_knee_deg = math.degrees(measured[at["knee_angle_rad"]])
+        measured_exo_deg = math.degrees(measured[at["exo_angle_rad"]])
         target_deg = self.task.target_angle_deg
         thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
         exo_nm, muscle_nm = values[at["exo_torque_nm"]], values[at["muscle_knee_torque_nm"]]
@@ -554,6 +570,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             misalignment_deg=knee_deg - exo_deg,
             measured_knee_angle_deg=measured_knee_deg,
             measured_exo_angle_deg=measured_exo_deg,
+            measured_knee_velocity_deg_s=math.degrees(measured[at["knee_vel_rad_s"]]),
+            measured_exo_velocity_deg_s=math.degrees(measured[at["exo_vel_rad_s"]]),
+            measured_exo_torque_nm=measured[at["exo_torque_nm"]],
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,

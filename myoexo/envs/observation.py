@@ -5,7 +5,7 @@ Every key is described once, in :data:`OBS_KEY_DOCS` (meaning and unit); the doc
 site's environment page (``docs/envs.md``) shows it as a table, with each key's size and
 scale in the vector read from a built twin. This module only defines constants and the
 :class:`ObsLayout` class: it builds no model and does not import the env
-(``myoexo.training.presets`` reads :data:`OBS_PRESETS` from here).
+(``myoexo.envs.options`` reads :data:`OBS_PRESETS` from here).
 
 Each step the env *gathers* every observed quantity, in physical units, into one fresh
 float64 **raw buffer** laid out as :data:`RAW_KEYS` (:meth:`ObsLayout.gather`); ``obs_dict``

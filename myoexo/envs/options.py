@@ -4,9 +4,10 @@ Everything that makes one MyoExoKnee twin differ from another, beyond its level 
 subject, is one frozen, JSON-able value: the task (any :class:`~myoexo.envs.config.TaskParams`
 field), the reward weights, the observation (a preset or explicit keys), the reflex model
 (a registered name, :mod:`myoexo.spasticity.registry`) and robustness (a perturbed twin
-per episode). It is built once, from the command line (``--set reflex=persistent``) or from
-a preset, and carried unchanged by training, evaluation, distillation, sweeps and the
-frontier; every run folder and every shipped policy records it (:meth:`TwinOptions.to_dict`),
+per episode). It is built once, from the command line (one option per field:
+``--reflex persistent --episode-duration-s 4``) or from a preset, and carried unchanged by
+training, evaluation, distillation, sweeps and the frontier; every run folder and every
+shipped policy records it (:meth:`TwinOptions.to_dict`),
 and a policy's env is rebuilt from it (:meth:`TwinOptions.env_kwargs`)::
 
     options = TwinOptions.from_overrides(["reflex=persistent", "episode_duration_s=4"])
@@ -20,17 +21,16 @@ constructor takes them (no check on the id's name).
 from __future__ import annotations
 
 import dataclasses
+import typing
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
+from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TASK_FIELDS, TaskParams
 from myoexo.envs.observation import OBS_PRESETS
+from myoexo.runtime.fields import add_options, convert, option
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import get_reflex, reflex_parameters
-
-#: Names of the :class:`TaskParams` fields, each a twin option of its own name.
-TASK_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(TaskParams))
 
 #: Names of the options that are not task fields.
 OPTION_FIELDS: tuple[str, ...] = (
@@ -76,12 +76,23 @@ class TwinOptions:
             (each message lists the accepted ones), or a task value out of its range.
     """
 
-    task: tuple[tuple[str, float], ...] = ()
-    reward_weights: tuple[tuple[str, float], ...] = ()
-    obs_preset: str = "full"
-    obs_keys: tuple[str, ...] = ()
-    reflex: str = DEFAULT_REFLEX
-    robustness: bool = False
+    task: tuple[tuple[str, float], ...] = option((), "task fields", flag="")
+    reward_weights: tuple[tuple[str, float], ...] = option(
+        (), "reward weights, e.g. inter:-0.5,act:-0.2", flag=""
+    )
+    obs_preset: str = option(
+        "full", "observation preset", choices=sorted(OBS_PRESETS), metavar="PRESET"
+    )
+    obs_keys: tuple[str, ...] = option(
+        (), "observation entries (default: those of the preset)", metavar="KEY"
+    )
+    reflex: str = option(DEFAULT_REFLEX, "reflex model of the twin", flag="")
+    robustness: bool = option(
+        False,
+        "a perturbed twin per episode, drawn from the subject's seed (strap stiffness and "
+        "damping x0.5-2, masses +-10 %, slide friction +-50 %, motor constant +-5 %, sensor "
+        "noise, 10 ms latency)",
+    )
 
     def __post_init__(self) -> None:
         task = _pairs(self.task, "task")
@@ -136,9 +147,7 @@ class TwinOptions:
         """Keyword arguments of :func:`~myoexo.envs.make_env` (and ``gymnasium.make``) that
         build this twin: only the options that differ from the defaults, so an env id that
         takes none of them is built as it is."""
-        kwargs: dict[str, Any] = {}
-        if self.task:
-            kwargs["task"] = dict(self.task)
+        kwargs: dict[str, Any] = dict(self.task)
         if self.reward_weights:
             kwargs["reward_weights"] = dict(self.reward_weights)
         if self.obs_keys:
@@ -211,7 +220,7 @@ class TwinOptions:
         return name in TASK_FIELDS or name in OPTION_FIELDS
 
     def with_override(self, text: str) -> TwinOptions:
-        """These options with one ``NAME=VALUE`` of the command line applied.
+        """These options with one ``NAME=VALUE`` applied (a training or sweep setting).
 
         ``NAME`` is a task field (``episode_duration_s=4``; ``none`` resets it),
         ``reward_weights=inter:-0.5,act:-0.2``, ``obs_preset=exo``,
@@ -228,21 +237,14 @@ class TwinOptions:
                 f"bad twin option {text!r}: expected NAME=VALUE with NAME in "
                 f"{[*TASK_FIELDS, *OPTION_FIELDS]}"
             )
+        types = {**typing.get_type_hints(TaskParams), **typing.get_type_hints(TwinOptions)}
+        tp = float | None if name in TASK_FIELDS else types[name]
+        if name == "reward_weights":
+            tp = dict[str, float]
         try:
-            if name in TASK_FIELDS:
-                return self.replace(**{name: None if raw.lower() == "none" else float(raw)})
-            if name == "reward_weights":
-                pairs = [p.split(":") for p in raw.split(",") if p]
-                return self.replace(reward_weights=tuple((k, float(w)) for k, w in pairs))
-            if name == "obs_keys":
-                return self.replace(obs_keys=tuple(k for k in raw.split(",") if k))
-            if name == "robustness":
-                if raw.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(f"robustness = {raw!r}: expected true or false")
-                return self.replace(robustness=raw.lower() in ("true", "1"))
+            return self.replace(**{name: convert(raw, tp, name)})
         except ValueError as exc:
             raise ValueError(f"bad value in twin option {text!r}: {exc}") from None
-        return self.replace(**{name: raw})
 
     @classmethod
     def from_overrides(
@@ -268,49 +270,49 @@ def twin_mismatch(trained: TwinOptions, evaluated: TwinOptions) -> str | None:
 
 # ----------------------------------------------------------------------------- CLI
 def add_twin_arguments(parser: Any, *, observation: bool = False) -> None:
-    """The twin options of a command: ``--set NAME=VALUE`` (repeatable, any option by its
-    own name) and the shortcuts ``--reflex NAME``, ``--robustness`` and
-    ``--episode-duration S`` (``episode_duration_s``); with *observation*, the help names the
-    observation options too (a command that evaluates policies takes each policy's own)."""
+    """The twin options of a command, one per field: each task field
+    (``--episode-duration-s 4``; not given: the task's default), ``--reflex NAME`` and
+    ``--robustness``; with *observation* (a command that trains a policy), ``--obs-preset``,
+    ``--obs-keys`` and ``--reward-weights`` too (a command that evaluates policies runs each
+    on its own observation, and rewards nothing)."""
     from myoexo.spasticity.registry import add_reflex_argument
 
-    names = [*TASK_FIELDS, *OPTION_FIELDS]
-    if not observation:
-        names = [n for n in names if n not in ("obs_preset", "obs_keys", "reward_weights")]
-    parser.add_argument(
-        "--set",
-        dest="twin_set",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a twin option (repeatable): " + ", ".join(names),
-    )
-    add_reflex_argument(parser, default=DEFAULT_REFLEX)
-    parser.add_argument(
-        "--robustness",
-        action="store_true",
-        help="a perturbed twin per episode (strap stiffness/damping x0.5-2, masses +-10 %%, "
-        "slide friction +-50 %%, motor constant +-5 %%, sensor noise, 10 ms latency; "
-        "myoexo.envs.robustness), drawn from the subject's seed",
-    )
-    parser.add_argument(
-        "--episode-duration",
-        type=float,
-        default=None,
-        metavar="S",
-        help="simulated seconds per episode: the task's episode_duration_s (default: 8 s)",
-    )
+    group = parser.add_argument_group("twin options")
+    add_options(group, TaskParams, given_only=True)
+    add_reflex_argument(group, default=DEFAULT_REFLEX)
+    add_options(group, TwinOptions, exclude=() if observation else ("obs_preset", "obs_keys"))
+    if observation:
+        group.add_argument(
+            "--reward-weights",
+            type=_reward_weights,
+            metavar="NAME:VALUE,...",
+            help="reward weights that differ from the env's, e.g. inter:-0.5,act:-0.2 "
+            f"(terms: {', '.join(sorted(DEFAULT_REWARD_WEIGHTS))})",
+        )
+
+
+def _reward_weights(raw: str) -> dict[str, float]:
+    """``--reward-weights`` text as a mapping (``inter:-0.5,act:-0.2``)."""
+    import argparse
+
+    try:
+        return dict(convert(raw, dict[str, float], "--reward-weights"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{raw!r} is not NAME:VALUE,...") from None
 
 
 def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:
-    """The :class:`TwinOptions` of the options :func:`add_twin_arguments` added (``--set``
-    first, then the shortcuts that were given)."""
-    options = TwinOptions.from_overrides(getattr(args, "twin_set", []) or [], base)
-    changes: dict[str, Any] = {}
+    """The :class:`TwinOptions` of the options :func:`add_twin_arguments` added, on top of
+    *base* (default: the defaults): only the options that were given change it."""
+    options = base or TwinOptions()
+    changes: dict[str, Any] = {n: getattr(args, n) for n in TASK_FIELDS if hasattr(args, n)}
     if getattr(args, "reflex", DEFAULT_REFLEX) != DEFAULT_REFLEX:
         changes["reflex"] = args.reflex
     if getattr(args, "robustness", False):
         changes["robustness"] = True
-    if getattr(args, "episode_duration", None) is not None:
-        changes["episode_duration_s"] = float(args.episode_duration)
+    for name in ("obs_preset", "obs_keys"):
+        if hasattr(args, name) and getattr(args, name) != getattr(TwinOptions(), name):
+            changes[name] = tuple(args.obs_keys) if name == "obs_keys" else args.obs_preset
+    if getattr(args, "reward_weights", None):  # merged into the base's
+        changes["reward_weights"] = {**dict(options.reward_weights), **args.reward_weights}
     return options.replace(**changes) if changes else options

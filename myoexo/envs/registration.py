@@ -19,15 +19,13 @@ gymnasium's ``TimeLimit(n)``. :func:`make_env` is the shortcut every part of myo
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import gymnasium as gym
 
-from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TaskParams
+from myoexo.envs.config import TaskParams
 from myoexo.spasticity.levels import RANDOM_LEVEL, VALID_LEVELS
 
 ENTRY_POINT = "myoexo.envs.knee_exo:MyoExoKneeEnv"
@@ -78,43 +76,19 @@ def env_id(level: int | str) -> str:
     )
 
 
-def make_env(
-    env: int | str = 0,
-    *,
-    task: TaskParams | Mapping[str, Any] | None = None,
-    episode_duration_s: float | None = None,
-    reward_weights: Mapping[str, float] | None = None,
-    subject_noise: bool = True,
-    **kwargs: Any,
-) -> gym.Env[Any, Any]:
+def make_env(env: int | str = 0, **kwargs: Any) -> gym.Env[Any, Any]:
     """Build a MyoExoKnee env through ``gymnasium.make``.
 
     Args:
         env: A spasticity level (0..3 or ``"random"``) or an env id (``"MyoExoKnee-v2"``,
             ``"module:EnvId"`` for an env registered by another module).
-        task: Task parameters, or a mapping of their fields (default: the env's, i.e.
-            :class:`TaskParams`' defaults).
-        episode_duration_s: Shortcut replacing ``task.episode_duration_s`` (``None``: keep).
-        reward_weights: Reward-weight overrides on top of the defaults
-            (:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`); an unknown key raises.
-        subject_noise: Draw individual subjects at reset (``False``: Table I's nominal
-            subject of the level, e.g. for tuning).
-        **kwargs: Other keyword arguments of :class:`~myoexo.envs.knee_exo.MyoExoKneeEnv`
-            (``twin``, ``obs_keys``, ``render_mode``, ...).
+        **kwargs: Keyword arguments of :class:`~myoexo.envs.knee_exo.MyoExoKneeEnv`, flat:
+            task fields (``episode_duration_s=4.0``), ``reward_weights``, ``obs_preset``,
+            ``reflex``, ``robustness``, ``subject_noise``, ``render_mode``, ...
     """
     import gymnasium as gym
 
     register_envs()  # a no-op after ``import myoexo``; here for ``myoexo.envs`` alone
 
     env_name = env if isinstance(env, str) and env != RANDOM_LEVEL else env_id(env)
-    if isinstance(task, Mapping):
-        task = TaskParams(**task)
-    if episode_duration_s is not None:
-        task = dataclasses.replace(task or TaskParams(), episode_duration_s=episode_duration_s)
-    if task is not None:
-        kwargs["task"] = task
-    if reward_weights:
-        kwargs["weighted_reward_keys"] = {**DEFAULT_REWARD_WEIGHTS, **dict(reward_weights)}
-    if not subject_noise:
-        kwargs["subject_noise"] = False
     return gym.make(env_name, **kwargs)

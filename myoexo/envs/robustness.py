@@ -36,26 +36,20 @@ draw in these ranges as stable as the nominal twin (``tests/test_stability.py``)
   sqrt(k))``. Where ``timeconst / c`` would fall under MuJoCo's 2-timestep floor (c > 1.25 at
   the nominal 5 ms and 2 ms) the same stiffness and damping are written in the direct form
   ``(-stiffness, -damping)``, which MuJoCo does not floor; the damping range is checked
-  against the weld's explicit limit (:data:`MAX_WELD_HB`). (The former ``(timeconst /
-  sqrt(k), dampratio x c / sqrt(k))``, a mass-spring-damper reading of ``solref``, stiffened
-  the weld by ``k^2 / c^2``, x12.5 at k = 2, c = 0.5, and left its damping independent of c;
-  draws just past the ranges, k = 2.5-3 with c = 0.35-0.5, diverged within 10 control steps.)
+  against the weld's explicit limit (:data:`MAX_WELD_HB`). A mass-spring-damper reading of
+  ``solref``, ``(timeconst / sqrt(k), dampratio x c / sqrt(k))``, would stiffen the weld by
+  ``k^2 / c^2`` (x12.5 at k = 2, c = 0.5) and leave its damping independent of c.
 * A stiffer strap (k > 1) raises the coupling joints' armature (their numerical rotor
   inertia) by ``k^2``. The shank cuff pin carries 2000 Nm/rad on 4.5e-3 kg m^2 (the 0.2 kg
   cuff about the pin, 4e-3 of it armature, ``TwinParams.pin_armature_kg_m2``): ``omega h``
-  = 1.3. With the twin's first 1e-3 of armature it was 2.3, past the explicit limit 2, held
-  by the pins' implicit damping and the weld, and the damped pins of twin version 2 then
-  chattered with the weld at some draws. Without the ``k^2`` scaling the first armature's
-  spring at x1.6-2 let an exo-chain mode near 50 Hz grow by ~1 % per physics step (the
-  "unstable" episodes, preceded by seconds of chatter); with it ``omega h`` fell from 2.3 at
-  x1 to 1.9 at x2 (an armature x k, which keeps ``sqrt(stiffness / armature)``, stopped the
-  divergence but left a bang-bang command at the 50 Hz control rate driving the pins 3-4
-  times faster than on the nominal twin); with today's armature it falls from 1.3 to 1.0.
-  The other couplings are slow (``omega h`` < 0.5 at x2).
+  = 1.3, under the explicit limit 2, and with the ``k^2`` scaling it falls to 1.0 at x2;
+  an armature x k (which keeps ``sqrt(stiffness / armature)``) would leave a bang-bang
+  command at the 50 Hz control rate driving the pins 3-4 times faster than on the nominal
+  twin. The other couplings are slow (``omega h`` < 0.5 at x2).
 
-What is *measured* (the observation the controller reads, ``info["measured_knee_angle_deg"]``
-and ``info["measured_exo_angle_deg"]`` that the PID uses) is noisy and late; what is *scored*
-(``info["knee_angle_deg"]``, the interaction torque, the reward) stays the true state.
+What is *measured* (the observation and the sensor record a controller reads,
+:mod:`myoexo.envs.sensors`, made from ``info["measured_*"]``) is noisy and late; what is
+*scored* (``info["knee_angle_deg"]``, the interaction torque, the reward) stays the true state.
 """
 
 from __future__ import annotations

@@ -10,8 +10,9 @@ Modules: :mod:`.config` (what a run is, subject seeds, ``config.json``), :mod:`.
 (episodes, chunks), :mod:`.backends` (in-process, worker processes) and :mod:`.ray_backend`
 (the chunks as Ray tasks, on a cluster: ``docs/cluster.md``), :mod:`.runner` (a whole run:
 :func:`evaluate`), :mod:`.storage` (chunk, table and trace files),
-:mod:`.metrics`, :mod:`.criteria` (the acceptance criteria), :mod:`.paper` (the study's
-numbers), :mod:`.figures`, :mod:`.report`.
+:mod:`.metrics`, :mod:`.stats` (summaries, intervals, bootstraps, the tail),
+:mod:`.criteria` (the acceptance criteria and the verdicts), :mod:`.paper` (the study's
+numbers), :mod:`.figures`, :mod:`.report`, :mod:`.results` (result sets and their tables).
 """
 
 from myoexo.evaluation.backends import available_cores

@@ -19,100 +19,67 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from myoexo.envs.options import add_twin_arguments, twin_from_args
-from myoexo.evaluation.backends import available_cores
 from myoexo.evaluation.config import EvaluationConfig
 from myoexo.evaluation.ray_backend import BACKENDS
 from myoexo.runtime.docs import docs_url
-from myoexo.spasticity.levels import VALID_LEVELS
+from myoexo.runtime.fields import Execution, add_options, check_fields, from_options, option
 
 #: Default output folder of ``myoexo evaluate`` (``results/`` is git-ignored).
 DEFAULT_OUT = Path("results") / "evaluation"
 
+#: Defaults of ``myoexo evaluate`` that differ from :class:`EvaluationConfig`'s.
+DEFAULTS: dict[str, object] = {"controllers": ("pid", "sac")}
+#: :class:`EvaluationRunOptions`'s fields listed under "where and how to run".
+_RUN_FIELDS = ("out", "backend", "address", "report")
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo evaluate``."""
-    d = EvaluationConfig()
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=["pid", "sac"],
-        metavar="SPEC",
-        help="controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,"
-        "limit=..,tuned=..]' (ramp_s: a ramped setpoint; limit: a clipped command; tuned=exo: "
-        "gains tuned on the exo encoder, tuned=latency: tuned for the perturbed twins' 10 ms "
-        "latency), 'sac' / 'student_exo' (the shipped policies; skipped with a "
-        "message if absent), "
-        "'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the achievable bound, "
-        "slow) or paths of SB3 .zip models (default: pid sac)",
-    )
-    parser.add_argument(
-        "--levels",
-        nargs="+",
-        type=int,
-        default=list(d.levels),
-        metavar="L",
-        help=f"spasticity levels, from {VALID_LEVELS} (default: all)",
-    )
-    parser.add_argument(
-        "--subjects", type=int, default=d.subjects, help="subjects per level (default: 1000)"
-    )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help=f"worker processes (default: all cores, here {available_cores()}); with "
-        "--backend ray and --address: the most chunks in flight (default: the cluster's CPUs)",
-    )
-    parser.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default="process",
-        help="'process': worker processes on this machine (default); 'ray': Ray tasks, on a "
-        "local cluster of --workers CPUs or on the cluster of --address (needs the 'ray' "
-        f"extra; {docs_url('cluster')})",
-    )
-    parser.add_argument(
-        "--address",
-        default=None,
-        help="Ray cluster to join with --backend ray: HOST:PORT or 'auto' (default: the "
-        "RAY_ADDRESS environment variable, else a local cluster that ends with the command)",
-    )
-    parser.add_argument(
-        "--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})"
-    )
-    parser.add_argument(
-        "--seed", type=int, default=d.root_seed, help="root seed of the subjects (default: 0)"
-    )
-    parser.add_argument(
-        "--trace-stride",
-        type=int,
-        default=d.trace_stride,
-        help="store every n-th control step of the traces (default: 2, i.e. 50 Hz)",
-    )
-    parser.add_argument(
-        "--chunk-size", type=int, default=d.chunk_size, help="subjects per resumable chunk"
-    )
-    parser.add_argument(
-        "--env-id",
-        default=d.env_id,
-        help="gymnasium id of a level's env, with '{level}' (default: %(default)s)",
-    )
-    parser.add_argument(
-        "--seeds-dir",
-        type=Path,
-        nargs="+",
-        default=[],
-        metavar="DIR",
-        help="aggregated `myoexo seeds` folders: each seed's selected checkpoint is added to "
+
+@dataclass(frozen=True)
+class EvaluationRunOptions:
+    """What ``myoexo evaluate`` adds to the controllers, where it writes and where it runs
+    (each field is an option of the command; :class:`EvaluationConfig`'s fields, the twin's
+    options and :class:`~myoexo.runtime.fields.Execution`'s are its other options)."""
+
+    seeds_dir: tuple[Path, ...] = option(
+        (),
+        "aggregated `myoexo policy seeds` folders: each seed's selected checkpoint is added to "
         "the controllers, and the report and result sets treat a folder's seeds as one "
         "controller (intervals over seeds and subjects)",
+        metavar="DIR",
     )
+    out: Path = option(DEFAULT_OUT, "output folder", folder=True)
+    backend: str = option(
+        "process",
+        "where the episodes run, 'process': worker processes on this machine; 'ray': Ray tasks "
+        f"(the 'ray' extra, {docs_url('cluster')}) on a local cluster of --workers CPUs or on "
+        "the cluster of --address, where --workers is the most chunks in flight, else the "
+        "cluster's CPUs",
+        choices=BACKENDS,
+    )
+    address: str | None = option(
+        None,
+        "Ray cluster to join with --backend ray: HOST:PORT or 'auto' (default: the "
+        "RAY_ADDRESS environment variable, else a local cluster that ends with the command)",
+    )
+    report: bool = option(False, "write the report when done")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo evaluate``: :class:`EvaluationConfig`'s fields, the twin's
+    options, and :class:`EvaluationRunOptions`'s and
+    :class:`~myoexo.runtime.fields.Execution`'s (how and where to run)."""
+    add_options(parser, EvaluationConfig, exclude=("twin", "selection"), defaults=DEFAULTS)
+    add_options(parser, EvaluationRunOptions, exclude=_RUN_FIELDS)
     add_twin_arguments(parser)
-    parser.add_argument("--report", action="store_true", help="write the report when done")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run = parser.add_argument_group("where and how to run")
+    add_options(run, EvaluationRunOptions, exclude=("seeds_dir",))
+    add_options(run, Execution)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,29 +88,23 @@ def run(args: argparse.Namespace) -> int:
     from myoexo.control.specs import seeds_controllers
     from myoexo.evaluation.runner import evaluate
 
-    try:
-        seeds = [spec for folder in args.seeds_dir for spec in seeds_controllers(folder)]
-        config = EvaluationConfig(
-            controllers=(*args.controllers, *seeds),
-            levels=tuple(args.levels),
-            subjects=args.subjects,
-            root_seed=args.seed,
-            trace_stride=args.trace_stride,
-            chunk_size=args.chunk_size,
-            env_id=args.env_id,
-            twin=twin_from_args(args),
-        )
-        result = evaluate(
-            config,
-            args.out,
-            workers=args.workers,
-            progress=not args.no_progress,
-            backend=args.backend,
-            address=args.address,
-        )
-    except ValueError as exc:
-        print(f"myoexo evaluate: error: {exc}", file=sys.stderr)
-        return 2
+    options = from_options(EvaluationRunOptions, args)
+    execution = from_options(Execution, args)
+    seeds = [spec for folder in options.seeds_dir for spec in seeds_controllers(folder)]
+    config = from_options(
+        EvaluationConfig,
+        args,
+        controllers=(*args.controllers, *seeds),
+        twin=twin_from_args(args),
+    )
+    result = evaluate(
+        config,
+        options.out,
+        workers=execution.workers,
+        progress=execution.progress,
+        backend=options.backend,
+        address=options.address,
+    )
     if result.stopped_by is not None:
         from myoexo.runtime.lifecycle import signal_exit_status
 
@@ -159,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         f"{n} episodes ({result.computed} computed now) of {', '.join(result.controllers)} "
         f"in {result.out_dir}/episodes.parquet (and .csv)"
     )
-    if args.report:
+    if options.report:
         from myoexo.evaluation.report import write_report
 
         path = write_report(result.out_dir)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import importlib
 import json
 import os
 from collections.abc import Mapping, Sequence
@@ -29,6 +30,7 @@ import numpy as np
 
 from myoexo.control.specs import ControllerSpec, policy_twin, spec_env_kwargs
 from myoexo.envs.options import TwinOptions
+from myoexo.runtime.fields import check_fields, option
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -37,12 +39,12 @@ CONFIG_FILE = "config.json"
 #: Root seed of the reported evaluations (``myoexo evaluate``'s default, the README's tables).
 EVALUATION_ROOT_SEED = 0
 #: Root seed of the subjects that *select* policies (training's periodic evaluation,
-#: ``myoexo select``, the seed that is shipped, distillation). It differs from
+#: ``myoexo policy select``, the seed that is shipped, distillation). It differs from
 #: :data:`EVALUATION_ROOT_SEED`, so no subject of a reported evaluation chose the checkpoint
 #: being reported; :func:`check_no_selection_leak` enforces it for policies that record their
 #: selection seed.
 SELECTION_ROOT_SEED = 1
-#: Root seed of the subjects the twin is *fitted* on (``myoexo calibrate``).
+#: Root seed of the subjects the twin is *fitted* on (``myoexo twin calibrate``).
 CALIBRATION_ROOT_SEED = 2
 
 #: The three subject streams, by purpose: each root seeds its own
@@ -110,13 +112,29 @@ class EvaluationConfig:
             policies on the root that selected them; its numbers are in-sample.
     """
 
-    controllers: tuple[str, ...] = ("pid",)
-    levels: tuple[int, ...] = VALID_LEVELS
-    subjects: int = 1000
-    root_seed: int = EVALUATION_ROOT_SEED
-    trace_stride: int = 2
-    chunk_size: int = 10
-    env_id: str = "MyoExoKnee-v{level}"
+    controllers: tuple[str, ...] = option(
+        ("pid",),
+        "controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,limit=..,"
+        "tuned=..]' (ramp_s: a ramped setpoint; limit: a clipped command; tuned=exo: gains "
+        "tuned on the exo encoder, tuned=latency: tuned for the perturbed twins' 10 ms "
+        "latency), 'sac' / 'student_exo' (the shipped policies; skipped with a message if "
+        "absent), 'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the "
+        "achievable bound, about 65 s of a core per episode: 2 subjects x 4 levels take "
+        "~4.5 min on 2 cores) or paths of SB3 .zip models",
+        metavar="SPEC",
+    )
+    levels: tuple[int, ...] = option(
+        VALID_LEVELS, "spasticity levels", choices=VALID_LEVELS, metavar="L"
+    )
+    subjects: int = option(1000, "subjects per level", low=1)
+    root_seed: int = option(EVALUATION_ROOT_SEED, "root seed of the subjects", low=0, flag="seed")
+    trace_stride: int = option(
+        2, "store every n-th control step of the traces (2: 50 Hz)", low=1, metavar="N"
+    )
+    chunk_size: int = option(10, "subjects per resumable chunk", low=1, metavar="N")
+    env_id: str = option(
+        "MyoExoKnee-v{level}", "gymnasium id of a level's env, with '{level}'", metavar="ID"
+    )
     twin: TwinOptions = field(default_factory=TwinOptions)
     selection: bool = False
 
@@ -129,21 +147,15 @@ class EvaluationConfig:
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
         if not self.controllers:
             raise ValueError("controllers is empty: name at least one (e.g. 'pid')")
-        bad = [v for v in self.levels if v not in VALID_LEVELS]
-        if bad or not self.levels:
-            raise ValueError(
-                f"unknown spasticity level(s) {bad or '(none given)'}; accepted: {VALID_LEVELS}"
-            )
+        check_fields(self)
+        if not self.levels:
+            raise ValueError(f"levels is empty; accepted: {VALID_LEVELS}")
         if len(set(self.levels)) != len(self.levels):
             raise ValueError(f"levels {self.levels} has duplicates")
-        for name in ("subjects", "trace_stride", "chunk_size"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or value <= 0:
-                raise ValueError(f"{name} = {value!r} must be a positive integer")
-        if not isinstance(self.root_seed, (int, np.integer)) or self.root_seed < 0:
-            raise ValueError(f"root_seed = {self.root_seed!r} must be an integer >= 0")
         if "{level}" not in self.env_id:
             raise ValueError(f"env_id = {self.env_id!r} must contain '{{level}}'")
+        for level in self.levels:
+            check_env_id(self.level_env_id(level))
 
     @property
     def episode_duration_s(self) -> float | None:
@@ -176,6 +188,20 @@ class EvaluationConfig:
             "env_fingerprint": env_fingerprint(self.level_env_id(self.levels[0])),
             "twin": self.twin.dynamics().to_dict(),
         }
+
+
+def check_env_id(env_id: str) -> None:
+    """Raise ``ValueError`` unless ``env_id`` names a registered env (``"module:EnvId-v0"``
+    imports its module first, as ``gymnasium.make`` does)."""
+    import gymnasium as gym
+
+    module, _, name = env_id.rpartition(":")
+    try:
+        if module:
+            importlib.import_module(module)
+        gym.spec(name)
+    except (ImportError, gym.error.Error) as exc:
+        raise ValueError(f"env id {env_id!r} is not registered: {exc}") from None
 
 
 @functools.lru_cache(maxsize=8)

@@ -1,7 +1,8 @@
-"""The acceptance criteria of a controller against the PID, and the scores that rank them.
+"""The acceptance criteria: what a controller must meet, and the verdicts that say whether
+it does.
 
-Per level, on the same simulated subjects (means over subjects; docs/reference.md
-section 5):
+:class:`Criteria` holds a controller against the PID, per level, on the same simulated
+subjects (means over subjects; docs/reference.md section 5):
 
 * mean absolute final error below the paper's SAC bound: 1 deg at levels 0-2, 11.45 deg at
   level 3 (:attr:`~myoexo.evaluation.paper.PaperLevelResults.sac_final_error_bound_deg`);
@@ -9,14 +10,24 @@ section 5):
 * RMS interaction torque up to settling lower than the PID's at every level (the study
   claims a lower RMS at all four levels, though its table gives no level-3 percentage).
 
-:func:`compare` makes the per-level table, :func:`shortfall` says how far a table is from
-passing (0 = passes; checkpoint selection minimises it), :func:`score` ranks policies during
-training (mean peak-torque reduction minus the final-error excess; higher is better).
+:func:`compare_with_pid` makes the per-level table, :func:`shortfall` says how far a table is
+from passing (0 = passes; checkpoint selection minimises it), :func:`ranking_score` ranks
+policies during training (mean peak-torque reduction minus the final-error excess; higher is
+better).
+
+:class:`DeployableGoals` holds a controller that reads only the device's own sensors against
+fixed accuracies and the paper's PID on held-out subjects.
+
+A number measured with an interval is judged by the whole interval (:func:`verdict` against
+a target, :func:`verdict_against` against another interval): met when it lies on the good
+side, missed when it lies wholly on the other, a tie otherwise; :func:`combined_verdict` and
+:func:`verdict_by_level` join several verdicts into one.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -78,6 +89,13 @@ class DeployableGoals:
     hard_levels: tuple[int, ...] = (2, 3)
     within_pid_deg: float = 1.5
 
+    def easy_bounds(self, perturbed: bool) -> tuple[float, float]:
+        """``(mean, p95)`` bounds of the easy levels' absolute final error on a nominal or a
+        perturbed twin (deg)."""
+        if perturbed:
+            return self.easy_mean_perturbed_deg, self.easy_p95_perturbed_deg
+        return self.easy_mean_deg, self.easy_p95_deg
+
 
 def level_means(table: Any) -> Any:
     """Per-level means of :data:`CRITERIA_METRICS` from an evaluation table (pandas)."""
@@ -93,7 +111,7 @@ def _as_frame(means: Any) -> Any:
     return means
 
 
-def compare(policy: Any, pid: Any, criteria: Criteria | None = None) -> Any:
+def compare_with_pid(policy: Any, pid: Any, criteria: Criteria | None = None) -> Any:
     """Side-by-side table per level with reductions against the PID and pass flags.
 
     Args:
@@ -151,7 +169,7 @@ def final_error_excess(table: Any, criteria: Criteria | None = None) -> Any:
 
 
 def shortfall(table: Any, criteria: Criteria | None = None) -> float:
-    """How far a :func:`compare` table is from passing (0 when it passes; larger is worse):
+    """How far a :func:`compare_with_pid` table is from passing (0 when it passes; larger is worse):
     the sum over levels of the relative excess of the final error over its bound and of the
     relative peak / RMS increase over the PID."""
     c = criteria or Criteria()
@@ -164,10 +182,67 @@ def shortfall(table: Any, criteria: Criteria | None = None) -> float:
     return total
 
 
-def score(table: Any, criteria: Criteria | None = None) -> float:
+def ranking_score(table: Any, criteria: Criteria | None = None) -> float:
     """Rank of a controller (higher is better): the mean over levels of its relative
     peak-torque reduction against the PID minus its final-error excess
     (:func:`final_error_excess`). A controller meeting every final-error bound scores its
     mean peak-torque reduction (a fraction)."""
     per_level = table.peak_reduction_pct / 100 - final_error_excess(table, criteria)
     return float(per_level.mean())
+
+
+# ----------------------------------------------------------------------------- verdicts
+def verdict(low: float, high: float, target: float, higher_is_better: bool = True) -> str:
+    """``"met"`` if the whole interval ``[low, high]`` is on the good side of *target*,
+    ``"missed"`` if it is wholly on the other side, else ``"tie"`` (``"n/a"`` without an
+    interval)."""
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return "n/a"
+    if not higher_is_better:
+        low, high, target = -high, -low, -target
+    if low > target:
+        return "met"
+    if high < target:
+        return "missed"
+    return "tie"
+
+
+def verdict_against(
+    low: float, high: float, other_low: float, other_high: float, higher_is_better: bool = False
+) -> str:
+    """:func:`verdict` of an interval against another's instead of a number: ``"met"`` if
+    ``[low, high]`` lies wholly on the good side of ``[other_low, other_high]``, ``"missed"``
+    if wholly on the other, ``"tie"`` where they overlap (``"n/a"`` without both)."""
+    if not all(math.isfinite(v) for v in (low, high, other_low, other_high)):
+        return "n/a"
+    if higher_is_better:
+        low, high, other_low, other_high = -high, -low, -other_high, -other_low
+    if high < other_low:
+        return "met"
+    if low > other_high:
+        return "missed"
+    return "tie"
+
+
+def combined_verdict(calls: Sequence[str]) -> str:
+    """One verdict of several: ``"met"`` if every one is met, ``"missed"`` if any is missed,
+    else ``"tie"``."""
+    if all(c == "met" for c in calls):
+        return "met"
+    return "missed" if "missed" in calls else "tie"
+
+
+def verdict_by_level(levels: Sequence[int], calls: Sequence[str]) -> str:
+    """One verdict over levels from each level's: ``"met"`` when no level misses or ties,
+    else ``"missed at level(s) ..."`` and/or ``"tie at level(s) ..."`` (a level without an
+    interval, ``"n/a"``, counts as a tie)."""
+    missed = [lv for lv, c in zip(levels, calls, strict=True) if c == "missed"]
+    ties = [lv for lv, c in zip(levels, calls, strict=True) if c in ("tie", "n/a")]
+    if not missed and not ties:
+        return "met"
+    parts = [
+        f"{word} at level{'s' if len(group) > 1 else ''} {', '.join(map(str, group))}"
+        for word, group in (("missed", missed), ("tie", ties))
+        if group
+    ]
+    return ", ".join(parts)

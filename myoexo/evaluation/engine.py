@@ -147,7 +147,9 @@ def evaluate_controller(
 
     indices = list(range(subjects)) if isinstance(subjects, (int, np.integer)) else list(subjects)
     kwargs = {**controller_env_kwargs(controller), **dict(env_kwargs or {})}
-    env = make_env(level, episode_duration_s=episode_duration_s, **kwargs)
+    if episode_duration_s is not None:
+        kwargs["episode_duration_s"] = episode_duration_s
+    env = make_env(level, **kwargs)
     try:
         results = [run_episode(env, controller, subject_seed(level, i, root_seed)) for i in indices]
     finally:

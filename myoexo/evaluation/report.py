@@ -21,78 +21,33 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from myoexo.control.specs import controller_slug, seeds_folder_of
+from myoexo.control.specs import controller_slug
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.config import load_config
+from myoexo.evaluation.criteria import verdict
 from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
-from myoexo.evaluation.risk import (
+from myoexo.evaluation.stats import (
     FAILURE_DEG,
+    HEADLINE_LEVELS,
     INTERVAL_METHOD,
+    SUMMARY_METRICS,
     catastrophic_lines,
-    crossed_interval,
-    mean_ratio,
-    mean_reduction_pct,
-    reduction_pct,
+    headline,
+    pool_seed_groups,
+    reductions,
+    summarize_episodes,
     tail_risk,
-    verdict,
 )
 from myoexo.evaluation.storage import load_table, load_traces
 from myoexo.runtime.docs import docs_url
-
-#: Metrics summarized per controller and level (column -> label in the report).
-SUMMARY_METRICS: dict[str, str] = {
-    "final_error_deg": "final error (deg)",
-    "target_overshoot_deg": "overshoot past target (deg)",
-    "settling_time_s": "settling time (s)",
-    "rms_interaction_torque_nm": "RMS torque to settling (Nm)",
-    "peak_interaction_torque_nm": "peak torque (Nm)",
-    "peak_misalignment_deg": "peak misalignment (deg)",
-    "command_rms": "command RMS (-)",
-    "command_total_variation": "command total variation (-)",
-}
-
-
-def summarize(table: Any) -> Any:
-    """Per (controller, level): count, unstable episodes, and mean / std / median / q25 /
-    q75 of every metric of :data:`SUMMARY_METRICS` (NaN settling times ignored; NaN for a
-    metric an older table lacks)."""
-    import pandas as pd
-
-    rows = []
-    for (label, level), episodes in table.groupby(["controller", "level"], sort=False):
-        row: dict[str, Any] = {
-            "controller": label,
-            "level": int(level),
-            "n": len(episodes),
-            "unstable": int(episodes["unstable"].sum()),
-            "not_settled": int(episodes["settling_time_s"].isna().sum()),
-        }
-        for col in SUMMARY_METRICS:
-            if col not in episodes:
-                values = np.empty(0)
-            else:
-                values = episodes[col].to_numpy(dtype=float)
-            values = values[np.isfinite(values)]
-            stats = (
-                (
-                    values.mean(),
-                    values.std(ddof=1) if values.size > 1 else 0.0,
-                    *np.percentile(values, [50, 25, 75]),
-                )
-                if values.size
-                else (math.nan,) * 5
-            )
-            for name, value in zip(("mean", "std", "median", "q25", "q75"), stats, strict=True):
-                row[f"{col}_{name}"] = float(value)
-        rows.append(row)
-    return pd.DataFrame(rows)
+from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 
 
 def reference_controller(labels: Sequence[str]) -> str | None:
@@ -100,139 +55,6 @@ def reference_controller(labels: Sequence[str]) -> str | None:
     if "pid" in labels:
         return "pid"
     return next((c for c in labels if c.lower().startswith("pid")), None)
-
-
-#: Column of a grouped episode table (:func:`seed_groups`) naming the controller an episode
-#: was run with; ``controller`` then names its group.
-MEMBER = "member"
-
-
-def seed_groups(table: Any) -> Any:
-    """The episode table with every ``myoexo seeds`` folder's checkpoints as one controller.
-
-    A checkpoint of a seeds folder is labelled ``<seeds>-seed_<N>-step_<k>``
-    (:func:`~myoexo.control.specs.seeds_folder_of`); its episodes get the controller
-    ``<seeds>`` and keep their own label in the column :data:`MEMBER`, so means, tails and
-    intervals are over the seeds *and* the subjects. Every other controller is its own group
-    of one.
-    """
-    out = table.copy()
-    out[MEMBER] = out["controller"]
-    out["controller"] = [seeds_folder_of(c) or c for c in out[MEMBER]]
-    return out
-
-
-def _pairs(table: Any, reference: str, other: str, level: int, col: str) -> tuple:
-    """``(reference, other)`` values of *col* on the subjects both ran at *level*: the
-    reference's as ``(subjects,)``, the other's as ``(members, subjects)`` (one row per seed
-    of a group, :func:`seed_groups`), subject ``i`` the same person in both; only subjects
-    that every member ran and whose values are all finite."""
-    member = MEMBER if MEMBER in table else "controller"
-    ref = table[(table.controller == reference) & (table.level == level)]
-    ref = ref.drop_duplicates("subject").set_index("subject")[col]
-    oth = table[(table.controller == other) & (table.level == level)]
-    wide = oth.pivot_table(index=member, columns="subject", values=col, dropna=False)
-    common = ref.index.intersection(wide.columns).sort_values()
-    ref_v = ref.loc[common].to_numpy(dtype=float)
-    oth_v = wide.loc[:, common].to_numpy(dtype=float)
-    ok = np.isfinite(ref_v) & np.isfinite(oth_v).all(axis=0)
-    return ref_v[ok], oth_v[:, ok]
-
-
-def _mean(values: np.ndarray, axis: int = -1) -> Any:
-    return np.mean(values, axis=axis)
-
-
-def _mean_difference(reference: np.ndarray, other: np.ndarray, axis: int = -1) -> Any:
-    return np.mean(other, axis=axis) - np.mean(reference, axis=axis)
-
-
-def reductions(table: Any, reference: str, other: str) -> Any:
-    """Per level, ``other`` (a controller, or a group of seeds: :func:`seed_groups`) against
-    ``reference`` on the same subjects:
-
-    * the reduction of the RMS to settling and of the peak interaction torque, in % of the
-      reference's mean, with a 95 % interval over seeds and subjects
-      (:func:`~myoexo.evaluation.risk.crossed_interval`), and the paired difference
-      (reference - other) as mean and std in Nm;
-    * the mean absolute final error and its paired difference from the reference's (other -
-      reference, deg), each with its interval (unstable episodes are left to the tail);
-    * settling: the share of episodes that settle for each, and the ratio of the mean
-      settling times on the subjects where both settle (with its interval); unsettled
-      episodes are counted, not dropped."""
-    import pandas as pd
-
-    rows = []
-    cols = {"rms": "rms_interaction_torque_nm", "peak": "peak_interaction_torque_nm"}
-    levels = sorted(
-        set(table.level[table.controller == reference])
-        & set(table.level[table.controller == other])
-    )
-    for level in levels:
-        row: dict[str, Any] = {"level": int(level)}
-        for key, col in cols.items():
-            ref, oth = _pairs(table, reference, other, level, col)
-            row["n_paired"] = int(oth.size)
-            row["seeds"] = int(oth.shape[0])
-            diff = ref - oth
-            row[f"{key}_reduction_pct"] = (
-                float(reduction_pct(ref, oth.ravel())) if ref.size and ref.mean() else math.nan
-            )
-            low, high = crossed_interval((ref, oth), reduction_pct, seed=int(level))
-            row[f"{key}_reduction_pct_low"], row[f"{key}_reduction_pct_high"] = low, high
-            row[f"{key}_paired_diff_nm_mean"] = float(diff.mean()) if diff.size else math.nan
-            row[f"{key}_paired_diff_nm_std"] = (
-                float(diff.std(ddof=1)) if diff.size > 1 else math.nan
-            )
-        ref_e, oth_e = _pairs(table, reference, other, level, "abs_final_error_deg")
-        row["abs_final_error_deg"] = float(oth_e.mean()) if oth_e.size else math.nan
-        row["abs_final_error_deg_low"], row["abs_final_error_deg_high"] = crossed_interval(
-            (oth_e,), _mean, seed=int(level)
-        )
-        row["abs_final_error_diff_deg"] = (
-            float(oth_e.mean() - ref_e.mean()) if oth_e.size else math.nan
-        )
-        row["abs_final_error_diff_deg_low"], row["abs_final_error_diff_deg_high"] = (
-            crossed_interval((ref_e, oth_e), _mean_difference, seed=int(level))
-        )
-        level_rows = table[table.level == level]
-        settled = np.isfinite(level_rows["settling_time_s"].to_numpy(dtype=float))
-        for who, name in (("reference", reference), ("other", other)):
-            mine = (level_rows.controller == name).to_numpy()
-            row[f"{who}_settled_pct"] = 100.0 * float(settled[mine].mean())
-        ref_s, oth_s = _pairs(table, reference, other, level, "settling_time_s")
-        row["n_both_settled"] = int(oth_s.size)
-        row["settling_ratio"] = float(mean_ratio(ref_s, oth_s.ravel())) if ref_s.size else math.nan
-        row["settling_ratio_low"], row["settling_ratio_high"] = crossed_interval(
-            (ref_s, oth_s), mean_ratio, seed=int(level)
-        )
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-#: The levels whose mean is the study's headline (its peak 10.6 % and RMS 8.9 % are the
-#: means over the spastic levels where its SAC reaches the target: (12.5 + 8.8) / 2 and
-#: (9.7 + 8.1) / 2).
-HEADLINE_LEVELS: tuple[int, ...] = (1, 2)
-
-
-def headline(table: Any, reference: str, other: str, levels: Sequence[int]) -> dict[str, Any]:
-    """The mean over *levels* of the per-level peak and RMS reductions of ``other`` against
-    ``reference``, each with a 95 % interval over seeds and subjects (the levels' subject
-    ``i`` together; ``nan`` where a level is missing or the levels have other subjects)."""
-    out: dict[str, Any] = {"levels": tuple(levels)}
-    cols = {"rms": "rms_interaction_torque_nm", "peak": "peak_interaction_torque_nm"}
-    for key, col in cols.items():
-        arrays: list[np.ndarray] = []
-        for level in levels:
-            arrays += list(_pairs(table, reference, other, level, col))
-        subjects = {a.shape[-1] for a in arrays}
-        if not arrays or len(subjects) != 1 or 0 in subjects:
-            out[key] = out[f"{key}_low"] = out[f"{key}_high"] = math.nan
-            continue
-        out[key] = float(mean_reduction_pct(*(a.ravel() for a in arrays)))
-        out[f"{key}_low"], out[f"{key}_high"] = crossed_interval(arrays, mean_reduction_pct)
-    return out
 
 
 # ----------------------------------------------------------------------------- markdown
@@ -511,8 +333,8 @@ def write_report(
     fig_dir = dest / "figures"
     pngs = write_figures(out, fig_dir, table)
 
-    table = seed_groups(table)  # a seeds folder's checkpoints: one controller
-    summary = summarize(table)
+    table = pool_seed_groups(table)  # a seed group's checkpoints: one controller
+    summary = summarize_episodes(table)
     summary.to_csv(dest / "summary.csv", index=False)
     labels = list(dict.fromkeys(table["controller"]))
     reference = reference_controller(labels)
@@ -652,28 +474,36 @@ def _bound_section(table: Any, out: Path, bound_dir: str | Path | None) -> list[
 
 
 # ----------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo report``."""
-    parser.add_argument("dir", type=Path, help="evaluation folder (myoexo evaluate --out)")
-    parser.add_argument(
-        "--out", type=Path, default=None, help="where to write (default: the folder itself)"
+@dataclass(frozen=True)
+class ReportConfig:
+    """What ``myoexo report`` writes (``dir`` is its positional argument, the other fields
+    its options)."""
+
+    dir: Path = option(doc="evaluation folder (myoexo evaluate --out)", flag="", metavar="DIR")
+    out: Path | None = option(
+        None, "where to write (default: the folder itself)", folder=True, metavar="DIR"
     )
-    parser.add_argument(
-        "--bound",
-        type=Path,
-        default=None,
+    bound: Path | None = option(
+        None,
+        "evaluation folder of the oracle on some of the same subjects: adds each controller's "
+        "distance to the achievable bound (default: none)",
         metavar="DIR",
-        help="evaluation folder of the oracle on some of the same subjects: adds each "
-        "controller's distance to the achievable bound",
     )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo report``: :class:`ReportConfig`'s fields."""
+    add_positional(parser, ReportConfig, "dir")
+    add_options(parser, ReportConfig)
 
 
 def run(args: argparse.Namespace) -> int:
-    """``myoexo report DIR``: 0 on success, 2 if DIR is not an evaluation folder."""
-    try:
-        path = write_report(args.dir, args.out, bound_dir=args.bound)
-    except ValueError as exc:
-        print(f"myoexo report: error: {exc}", file=sys.stderr)
-        return 2
+    """``myoexo report DIR``: 0 on success; a DIR that is not an evaluation folder is a
+    user error (one line, exit status 2)."""
+    config = from_options(ReportConfig, args, dir=args.dir)
+    path = write_report(config.dir, config.out, bound_dir=config.bound)
     print(f"report: {path}")
     return 0

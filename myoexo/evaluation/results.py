@@ -1,185 +1,65 @@
-"""Result sets: the small files every results table of the docs is generated from.
+"""Result sets: the small files a results table is computed from.
 
 A *result set* is a folder of small CSV files computed from one evaluation folder
-(``myoexo results collect EVAL_DIR NAME``): ``summary.csv`` (mean, std, quantiles per
-controller and level, :func:`~myoexo.evaluation.report.summarize`), ``tail_risk.csv``
-(:func:`~myoexo.evaluation.risk.tail_risk`), ``reductions.csv`` (each controller against the
-PID on the same subjects, with intervals, :func:`~myoexo.evaluation.report.reductions`),
+(``myoexo results collect EVAL_DIR DEST``): ``summary.csv`` (mean, std, quantiles per
+controller and level, :func:`~myoexo.evaluation.stats.summarize_episodes`), ``tail_risk.csv``
+(:func:`~myoexo.evaluation.stats.tail_risk`), ``reductions.csv`` (each controller against the
+PID on the same subjects, with intervals, :func:`~myoexo.evaluation.stats.reductions`),
 ``headline.csv`` (the study's levels 1-2 aggregation and the mean over every level run) and
 ``meta.json`` (the command that produced the evaluation, its twin, subjects and root seed,
-and the package versions). Result sets are committed under ``docs/results/``.
+and the package versions).
 
-``myoexo results tables`` renders each set's Markdown tables into ``tables.md`` beside its
-files (the docs include it) and the short tables of the README and the model cards between
-their markers (:data:`BLOCKS`); ``--check`` fails where a committed table differs from what
-the files give, so no results table is typed by hand.
+The tables of a set are computed from its files, as text: :func:`render` (every table of the
+set), :func:`headline_block` (the short tables of some of its controllers),
+:func:`goals_table` (a deployable controller against
+:class:`~myoexo.evaluation.criteria.DeployableGoals`, from a nominal and a perturbed set).
+``myoexo results tables`` and ``myoexo results goals`` print them; nothing here writes
+outside the set folder that ``collect`` is given.
 
-A ``myoexo seeds`` folder's checkpoints are one controller of a set, named after the folder
-(:func:`~myoexo.evaluation.report.seed_groups`): its means, tails and intervals are over the
-seeds and the subjects.
+The members of a seed group (the checkpoints of a ``myoexo policy seeds`` folder, a
+distillation's seed copies) are one controller of a set, named after the group
+(:func:`~myoexo.evaluation.stats.pool_seed_groups`): its means, tails and intervals are over
+the seeds and the subjects.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.control.specs import seeds_folder_of_spec
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.config import EVALUATION_ROOT_SEED, load_config
-from myoexo.evaluation.criteria import DeployableGoals
-from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
-from myoexo.evaluation.report import (
-    HEADLINE_LEVELS,
-    fmt_ci,
-    fmt_num,
-    headline,
-    reductions,
-    reference_controller,
-    seed_groups,
-    summarize,
-)
-from myoexo.evaluation.risk import (
-    FAILURE_DEG,
-    INTERVAL_METHOD,
-    tail_risk,
+from myoexo.evaluation.criteria import (
+    DeployableGoals,
+    combined_verdict,
     verdict,
     verdict_against,
+    verdict_by_level,
+)
+from myoexo.evaluation.paper import PAPER_HEADLINES, PAPER_RESULTS
+from myoexo.evaluation.report import fmt_ci, fmt_num, reference_controller
+from myoexo.evaluation.stats import (
+    FAILURE_DEG,
+    HEADLINE_LEVELS,
+    INTERVAL_METHOD,
+    headline,
+    mean_interval,
+    pool_seed_groups,
+    reductions,
+    summarize_episodes,
+    tail_risk,
 )
 from myoexo.evaluation.storage import load_table
 from myoexo.model import recorded_twin_version
+from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 from myoexo.runtime.files import write_json_atomic
 
-#: Where the committed result sets live, relative to the repository root.
-RESULTS_DIR = Path("docs") / "results"
-#: The rendered tables of a set.
-TABLES_FILE = "tables.md"
-
-
-@dataclass(frozen=True)
-class Block:
-    """A generated results block in a file outside the result sets (the README, a model
-    card): the headline table of each of *controllers* from the set *result_set*, between
-    the lines :attr:`start` and :attr:`end`.
-
-    Attributes:
-        path: The file, relative to the repository root.
-        result_set: The set's folder name under :data:`RESULTS_DIR`.
-        controllers: Controllers (or seed groups) of the set, in order.
-    """
-
-    path: str
-    result_set: str
-    controllers: tuple[str, ...]
-
-    def _marker(self, edge: str) -> str:
-        return f"<!-- myoexo-results:{self.result_set}:{','.join(self.controllers)}:{edge} -->"
-
-    @property
-    def start(self) -> str:
-        return self._marker("start")
-
-    @property
-    def end(self) -> str:
-        return self._marker("end")
-
-    def render(self, root: Path) -> str:
-        """The block's text, its markers included."""
-        return block_text(root, self)
-
-
-@dataclass(frozen=True)
-class GoalsBlock:
-    """A generated table of a deployable controller against :class:`DeployableGoals`, from
-    a nominal and a perturbed result set of the same evaluation subjects
-    (:func:`goals_table`), in *path* between its markers.
-
-    Attributes:
-        path: The file, relative to the repository root.
-        controller: The deployable controller (a label or seed group of both sets).
-        nominal: The nominal result set's folder name under :data:`RESULTS_DIR`.
-        perturbed: The perturbed result set's.
-        teacher: The controller whose command smoothness it must match (in both sets).
-        device_baseline: The device's own tuned baseline it must beat (in either set that
-            holds it).
-    """
-
-    path: str
-    controller: str
-    nominal: str
-    perturbed: str
-    teacher: str
-    device_baseline: str
-
-    @property
-    def start(self) -> str:
-        return f"<!-- myoexo-goals:{self.controller}:{self.nominal},{self.perturbed}:start -->"
-
-    @property
-    def end(self) -> str:
-        return f"<!-- myoexo-goals:{self.controller}:{self.nominal},{self.perturbed}:end -->"
-
-    def render(self, root: Path) -> str:
-        """The block's text, its markers included."""
-        sets = root / RESULTS_DIR
-        table = goals_table(
-            sets / self.nominal,
-            sets / self.perturbed,
-            self.controller,
-            self.teacher,
-            self.device_baseline,
-        )
-        note = (
-            f"(Generated by `myoexo results tables` from `{RESULTS_DIR.as_posix()}/"
-            f"{self.nominal}` and `{RESULTS_DIR.as_posix()}/{self.perturbed}`; goals: "
-            "`myoexo.evaluation.criteria.DeployableGoals`.)"
-        )
-        return "\n".join([self.start, table, "", note, self.end])
-
-
-#: Every generated block outside the result sets' own ``tables.md``.
-BLOCKS: tuple[Block | GoalsBlock, ...] = (
-    Block("README.md", "eval_1000", ("guard:sac", "guard:student_exo")),
-    Block("README.md", "eval_seeds_100", ("sac_5seeds",)),
-    Block("myoexo/policies/MODEL_CARD.md", "eval_1000", ("guard:sac",)),
-    Block("myoexo/policies/MODEL_CARD.md", "eval_1000_perturbed", ("guard:sac",)),
-    Block("myoexo/policies/MODEL_CARD.md", "eval_500", ("sac",)),
-    Block("myoexo/policies/MODEL_CARD.md", "eval_seeds_100", ("sac_5seeds",)),
-    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000", ("student_exo",)),
-    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000_perturbed", ("student_exo",)),
-    Block(
-        "myoexo/policies/MODEL_CARD_student_exo.md",
-        "eval_student_seeds_100",
-        ("student_exo_3seeds",),
-    ),
-    Block(
-        "myoexo/policies/MODEL_CARD_student_exo.md",
-        "eval_student_seeds_100_perturbed",
-        ("student_exo_3seeds",),
-    ),
-    Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
-    *(
-        GoalsBlock(
-            "myoexo/policies/MODEL_CARD_student_exo.md",
-            student,
-            "eval_1000",
-            "eval_1000_perturbed",
-            teacher="guard:sac",
-            device_baseline="pid:tuned=exo",
-        )
-        for student in ("student_exo", "guard:student_exo")
-    ),
-)
-
 _FILES = ("summary.csv", "tail_risk.csv", "reductions.csv", "headline.csv", "meta.json")
-
-
-#: A controller spec of a ``myoexo seeds`` folder's checkpoint (what ``--seeds-dir`` adds).
-_SEED_CHECKPOINT = re.compile(r"(?:\w+:)?(?P<dir>.+)/seed_\d+/checkpoints/step_\d+/model\.zip")
 
 
 def command_of(config: dict[str, Any]) -> str:
@@ -187,11 +67,11 @@ def command_of(config: dict[str, Any]) -> str:
     cfg = config.get("config", {})
     controllers, seeds_dirs = [], []
     for spec in map(str, cfg.get("controllers", [])):
-        m = _SEED_CHECKPOINT.fullmatch(spec)
-        if m is None:
+        folder = seeds_folder_of_spec(spec)
+        if folder is None:
             controllers.append(spec)
-        elif m.group("dir") not in seeds_dirs:
-            seeds_dirs.append(m.group("dir"))  # --seeds-dir added the folder's checkpoints
+        elif folder not in seeds_dirs:
+            seeds_dirs.append(folder)  # --seeds-dir added the folder's checkpoints
     parts = ["myoexo evaluate", "--controllers", *controllers]
     if seeds_dirs:
         parts += ["--seeds-dir", *seeds_dirs]
@@ -200,7 +80,7 @@ def command_of(config: dict[str, Any]) -> str:
         parts += ["--seed", str(cfg["root_seed"])]
     twin = TwinOptions.from_dict(cfg.get("twin") or {})
     for key, value in twin.task:
-        parts += ["--set", f"{key}={value:g}"]
+        parts += [f"--{key.replace('_', '-')}", f"{value:g}"]
     if twin.reflex != TwinOptions().reflex:
         parts += ["--reflex", twin.reflex]
     if twin.robustness:
@@ -227,7 +107,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     import pandas as pd
 
     config = load_config(eval_dir)
-    table = seed_groups(load_table(eval_dir))
+    table = pool_seed_groups(load_table(eval_dir))
     if table.empty:
         raise ValueError(f"{str(eval_dir)!r} holds no episodes yet")
     cfg = config.get("config", {})
@@ -254,7 +134,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
             h["levels"] = ", ".join(map(str, scope_levels))
             heads.append({"controller": c, "scope": scope, **h})
     files = {
-        "summary.csv": summarize(table),
+        "summary.csv": summarize_episodes(table),
         "tail_risk.csv": tail_risk(table, reference),
         "reductions.csv": pd.concat(
             [reductions(table, reference, c).assign(controller=c) for c in others],
@@ -482,7 +362,7 @@ def render(folder: str | Path, label: str | None = None) -> str:
         "edit -->",
         f"{_commands(meta)} ({meta['subjects_per_level']} subjects per level, root "
         f"seed {meta['root_seed']}, {meta['episodes']} episodes; {versions}). A `myoexo "
-        "seeds` folder's checkpoints are one controller named after the folder: its numbers "
+        "policy seeds` folder's checkpoints are one controller named after the folder: its numbers "
         "are over the seeds and the subjects. Intervals: "
         f"{INTERVAL_METHOD}. A criterion is met when its whole interval is on the good side "
         "of the paper's number, missed when wholly on the other, a tie otherwise.",
@@ -532,25 +412,6 @@ def render(folder: str | Path, label: str | None = None) -> str:
     return "\n\n".join(parts) + "\n"
 
 
-def _goal_cell(cells: list[str], calls: list[str]) -> str:
-    """Cells joined, then one verdict: met if every call is met, missed if any is."""
-    call = "met" if all(c == "met" for c in calls) else "missed" if "missed" in calls else "tie"
-    return f"{'; '.join(cells)}: **{call}**"
-
-
-def _missed_at(levels: Sequence[int], ties: Sequence[int] = ()) -> str:
-    """``"met"`` when no level misses or ties, else ``"missed at level(s) ..."`` and/or
-    ``"tie at level(s) ..."``."""
-    if not levels and not ties:
-        return "met"
-    parts = [
-        f"{word} at level{'s' if len(group) > 1 else ''} {', '.join(map(str, group))}"
-        for word, group in (("missed", levels), ("tie", ties))
-        if group
-    ]
-    return ", ".join(parts)
-
-
 def _twin_goals(
     result_set: tuple[Any, Any, Any, Any, dict[str, Any]],
     name: str,
@@ -569,8 +430,7 @@ def _twin_goals(
     missing = [c for c in (controller, teacher) if c not in set(summary.controller)]
     if missing:
         raise ValueError(f"the result set {name!r} has no {missing}")
-    mean_bound = goals.easy_mean_perturbed_deg if perturbed else goals.easy_mean_deg
-    p95_bound = goals.easy_p95_perturbed_deg if perturbed else goals.easy_p95_deg
+    mean_bound, p95_bound = goals.easy_bounds(perturbed)
     cells, calls = [], []
     for level in goals.easy_levels:
         row = r.loc[level]
@@ -580,7 +440,7 @@ def _twin_goals(
             verdict(row.abs_final_error_deg_low, row.abs_final_error_deg_high, mean_bound, False)
         )
         calls.append("met" if p95 < p95_bound else "missed")
-    out = [_goal_cell(cells, calls)]
+    out = [f"{'; '.join(cells)}: **{combined_verdict(calls)}**"]
     for level in goals.hard_levels:
         row = r.loc[level]
         diff, low, high = (
@@ -600,36 +460,21 @@ def _twin_goals(
         f"{' / '.join(map(str, counts))} (worst {' / '.join(fmt_num(w, 1) for w in worst)} "
         f"deg): **{'met' if not any(counts) else 'missed'}**"
     )
-    mine = [_mean_ci(s.loc[(controller, lv)], "command_total_variation") for lv in levels]
-    theirs = [_mean_ci(s.loc[(teacher, lv)], "command_total_variation") for lv in levels]
+    mine = [_summary_mean(s.loc[(controller, lv)], "command_total_variation") for lv in levels]
+    theirs = [_summary_mean(s.loc[(teacher, lv)], "command_total_variation") for lv in levels]
     calls = [verdict_against(*a[1:], *b[1:]) for a, b in zip(mine, theirs, strict=True)]
     out.append(
         f"{' / '.join(fmt_ci(*v, 1) for v in mine)} vs `{teacher}`'s "
-        f"{' / '.join(fmt_ci(*v, 1) for v in theirs)}: **{_by_level(levels, calls)}**"
+        f"{' / '.join(fmt_ci(*v, 1) for v in theirs)}: **{verdict_by_level(levels, calls)}**"
     )
     return out
 
 
-def _by_level(levels: Sequence[int], calls: Sequence[str]) -> str:
-    """One verdict over levels from each level's :func:`verdict_against` (a level without
-    intervals counts as a tie)."""
-    missed = [lv for lv, c in zip(levels, calls, strict=True) if c == "missed"]
-    ties = [lv for lv, c in zip(levels, calls, strict=True) if c in ("tie", "n/a")]
-    return _missed_at(missed, ties)
-
-
-def _mean_ci(row: Any, name: str) -> tuple[float, float, float]:
-    """``(mean, low, high)`` of a summary row's ``name``: the Student-t 95 % interval of the
-    mean over its ``n`` episodes, from ``name_mean`` and ``name_std`` (subjects only)."""
-    import math
-
-    from scipy import stats
-
-    mean, std, n = float(row[f"{name}_mean"]), float(row[f"{name}_std"]), int(row["n"])
-    if n < 2:
-        return mean, float("nan"), float("nan")
-    half = float(stats.t.ppf(0.975, n - 1)) * std / math.sqrt(n)
-    return mean, mean - half, mean + half
+def _summary_mean(row: Any, name: str) -> tuple[float, float, float]:
+    """``(mean, low, high)`` of a summary row's *name*: its mean over the row's ``n``
+    episodes with the interval of :func:`~myoexo.evaluation.stats.mean_interval`."""
+    mean = float(row[f"{name}_mean"])
+    return (mean, *mean_interval(mean, float(row[f"{name}_std"]), int(row["n"])))
 
 
 def _beats(red: Any, controller: str, baseline: str) -> str:
@@ -650,7 +495,7 @@ def _beats(red: Any, controller: str, baseline: str) -> str:
                 a[f"{name}_low"], a[f"{name}_high"], b[f"{name}_low"], b[f"{name}_high"]
             )
         )
-    return f"{' / '.join(cells)} deg: **{_by_level(levels, calls)}**"
+    return f"{' / '.join(cells)} deg: **{verdict_by_level(levels, calls)}**"
 
 
 def goals_table(
@@ -719,16 +564,44 @@ def goals_table(
     )
 
 
-def block_text(root: Path, block: Block) -> str:
-    """The text of a generated block, its markers included."""
-    folder = root / RESULTS_DIR / block.result_set
+def goals_block(
+    nominal: str | Path,
+    perturbed: str | Path,
+    controller: str,
+    teacher: str,
+    device_baseline: str,
+    labels: tuple[str, str] | None = None,
+) -> str:
+    """:func:`goals_table` with the line that names its sets (*labels*: how the nominal and
+    the perturbed set are named there, default their paths) and the goals."""
+    nominal, perturbed = Path(nominal), Path(perturbed)
+    names = labels or (nominal.as_posix(), perturbed.as_posix())
+    table = goals_table(nominal, perturbed, controller, teacher, device_baseline)
+    note = (
+        f"(Generated by `myoexo results goals` from `{names[0]}` and `{names[1]}`; goals: "
+        "`myoexo.evaluation.criteria.DeployableGoals`.)"
+    )
+    return "\n".join([table, "", note])
+
+
+def headline_block(folder: str | Path, controllers: Sequence[str], label: str | None = None) -> str:
+    """The short tables of *controllers* of a result set (the README's and the model cards'):
+    for each, :func:`headline_table` and its line of :func:`aggregation_lines`, then the
+    set's subjects and root seed (*label*: how the set's folder is named there, default its
+    path).
+
+    Raises:
+        ValueError: The set lacks one of *controllers*.
+    """
+    folder = Path(folder)
     _, _, red, _, meta = _read(folder)
-    missing = [c for c in block.controllers if c not in set(red.controller)]
+    label = label or folder.as_posix()
+    missing = [c for c in controllers if c not in set(red.controller)]
     if missing:
-        raise ValueError(f"{block.path}: the result set {block.result_set!r} has no {missing}")
-    lines = [block.start]
+        raise ValueError(f"the result set {label!r} has no {missing}")
+    lines: list[str] = []
     aggregation = aggregation_lines(folder)
-    for controller in block.controllers:
+    for controller in controllers:
         lines += [
             f"**`{controller}`** against `{meta['reference']}` on the same subjects:",
             "",
@@ -740,78 +613,102 @@ def block_text(root: Path, block: Block) -> str:
     robust = " perturbed twins," if (meta.get("twin") or {}).get("robustness") else ""
     if (note := earlier_twin_note(meta)) is not None:
         lines += [note, ""]
-    lines += [
+    lines.append(
         f"({meta['subjects_per_level']} evaluation subjects per level,{robust} root seed "
-        f"{meta['root_seed']}; generated by `myoexo results tables` from "
-        f"`{RESULTS_DIR.as_posix()}/{block.result_set}`.)",
-        block.end,
-    ]
+        f"{meta['root_seed']}; generated by `myoexo results tables` from `{label}`.)"
+    )
     return "\n".join(lines)
 
 
-def write_tables(
-    root: Path, check: bool = False, blocks: Sequence[Block | GoalsBlock] = BLOCKS
-) -> list[str]:
-    """Render every result set under ``root/docs/results`` and every generated block of
-    *blocks*; with *check*, write nothing and return the files that differ from what they
-    should hold.
-
-    Raises:
-        ValueError: A folder is no result set, a block's file lacks its markers, or its set
-            or controller does not exist.
-    """
-    stale = []
-    for folder in sorted(p for p in (root / RESULTS_DIR).iterdir() if p.is_dir()):
-        text = render(folder, (RESULTS_DIR / folder.name).as_posix())
-        path = folder / TABLES_FILE
-        if not path.is_file() or path.read_text() != text:
-            stale.append(str(path.relative_to(root)))
-            if not check:
-                path.write_text(text)
-    for block in blocks:
-        path = root / block.path
-        text = path.read_text()
-        if block.start not in text or block.end not in text:
-            raise ValueError(f"{block.path} lacks the markers {block.start} ... {block.end}")
-        head, rest = text.split(block.start, 1)
-        _, tail = rest.split(block.end, 1)
-        new = head + block.render(root) + tail
-        if new != text:
-            if block.path not in stale:
-                stale.append(block.path)
-            if not check:
-                path.write_text(new)
-    return stale
-
-
 # ----------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo results``."""
-    sub = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
-    c = sub.add_parser("collect", help="write the result set of an evaluation folder")
-    c.add_argument("eval_dir", type=Path, help="a myoexo evaluate output folder")
-    c.add_argument("name", help=f"the set's name: its folder under {RESULTS_DIR}")
-    c.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
-    c.add_argument(
-        "--update",
-        action="store_true",
-        help="add the evaluation's controllers to the existing set NAME (replacing rows of the "
+@dataclass(frozen=True)
+class CollectOptions:
+    """What ``myoexo results collect EVAL_DIR DEST`` reads and writes (its positional
+    arguments and its option)."""
+
+    eval_dir: Path = option(doc="a myoexo evaluate output folder", flag="")
+    dest: Path = option(doc="the set's folder (created)", flag="", folder=True)
+    update: bool = option(
+        False,
+        "add the evaluation's controllers to the existing set DEST (replacing rows of the "
         "same name) instead of writing a new one; it must hold the set's reference on the "
         "same subjects",
     )
-    t = sub.add_parser("tables", help="render every result set's tables and the front page's")
-    t.add_argument("--root", type=Path, default=Path("."), help="repository root (default: .)")
-    t.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table is stale")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class TablesOptions:
+    """What ``myoexo results tables SET`` prints."""
+
+    set: Path = option(doc="a result set folder (myoexo results collect)", flag="")
+    controllers: tuple[str, ...] = option(
+        (),
+        "only the short table of each of these controllers (one row per level)",
+        metavar="LABEL",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class GoalsOptions:
+    """What ``myoexo results goals NOMINAL PERTURBED`` judges (``--controller`` and
+    ``--teacher`` are required)."""
+
+    nominal: Path = option(doc="result set on the nominal twin", flag="")
+    perturbed: Path = option(doc="result set of the same subjects, perturbed", flag="")
+    controller: str = option(doc="the deployable controller (required, no default)")
+    teacher: str = option(
+        doc="the controller whose command smoothness it must match (required, no default)"
+    )
+    device_baseline: str = option("pid:tuned=exo", "the device's own baseline it must beat")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def _positionals(parser: argparse.ArgumentParser, cls: type, names: Sequence[str]) -> None:
+    for name in names:
+        add_positional(parser, cls, name)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo results``: each sub-command's are the fields of its options class
+    (:class:`CollectOptions`, :class:`TablesOptions`, :class:`GoalsOptions`)."""
+    sub = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    c = sub.add_parser("collect", help="write the result set of an evaluation folder")
+    _positionals(c, CollectOptions, ("eval_dir", "dest"))
+    add_options(c, CollectOptions)
+    t = sub.add_parser("tables", help="print a result set's tables (Markdown)")
+    _positionals(t, TablesOptions, ("set",))
+    add_options(t, TablesOptions)
+    g = sub.add_parser(
+        "goals", help="print a deployable controller's table against its goals (Markdown)"
+    )
+    _positionals(g, GoalsOptions, ("nominal", "perturbed"))
+    add_options(g, GoalsOptions)
+    for action in g._actions:  # the fields have no default: their options are required
+        if action.dest in ("controller", "teacher"):
+            action.required = True
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo results``."""
     if args.action == "collect":
-        dest = collect(args.eval_dir, args.root / RESULTS_DIR / args.name, update=args.update)
+        co = from_options(CollectOptions, args, eval_dir=args.eval_dir, dest=args.dest)
+        dest = collect(co.eval_dir, co.dest, update=co.update)
         print(f"result set: {dest}")
-        return 0
-    stale = write_tables(args.root, check=args.check)
-    verb = "stale" if args.check else "written"
-    for path in stale:
-        print(f"{verb}: {path}")
-    return 1 if (args.check and stale) else 0
+    elif args.action == "tables":
+        to = from_options(TablesOptions, args, set=args.set)
+        if to.controllers:
+            print(headline_block(to.set, to.controllers))
+        else:
+            print(render(to.set), end="")
+    else:
+        go = from_options(GoalsOptions, args, nominal=args.nominal, perturbed=args.perturbed)
+        print(goals_block(go.nominal, go.perturbed, go.controller, go.teacher, go.device_baseline))
+    return 0

@@ -17,7 +17,7 @@ with the driver even when it is killed with SIGKILL.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +27,13 @@ import numpy as np
 from myoexo.evaluation.backends import available_cores, check_backend, run_chunks
 from myoexo.evaluation.config import EvaluationConfig, write_config
 from myoexo.evaluation.engine import Chunk, plan_chunks, resolve_controllers
-from myoexo.evaluation.storage import TRACES_DIR, chunk_done, collect_table, write_table
+from myoexo.evaluation.storage import (
+    TABLE_STEM,
+    TRACES_DIR,
+    chunk_done,
+    collect_table,
+    write_table,
+)
 from myoexo.runtime.files import remove_stale_temporaries
 from myoexo.runtime.lifecycle import FolderLock, StopSignals
 
@@ -77,6 +83,30 @@ def _output_folder(out_dir: str | os.PathLike[str]) -> Path:
     return out
 
 
+def check_table_kept(out: Path, labels: Sequence[str], config: EvaluationConfig) -> None:
+    """Raise ``ValueError`` if ``out`` holds an episode table with episodes that this run
+    would drop when it rewrites the table (another controller, level or more subjects): a
+    folder's table, and the report drawn from it, only ever grow."""
+    path = out / f"{TABLE_STEM}.parquet"
+    if not path.is_file():
+        return
+    import pandas as pd
+
+    old = pd.read_parquet(path, columns=["controller", "level", "subject"])
+    dropped = old[
+        ~old["controller"].isin(list(labels))
+        | ~old["level"].isin(list(config.levels))
+        | (old["subject"] >= config.subjects)
+    ]
+    if not dropped.empty:
+        raise ValueError(
+            f"{str(out)!r} holds {len(old)} episodes ({old['controller'].nunique()} "
+            f"controller(s), levels {sorted(old['level'].unique().tolist())}, "
+            f"{old['subject'].nunique()} subjects) and this run would drop {len(dropped)} of "
+            "them; choose another --out folder, or ask for at least what it holds"
+        )
+
+
 def _episodes(chunks: list[Chunk]) -> int:
     return sum(c.stop - c.start for c in chunks)
 
@@ -124,8 +154,9 @@ def evaluate(
         root_seed=None if config.selection else config.root_seed,  # a selection run picks
         twin=config.twin,
     )
-    out = _output_folder(out_dir)
     labels = [s.label for s in specs]
+    check_table_kept(Path(out_dir), labels, config)
+    out = _output_folder(out_dir)
     with FolderLock(out, "evaluation folder"), StopSignals(enabled=graceful_stop) as stop:
         write_config(out, config, specs)
         remove_stale_temporaries(out / TRACES_DIR, "*/L*/.tmp-*")  # writes cut short by a kill
@@ -151,7 +182,8 @@ def evaluate(
             stored = _episodes([c for c in chunks if chunk_done(c.path(out))])
         table = None
         if stored == total:  # else stopped: the run that completes the chunks writes it
-            table = collect_table([c.path(out) for c in chunks], labels)
+            groups = {s.label: s.seed_group for s in specs}
+            table = collect_table([c.path(out) for c in chunks], labels, groups)
             write_table(out, table)
     return EvaluationRun(
         out_dir=out,

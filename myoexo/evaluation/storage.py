@@ -3,7 +3,8 @@
 ::
 
     config.json                      the run-defining settings (:mod:`.config`)
-    episodes.parquet, episodes.csv   one row per episode (:func:`~.engine.episode_row`)
+    episodes.parquet, episodes.csv   one row per episode (:func:`~.engine.episode_row`, and
+                                     the controller's ``seed_group``)
     traces/<controller>/L<level>/<first>-<stop>.npz   finished chunks (rows + traces)
 
 A finished chunk is one compressed ``.npz`` (its table rows as JSON, its traces, their
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.specs import controller_slug
+from myoexo.evaluation.stats import SEED_GROUP
 from myoexo.runtime.files import atomic_path, savez_atomic
 
 TABLE_STEM = "episodes"
@@ -81,9 +84,15 @@ def read_chunk(path: Path) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray
         return json.loads(str(z["rows_json"])), z["traces"], z["time_s"]
 
 
-def collect_table(paths: Sequence[Path], controller_order: Sequence[str]) -> Any:
+def collect_table(
+    paths: Sequence[Path],
+    controller_order: Sequence[str],
+    seed_groups: Mapping[str, str | None] | None = None,
+) -> Any:
     """The episode table of the given chunk files, sorted by controller (in
-    ``controller_order``), level and subject."""
+    ``controller_order``), level and subject, with the column ``seed_group``
+    (:data:`~myoexo.evaluation.stats.SEED_GROUP`) beside ``controller`` (*seed_groups*: each
+    controller label's group, ``None`` for none)."""
     import pandas as pd
 
     rows: list[dict[str, Any]] = []
@@ -91,6 +100,8 @@ def collect_table(paths: Sequence[Path], controller_order: Sequence[str]) -> Any
         rows.extend(read_chunk(path)[0])
     table = pd.DataFrame(rows)
     if not table.empty:
+        groups = dict(seed_groups or {})
+        table.insert(1, SEED_GROUP, [groups.get(c) for c in table["controller"]])
         order = {label: i for i, label in enumerate(controller_order)}
 
         def sort_key(col: pd.Series) -> pd.Series:
@@ -109,14 +120,26 @@ def write_table(out_dir: str | os.PathLike[str], table: Any) -> None:
             writer(tmp, index=False)
 
 
+#: The label of a seed group's member in a table without the column ``seed_group``:
+#: ``<group>-seed_<N>-step_<k>`` (a seeds folder's checkpoint) or
+#: ``<group>-seed_<N>-round_<r>`` (a distillation seed's copy).
+_MEMBER_LABEL = re.compile(r"(?P<group>.+)-seed_\d+-(?:step|round)_\d+")
+
+
 def load_table(out_dir: str | os.PathLike[str]) -> Any:
-    """The episode table of an evaluation folder."""
+    """The episode table of an evaluation folder; a table without the column ``seed_group``
+    (:data:`~myoexo.evaluation.stats.SEED_GROUP`) gets it from its members' labels."""
     import pandas as pd
 
     path = Path(out_dir) / f"{TABLE_STEM}.parquet"
     if not path.is_file():
         raise ValueError(f"{str(out_dir)!r} has no {path.name}: not an evaluation folder")
-    return pd.read_parquet(path)
+    table = pd.read_parquet(path)
+    if SEED_GROUP not in table and "controller" in table:
+        members = [_MEMBER_LABEL.fullmatch(str(c)) for c in table["controller"]]
+        column = list(table.columns).index("controller") + 1
+        table.insert(column, SEED_GROUP, [m.group("group") if m else None for m in members])
+    return table
 
 
 @dataclass

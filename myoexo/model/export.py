@@ -1,4 +1,4 @@
-"""``myoexo export-model``: write the twin (or the bare leg) as a standalone MJCF file.
+"""``myoexo twin export``: write the twin (or the bare leg) as a standalone MJCF file.
 
 The file is ``spec.to_xml()`` of :func:`~myoexo.model.build.build_model`'s spec, whose
 ``meshdir`` is MyoSuite's absolute mesh folder, so it loads with
@@ -9,9 +9,28 @@ The file is ``spec.to_xml()`` of :func:`~myoexo.model.build.build_model`'s spec,
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["add_arguments", "export_model", "run"]
+from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
+
+__all__ = ["ExportConfig", "add_arguments", "export_model", "run"]
+
+
+@dataclass(frozen=True)
+class ExportConfig:
+    """What ``myoexo twin export`` writes (``output`` is its positional argument, the other
+    fields its options)."""
+
+    output: Path = option(doc="MJCF file to write, e.g. twin.xml", flag="", metavar="OUTPUT")
+    exo: bool = option(
+        True,
+        "export the coupled twin; --no-exo: the seated leg without the exoskeleton (the "
+        "benchmark baseline)",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 def export_model(path: str | Path, *, with_exo: bool = True) -> Path:
@@ -35,20 +54,17 @@ def export_model(path: str | Path, *, with_exo: bool = True) -> Path:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``export-model`` arguments to ``parser``."""
-    parser.add_argument("output", type=Path, help="MJCF file to write, e.g. twin.xml")
-    parser.add_argument(
-        "--no-exo",
-        action="store_true",
-        help="export the seated leg without the exoskeleton (the benchmark baseline)",
-    )
+    """Options of ``myoexo twin export``: :class:`ExportConfig`'s fields."""
+    add_positional(parser, ExportConfig, "output")
+    add_options(parser, ExportConfig)
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the model and check that it loads; return the process exit code."""
     import mujoco
 
-    out = export_model(args.output, with_exo=not args.no_exo)
+    config = from_options(ExportConfig, args, output=args.output)
+    out = export_model(config.output, with_exo=config.exo)
     model = mujoco.MjModel.from_xml_path(str(out))
     print(
         f"wrote {out} ({model.nq} qpos, {model.nu} actuators, {model.neq} equalities, "

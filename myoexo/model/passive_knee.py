@@ -13,7 +13,7 @@ the knee extends), the second the extensors' (rectus femoris lengthens as the hi
 and the knee flexes), the last the structures that stop hyperextension.
 
 The twin (``TwinParams.passive_knee = "riener_edrich"``) takes the knee's passive moment from
-that fit instead of from its muscles' passive fibres, whose sum at hip 90 deg is 6-11 Nm
+that fit, not from its muscles' passive fibres, whose sum at hip 90 deg is 6-11 Nm
 stiffer than the measurement over knee 20-60 deg and at hip 40 deg 2-4 Nm too weak in
 extension beyond knee 40 deg:
 

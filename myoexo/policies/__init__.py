@@ -24,7 +24,7 @@ supersedes it (``MODEL_CARD_sac_exo.md`` says why and what it measured).
     device_policy = myoexo.load_policy("student_exo")
     env = gym.make("MyoExoKnee-v1", obs_preset=device_policy.obs_preset)
     obs, info = env.reset(seed=0)
-    action = policy.act(obs, info)                         # a myoexo Controller
+    action = policy.act(obs)                               # a myoexo Controller
     action, _ = policy.predict(obs, deterministic=True)   # SB3's signature
     action = policy(obs)                                   # or simply call it
 

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.envs.sensors import Measurements
 from myoexo.runtime.files import atomic_path, write_json_atomic
 
 #: Version of the file format written by :func:`save_actor`.
@@ -64,8 +65,9 @@ class MLPActor:
         metadata: Provenance (env id, steps, seed, ...), kept as given.
 
     The object is a myoexo :class:`~myoexo.control.protocol.Controller` (``reset(seed)``,
-    ``act(obs, info)``), follows SB3's ``predict(obs, state=None, episode_start=None,
-    deterministic=True) -> (action, state)`` and is callable: ``actor(obs) -> action``.
+    ``act(obs, measurements)``, on the observation alone), follows SB3's ``predict(obs,
+    state=None, episode_start=None, deterministic=True) -> (action, state)`` and is callable:
+    ``actor(obs) -> action``.
     """
 
     def __init__(
@@ -163,10 +165,11 @@ class MLPActor:
         """Start of an episode: the deterministic actor has no state to clear."""
         del seed
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """The controller's decision: the deterministic action for one observation, shape
-        ``(action_dim,)`` float32 in [action_low, action_high]."""
-        del info
+        ``(action_dim,)`` float32 in [action_low, action_high]. ``measurements`` is not
+        read."""
+        del measurements
         action = self(np.asarray(obs).reshape(self.obs_dim))
         if not np.isfinite(action).all():
             raise ValueError(f"the actor returned a non-finite action {action.tolist()}")

@@ -1,8 +1,11 @@
-"""The one table of learning algorithms: their names, where their classes live, which extra
-installs them and which ones a training preset can run.
+"""The one table of learning algorithms: their names, where their classes live and which
+extra installs them.
 
-A name is accepted in any case (``"sac"``, ``"SAC"``); a controller spec ``"td3:model.zip"``
-and a preset's ``algorithm = "tqc"`` both read this table.
+A name is accepted in any case (``"sac"``, ``"SAC"``); a controller spec
+``"sbx_sac:model.zip"`` and a training config's ``algorithm = "sbx_sac"``
+(:class:`~myoexo.training.config.TrainConfig`) both read this table. The table holds the
+learners that trained the shipped policies and the documented comparisons: SB3's SAC and PPO,
+and SBX's SAC, TQC and CrossQ.
 
 The ``sbx_*`` learners are SBX's (stable-baselines3 in JAX, the ``jax`` extra): the same API,
 checkpoints and exports, with jitted updates. JAX on a small machine starts more threads than
@@ -30,21 +33,19 @@ class Algorithm:
     """One learning algorithm.
 
     Attributes:
-        name: Lower-case alias (``"sac"``): preset values and controller-spec prefixes.
+        name: Lower-case alias (``"sac"``): a training config's ``algorithm`` and a
+            controller-spec prefix.
         class_name: Class name in its package (``"SAC"``).
         package: Module that defines the class.
         extra: The myoexo extra that installs ``package`` (``None``: a core dependency).
-        trainable: A preset can train it (the off-policy learners with SAC's interface, and
-            PPO).
-        framework: ``"torch"`` (stable-baselines3, sb3-contrib) or ``"jax"`` (SBX).
-        on_policy: Learns from fresh rollouts (no replay buffer; PPO, A2C).
+        framework: ``"torch"`` (stable-baselines3) or ``"jax"`` (SBX).
+        on_policy: Learns from fresh rollouts (no replay buffer; PPO).
     """
 
     name: str
     class_name: str
     package: str = "stable_baselines3"
     extra: str | None = None
-    trainable: bool = False
     framework: str = "torch"
     on_policy: bool = False
 
@@ -64,35 +65,25 @@ ALGORITHMS: MappingProxyType[str, Algorithm] = MappingProxyType(
     {
         a.name: a
         for a in (
-            Algorithm("sac", "SAC", trainable=True),
-            Algorithm("tqc", "TQC", "sb3_contrib", "contrib", trainable=True),
-            Algorithm("crossq", "CrossQ", "sb3_contrib", "contrib", trainable=True),
-            Algorithm("sbx_sac", "SAC", "sbx", "jax", trainable=True, framework="jax"),
-            Algorithm("sbx_tqc", "TQC", "sbx", "jax", trainable=True, framework="jax"),
-            Algorithm("sbx_crossq", "CrossQ", "sbx", "jax", trainable=True, framework="jax"),
-            Algorithm("td3", "TD3"),
-            Algorithm("ddpg", "DDPG"),
-            Algorithm("ppo", "PPO", trainable=True, on_policy=True),
-            Algorithm("a2c", "A2C", on_policy=True),
+            Algorithm("sac", "SAC"),
+            Algorithm("ppo", "PPO", on_policy=True),
+            Algorithm("sbx_sac", "SAC", "sbx", "jax", framework="jax"),
+            Algorithm("sbx_tqc", "TQC", "sbx", "jax", framework="jax"),
+            Algorithm("sbx_crossq", "CrossQ", "sbx", "jax", framework="jax"),
         )
     }
 )
 
-#: Aliases a training preset accepts.
-TRAINABLE_ALGORITHMS: tuple[str, ...] = tuple(a.name for a in ALGORITHMS.values() if a.trainable)
 
-
-def get_algorithm(name: str, trainable: bool = False) -> Algorithm:
-    """The :class:`Algorithm` of an alias or class name (any case).
+def get_algorithm(name: str) -> Algorithm:
+    """The :class:`Algorithm` of an alias (any case).
 
     Raises:
-        ValueError: Unknown name (or, with ``trainable``, one a preset cannot train); the
-            message lists the accepted names.
+        ValueError: Unknown name; the message lists the accepted names.
     """
-    accepted = TRAINABLE_ALGORITHMS if trainable else tuple(ALGORITHMS)
     key = str(name).lower()
-    if key not in accepted:
-        raise ValueError(f"algorithm = {name!r}; accepted: {sorted(accepted)}")
+    if key not in ALGORITHMS:
+        raise ValueError(f"algorithm = {name!r}; accepted: {sorted(ALGORITHMS)}")
     return ALGORITHMS[key]
 
 

@@ -6,7 +6,7 @@ it, the run's settings two folders up)::
     <run>/checkpoints/step_<n>/model.zip         CHECKPOINTS_DIR, MODEL_FILE
     <run>/checkpoints/step_<n>/vecnormalize.pkl  VECNORM_FILE
     <run>/checkpoints/step_<n>/state.json        STATE_FILE (with the twin it was trained on)
-    <seeds>/aggregate.json                       AGGREGATE_FILE (a ``myoexo seeds`` folder's
+    <seeds>/aggregate.json                       AGGREGATE_FILE (a ``myoexo policy seeds`` folder's
                                                  selected checkpoint per seed)
 
 The run folder's layout is :mod:`myoexo.training.checkpoints`'s (it writes these files and
@@ -42,7 +42,7 @@ VECNORM_FILE = "vecnormalize.pkl"
 #: from the checkpoint alone (``twin``: :meth:`~myoexo.envs.options.TwinOptions.to_dict`;
 #: ``env_id``; ``algorithm``).
 STATE_FILE = "state.json"
-#: A ``myoexo seeds`` folder's selection: each seed's chosen checkpoint folder
+#: A ``myoexo policy seeds`` folder's selection: each seed's chosen checkpoint folder
 #: (``selected_checkpoints``), the seed to ship and the selection root.
 AGGREGATE_FILE = "aggregate.json"
 

@@ -29,7 +29,7 @@ as ONNX with its memory as an explicit input and output.
     env = make_env(1, obs_preset=student.obs_preset)         # "exo"
     obs, info = env.reset(seed=0)
     student.reset(0)
-    obs, *_ , info = env.step(student.act(obs, info))
+    obs, *_ , info = env.step(student.act(obs))           # its sensors are in obs
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ from myoexo.envs.observation import (
     EXO_SENSOR_OBS_KEYS,
     STATE_OBS_KEYS,
 )
+from myoexo.envs.sensors import Measurements
 from myoexo.policies.actor import MLPActor, load_actor, save_actor
 
 #: What one frame of the controller's memory holds (obs-vector keys, in this order): the
@@ -217,10 +218,10 @@ class StudentController:
             self._memory[-1] = f
         return stack_frames(self._memory, self.n_frames, self.stride)
 
-    def act(self, obs: np.ndarray, info: Mapping[str, Any] | None = None) -> np.ndarray:
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """One decision: push this observation's frame, return the command ``(1,)`` float32
-        in [-1, 1]. ``info`` is not read."""
-        del info
+        in [-1, 1]. ``measurements`` is not read: the exo's sensors are in the frame."""
+        del measurements
         frame = self.frame(obs)
         if not np.isfinite(frame).all():
             raise ValueError(f"non-finite exo sensor reading {frame.tolist()}")

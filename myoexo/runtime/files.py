@@ -11,6 +11,7 @@ not the owner-only ones of the temporary.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import os
@@ -37,6 +38,19 @@ RECORDED_PACKAGES: tuple[str, ...] = (
 
 
 _UMASK_LOCK = threading.Lock()
+
+
+def output_folder(text: str) -> Path:
+    """An ``--out FOLDER`` of the command line (an argparse ``type``): a folder that exists or
+    can be made, checked when the command line is read, before any work. Raises
+    ``argparse.ArgumentTypeError`` (reported as one line naming the option) when the path,
+    or the nearest of its parents that exists, is not a folder."""
+    path = Path(text)
+    existing = next((p for p in (path, *path.parents) if p.exists()), None)
+    if existing is not None and not existing.is_dir():
+        what = "is a file" if existing == path else f"is under a file, {str(existing)!r}"
+        raise argparse.ArgumentTypeError(f"{text!r} {what}: name a folder (it is made if missing)")
+    return path
 
 
 def current_umask() -> int:

@@ -1,4 +1,4 @@
-"""Ray for the distributed commands (``myoexo evaluate --backend ray``, ``myoexo sweep``).
+"""Ray for the distributed commands (``myoexo evaluate --backend ray``, ``myoexo policy sweep``).
 
 Ray is an optional extra (``pip install 'myoexo[ray]'``); nothing in myoexo imports it
 until one of these commands runs, and :func:`require_ray` turns its absence into a one-line

@@ -46,7 +46,7 @@ The package, one module per part (each name is re-exported here):
   :class:`StageHost`, the smallest host it runs on;
 * :mod:`~myoexo.spasticity.wrapper`: :class:`SpasticityWrapper`, a gymnasium wrapper that
   installs the stage on any MyoSuite env whose model has the 11 muscles and ``knee_angle_r``;
-* the studies that fit the reflex (``myoexo calibrate``, :mod:`myoexo.studies.calibrate`:
+* the studies that fit the reflex (``myoexo twin calibrate``, :mod:`myoexo.studies.calibrate`:
   the stretch reflex, or with ``--reflex persistent`` the after-discharge, to the paper's
   PID) and the paper's Fig. 2b (:func:`myoexo.clinical.figures.plot_sc_curves`) live on the
   floors above (``docs/architecture.md``).

@@ -13,10 +13,11 @@ each a sigmoid "beyond a limit" of Table I's windows::
 with ``below(x; lim) = phi(k, x, lim) = 1 / (1 + exp(k (x - lim)))`` (-> 1 below ``lim``)
 and ``above = 1 - below``. Two readings of who receives it (docs/reference.md section 2):
 
-``"uniform"`` (the paper read literally, myoexo's first reading)
+``"uniform"`` (the paper read literally, kept for comparison)
     all 11 spastic muscles receive the whole ``SC_total``: flexors and the stronger
     extensors co-contract at every state.
-``"stretch"`` (the clinical stretch reflex, Lance 1980; the default)
+``"stretch"`` (the clinical stretch reflex, Lance 1980; on the muscles' own state it is
+    ``"spindle"``, the default, :mod:`myoexo.spasticity.spindle`)
     each group answers its own stretch. Knee extension (``theta`` falling, ``v < 0``)
     stretches the flexors (hamstrings, gastrocnemii), flexion stretches the extensors
     (vasti, rectus femoris; gracilis as the paper groups it)::
@@ -27,7 +28,7 @@ and ``above = 1 - below``. Two readings of who receives it (docs/reference.md se
     With unit gains and no shift, ``e_flex + e_ext`` is exactly the paper's ``SC_total``.
     Table I's extension-side limits (-35, -30, -15 deg) lie outside the knee's motion
     (7-90 deg), so read literally the flexors' angle term never fires during the task; the
-    calibration (:data:`CALIBRATION`, ``myoexo calibrate``) moves that threshold into the
+    calibration (:data:`CALIBRATION`, ``myoexo twin calibrate``) moves that threshold into the
     range, as the tonic-stretch-reflex-threshold account of spasticity has it (a reflex
     threshold shifted inside the joint's range; Levin and Feldman; Calota and Levin 2009),
     and sets one gain per muscle group and level.
@@ -165,11 +166,11 @@ class StretchCalibration:
 UNCALIBRATED = StretchCalibration(note="Table I read literally (no fit)")
 
 #: The package's fit of the stretch reflex (:mod:`myoexo.runtime.fits`), written by
-#: ``myoexo calibrate --write`` (:mod:`myoexo.studies.calibrate`).
+#: ``myoexo twin calibrate --write`` (:mod:`myoexo.studies.calibrate`).
 STRETCH_FIT = "reflex_stretch"
 
 #: The stretch reflex's calibration: the package's fit :data:`STRETCH_FIT`, with its
-#: provenance. Fitted with ``myoexo calibrate --subjects 40 --verify-subjects 200
+#: provenance. Fitted with ``myoexo twin calibrate --subjects 40 --verify-subjects 200
 #: --extensor-gain 0.5`` (20 ms delay) on 40 subjects per level of the **calibration root**
 #: (root seed 2, :data:`myoexo.evaluation.config.CALIBRATION_ROOT_SEED`), on twin version 3:
 #: the flexors' threshold shift of levels 2 and 3 (their Table I thresholds become 15.8 and
@@ -275,11 +276,11 @@ class PersistentParams:
 #: defaults of :class:`PersistentParams`). Its gains are **chosen, not fitted**: the level's
 #: full Table I reflex amplitude ``s_theta + s_v`` (0.4 / 0.6 / 0.8), so the after-discharge
 #: can sustain as much excitation as the reflex itself gives. A fit to the study's PID table
-#: is not possible with a decay of seconds: ``myoexo calibrate --reflex persistent
+#: is not possible with a decay of seconds: ``myoexo twin calibrate --reflex persistent
 #: --subjects 10`` (root 2) found the paper's PID at the target at level 2 for every gain
 #: bracketed (final error -0.01 deg at G = 0.3, -0.09 +- 0.02 deg at G = 1.0): the
-#: after-discharge decays within the 8 s episode and the PID's integral pushes through.
-#: Only the old 30 s latch held it short (docs/studies/calibration_persistent).
+#: after-discharge decays within the 8 s episode and the PID's integral pushes through
+#: (docs/studies/calibration_persistent).
 PERSISTENT = PersistentParams(
     gains=MappingProxyType({0: 0.0, 1: 0.4, 2: 0.6, 3: 0.8}),
     note=(
@@ -518,7 +519,7 @@ class StretchReflex(MemorylessGroupReflex):
 @dataclass(frozen=True)
 class UniformReflex(ReflexModel):
     """``"uniform"``: the paper read literally, all 11 muscles receive the whole ``SC_total``
-    (myoexo's first reading, kept for comparison; no delay).
+    (kept for comparison; no delay).
 
     Attributes:
         delay_s: Transmission delay, s (0: the present state).
@@ -654,7 +655,7 @@ class PersistentReflex(UniformReflex):
 
 #: The built-in models, registered on import: ``"stretch"`` (calibrated stretch reflex,
 #: 20 ms delay), ``"uniform"`` (the paper's SC_total on all 11 muscles,
-#: no delay: myoexo's first reading, kept for comparison) and ``"persistent"``
+#: no delay, kept for comparison) and ``"persistent"``
 #: (``"uniform"`` plus the calibrated after-discharge of the flexors, :data:`PERSISTENT`).
 BUILTIN_REFLEXES: Mapping[str, ReflexModel] = MappingProxyType(
     {

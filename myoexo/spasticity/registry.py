@@ -23,7 +23,7 @@ transmission delay line of sensory records (``delay_s``, a field every model has
 memory, and writes the excitations into MyoSuite's ``ctrl``. A model is registered under a name with
 :func:`register_reflex` and found with :func:`get_reflex`; every place that takes a reflex
 (``gymnasium.make(..., reflex=...)``, :class:`~myoexo.spasticity.SpasticityWrapper`, the
-CLI's ``--reflex``/``--set reflex=``, the clinical tests) takes a registered name or a model
+CLI's ``--reflex``, the clinical tests) takes a registered name or a model
 instance. Example (docs: "Reflex models", "Adding a reflex model")::
 
     import dataclasses
@@ -195,7 +195,7 @@ class ReflexModel(abc.ABC):
 
         Raises:
             NotImplementedError: For a model without a torch twin (the fits that need
-                gradients, ``myoexo calibrate``, cannot fit it).
+                gradients, ``myoexo twin calibrate``, cannot fit it).
         """
         raise NotImplementedError(f"{type(self).__name__} has no torch twin of its step")
 
@@ -306,7 +306,7 @@ def register_reflex(name: str, model: ReflexModel, *, replace: bool = False) -> 
 
     Args:
         name: A non-empty name without ``=``, ``,``, ``:`` or spaces (it is typed on the
-            command line: ``--reflex NAME``, ``--set reflex=NAME``).
+            command line: ``--reflex NAME``).
         model: An instance of a :class:`ReflexModel` subclass.
         replace: Allow replacing a model registered under *name* before.
 

@@ -29,7 +29,7 @@ fibre length, the tonic-stretch-reflex-threshold form of Levin and Feldman 1994 
 muscle's own state); in any other posture each muscle answers the stretch it actually has.
 The gracilis, which the paper groups with the extensors, is lengthened by extension and
 answers as a flexor here. The per-level parameters (gains, the flexors' threshold shift) are
-fitted by ``myoexo calibrate --reflex spindle`` to the study's PID table like
+fitted by ``myoexo twin calibrate --reflex spindle`` to the study's PID table like
 ``"stretch"``'s, and written with the geometry to the package's fit :data:`SPINDLE_FIT`.
 
 No memory, no torch twin (the gradient fits do not take it).
@@ -68,7 +68,7 @@ __all__ = [
 ]
 
 #: The package's fit of the ``"spindle"`` reflex: its geometry and its per-level parameters
-#: (``myoexo calibrate --reflex spindle --write``).
+#: (``myoexo twin calibrate --reflex spindle --write``).
 SPINDLE_FIT = "reflex_spindle"
 
 #: Knee angles (deg) over which each muscle's fibre length is fitted by a line, seated.

@@ -33,7 +33,7 @@ symbol is read from:
   slope ``k`` for both terms (0.5 / 0.2 / 0.1), which per rad/s leaves the velocity term
   nearly flat over the speeds the clinic tests (0 to 3 rad/s); the study's text names two
   slopes (``k_ang``, ``k_vel``), so the velocity slope is a reading, fitted here
-  (:data:`TSRT_CALIBRATION`, ``myoexo calibrate --reflex tsrt``).
+  (:data:`TSRT_CALIBRATION`, ``myoexo twin calibrate --reflex tsrt``).
 * ``g_flex``, ``g_ext``: a gain per group and level.
 
 The tonic term is Table I's angle term beyond the static threshold (the tone at rest); the
@@ -159,12 +159,12 @@ class TSRTCalibration:
 
 
 #: The package's fit of the ``"tsrt"`` reflex (:mod:`myoexo.runtime.fits`), written by
-#: ``myoexo calibrate --reflex tsrt --write`` (:mod:`myoexo.studies.joint_fit`).
+#: ``myoexo twin calibrate --reflex tsrt --write`` (:mod:`myoexo.studies.joint_fit`).
 TSRT_FIT = "reflex_tsrt"
 
 #: The ``"tsrt"`` reflex's per-level parameters, fitted jointly to the study's PID table and
 #: the clinical rows of the validation table on the calibration root, on twin version 1
-#: (``myoexo calibrate --reflex tsrt``, :mod:`myoexo.studies.joint_fit`; the record and its
+#: (``myoexo twin calibrate --reflex tsrt``, :mod:`myoexo.studies.joint_fit`; the record and its
 #: check: ``docs/studies/calibration_tsrt``): the package's fit :data:`TSRT_FIT`, with its
 #: provenance.
 TSRT_CALIBRATION = TSRTCalibration.from_dict(read_fit(TSRT_FIT)["result"])

@@ -1,4 +1,4 @@
-"""``myoexo calibrate``: fit a reflex model so that the paper's PID behaves as in the study.
+"""``myoexo twin calibrate``: fit a reflex model so that the paper's PID behaves as in the study.
 
 Each reflex model registers its own fit (:func:`register_fit`, a :class:`ReflexFit` with the
 options only that fit takes); ``--reflex MODEL`` runs it, and an option of another model's
@@ -20,7 +20,7 @@ inside the range stops the knee earlier), so each level is a one-dimensional roo
 Levels 0 and 1
 are not fitted; they are checked (overshoot, final error < 1 deg). Gains stay 1 unless given.
 
-    myoexo calibrate --subjects 40 --verify-subjects 200 --out results/calibration
+    myoexo twin calibrate --subjects 40 --verify-subjects 200 --out results/calibration
 
 prints the fitted :class:`~myoexo.spasticity.reflex.StretchCalibration` and the verification
 table: PID final error and overshoot per level next to the paper's, on ``--verify-subjects``
@@ -34,7 +34,7 @@ same bisection on the PID's mean final error (a larger gain stalls it further), 
 gain ``--level1-fraction`` x level 2's, then verifies every level and runs the PID on a
 target ramped over ``--ramp-s`` s (``PIDConfig(ramp_s=...)``, the gentle approach) at levels 2-3::
 
-    myoexo calibrate --reflex persistent --subjects 30 --verify-subjects 200
+    myoexo twin calibrate --reflex persistent --subjects 30 --verify-subjects 200
 
 prints :data:`myoexo.spasticity.reflex.PERSISTENT`'s gains and the table.
 """
@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -55,6 +54,15 @@ from myoexo.evaluation.config import (
     CALIBRATION_ROOT_SEED,
     EVALUATION_ROOT_SEED,
     check_fit_root,
+)
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    flag_of,
+    from_options,
+    option,
+    option_fields,
 )
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.spasticity.reflex import (
@@ -69,13 +77,20 @@ from myoexo.spasticity.reflex import (
 from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
 
 __all__ = [
+    "CalibrationConfig",
     "CalibrationResult",
     "CalibrationTargets",
     "PIDOutcome",
+    "PersistentFitOptions",
+    "ReflexFit",
+    "ThresholdFitOptions",
+    "TsrtFitOptions",
     "bisect_final_error",
     "calibrate",
     "calibrate_persistent",
+    "fit_names",
     "pid_outcome",
+    "register_fit",
 ]
 
 
@@ -269,8 +284,9 @@ def calibrate(
     elapsed = time.perf_counter() - t0
     model_flag = "" if type(reflex) is StretchReflex else " --reflex spindle"
     note = (
-        f"myoexo calibrate{model_flag} --subjects {subjects} --verify-subjects {verify_subjects} "
-        f"--delay {delay_s} --extensor-gain {extensor_gain} --seed {root_seed}: fitted on "
+        f"myoexo twin calibrate{model_flag} --subjects {subjects} "
+        f"--verify-subjects {verify_subjects} "
+        f"--delay-s {delay_s} --extensor-gain {extensor_gain} --seed {root_seed}: fitted on "
         f"root {root_seed}; check on root {check_root_seed}, PID final error "
         + ", ".join(
             f"L{lv} {o.final_error_deg:.2f} +- {o.final_error_std_deg:.2f} deg"
@@ -462,7 +478,7 @@ def calibrate_persistent(
     }
     elapsed = time.perf_counter() - t0
     note = (
-        f"myoexo calibrate --reflex persistent --subjects {subjects} --verify-subjects "
+        f"myoexo twin calibrate --reflex persistent --subjects {subjects} --verify-subjects "
         f"{verify_subjects} --level1-fraction {level1_fraction} --seed {root_seed}: fitted on "
         f"root {root_seed}; check on root {check_root_seed}, PID final error "
         + ", ".join(
@@ -491,179 +507,247 @@ def calibrate_persistent(
 
 
 # ----------------------------------------------------------------------------- CLI
-# ------------------------------------------------------------------ the command line
 @dataclass(frozen=True)
-class FitOption:
-    """One option of a model's fit: its flag, its default and the rest of
-    ``ArgumentParser.add_argument``'s keywords (``type``, ``help``)."""
+class CalibrationConfig:
+    """The options of ``myoexo twin calibrate`` that every model's fit takes (each field is
+    an option; a model's own options are the fields of its fit's :attr:`ReflexFit.options`).
 
-    flag: str
-    default: Any
-    kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    Raises:
+        ValueError: A field out of its range (:class:`~myoexo.runtime.fields.FieldError`), a
+            model without a fit, the evaluation root, or ``write`` for a model whose
+            parameters are chosen, not fitted.
+    """
 
-    @property
-    def dest(self) -> str:
-        return _dest(self.flag)
+    reflex: str = option(
+        "stretch",
+        "the reflex model to fit; each model's own options are listed below under its name",
+        metavar="MODEL",
+    )
+    subjects: int = option(40, "subjects per level in the fit", low=2)
+    verify_subjects: int = option(200, "subjects per level of the check", low=2)
+    root_seed: int = option(
+        CALIBRATION_ROOT_SEED,
+        f"root seed of the fit's subjects (the calibration root; the evaluation root "
+        f"{EVALUATION_ROOT_SEED} is refused); the verification runs on the evaluation root",
+        low=0,
+        flag="seed",
+    )
+    out: Path | None = option(
+        None,
+        "folder for calibration.md and .csv (default: none, print only)",
+        folder=True,
+        metavar="DIR",
+    )
+    write: bool = option(
+        False,
+        "make the fit the package's (myoexo/assets/fits/reflex_<model>.json, with its "
+        "provenance), which the reflex model then reads (a model whose parameters are "
+        "chosen, not fitted, refuses it)",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.reflex not in _FITS:
+            raise FieldError(
+                type(self).__name__, "reflex", self.reflex, f"has no fit; fits: {', '.join(_FITS)}"
+            )
+        check_fit_root(self.root_seed, "calibration")
+        if self.write and not _FITS[self.reflex].writes:
+            writers = ", ".join(f.model for f in _FITS.values() if f.writes)
+            raise ValueError(
+                f"--write with --reflex {self.reflex}: its parameters are chosen, not fitted; "
+                f"--write takes {writers}"
+            )
 
 
 @dataclass(frozen=True)
 class ReflexFit:
-    """How ``myoexo calibrate --reflex MODEL`` fits one reflex model.
+    """How ``myoexo twin calibrate --reflex MODEL`` fits one reflex model.
 
     Attributes:
         model: The registered reflex model it fits.
-        help: One line on what is fitted, for ``--help``.
-        run: ``run(args) -> exit status``: fit, report, and with ``--write`` (when
-            :attr:`writes`) make the fit the package's.
-        options: The options only this model's fit takes (the common ones: ``--subjects``,
-            ``--verify-subjects``, ``--seed``, ``--out``, ``--write``).
+        help: One line on what is fitted (the description of its options in ``--help``).
+        run: ``run(config, options) -> exit status``: fit, report, and with
+            ``config.write`` (when :attr:`writes`) make the fit the package's; *config* is
+            the :class:`CalibrationConfig`, *options* an instance of :attr:`options` (``None``
+            without).
+        options: A frozen dataclass whose :func:`~myoexo.runtime.fields.option` fields are
+            the options only this model's fit takes (``None``: none), e.g.
+            :class:`ThresholdFitOptions`; their values are checked
+            (:func:`~myoexo.runtime.fields.check_fields`) before the fit runs.
         writes: Whether ``--write`` applies (a model whose parameters are chosen, not
             fitted, refuses it).
     """
 
     model: str
     help: str
-    run: Callable[[argparse.Namespace], int]
-    options: tuple[FitOption, ...] = ()
+    run: Callable[[CalibrationConfig, Any], int]
+    options: type | None = None
     writes: bool = True
 
 
 _FITS: dict[str, ReflexFit] = {}
 
 
-def _dest(flag: str) -> str:
-    """The namespace attribute argparse makes of an option flag."""
-    return flag.removeprefix("--").replace("-", "_")
+def _fit_fields(fit: ReflexFit) -> dict[str, dataclasses.Field[Any]]:
+    """The option fields of a fit's own options, by name."""
+    return {} if fit.options is None else {f.name: f for f in option_fields(fit.options)}
+
+
+def _declaration(cls: type, f: dataclasses.Field[Any]) -> tuple[Any, ...]:
+    """What makes two option fields the same option: type, default and spec."""
+    import typing
+
+    return (typing.get_type_hints(cls)[f.name], f.default, f.metadata)
 
 
 def register_fit(fit: ReflexFit, *, replace: bool = False) -> ReflexFit:
-    """Make *fit* what ``myoexo calibrate --reflex <fit.model>`` runs (a plug-in module that
-    registers a reflex model registers its fit here too).
+    """Make *fit* what ``myoexo twin calibrate --reflex <fit.model>`` runs (a plug-in module
+    that registers a reflex model registers its fit here too).
 
     Raises:
         ValueError: If the model has a fit already (unless *replace*), or an option of the
-            fit has the flag of another fit's option with other settings.
+            fit is a common option (:class:`CalibrationConfig`) or has the name of another
+            fit's option with other settings.
     """
     if fit.model in _FITS and not replace:
         raise ValueError(f"the reflex model {fit.model!r} has a fit already")
-    for option in fit.options:
+    if fit.options is not None and not dataclasses.is_dataclass(fit.options):
+        raise ValueError(f"the {fit.model!r} fit's options {fit.options!r} are not a dataclass")
+    common = {f.name for f in dataclasses.fields(CalibrationConfig)}
+    for name, field in _fit_fields(fit).items():
+        if name in common:
+            raise ValueError(f"{flag_of(field)} of the {fit.model!r} fit is a common option")
         for other in _FITS.values():
-            for theirs in other.options:
-                if theirs.flag == option.flag and theirs != option and other.model != fit.model:
-                    raise ValueError(
-                        f"{option.flag} of the {fit.model!r} fit differs from the "
-                        f"{other.model!r} fit's option of that name"
-                    )
+            theirs = _fit_fields(other).get(name)
+            if (
+                other.model != fit.model
+                and theirs is not None
+                and other.options is not None
+                and fit.options is not None
+                and _declaration(other.options, theirs) != _declaration(fit.options, field)
+            ):
+                raise ValueError(
+                    f"{flag_of(field)} of the {fit.model!r} fit differs from the "
+                    f"{other.model!r} fit's option of that name"
+                )
     _FITS[fit.model] = fit
     return fit
 
 
 def fit_names() -> tuple[str, ...]:
-    """The reflex models ``myoexo calibrate`` can fit."""
+    """The reflex models ``myoexo twin calibrate`` can fit."""
     return tuple(_FITS)
 
 
-def _owners() -> dict[str, list[str]]:
-    """Each model option's flag -> the models whose fit takes it."""
-    owners: dict[str, list[str]] = {}
+def _owners() -> dict[str, tuple[dataclasses.Field[Any], list[str]]]:
+    """Each model option's name -> its field and the models whose fit takes it."""
+    owners: dict[str, tuple[dataclasses.Field[Any], list[str]]] = {}
     for fit in _FITS.values():
-        for option in fit.options:
-            owners.setdefault(option.flag, []).append(fit.model)
+        for name, field in _fit_fields(fit).items():
+            owners.setdefault(name, (field, []))[1].append(fit.model)
     return owners
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo calibrate``: the common ones, then each model's own, grouped by
-    the models that take them."""
-    parser.add_argument(
-        "--reflex",
-        choices=fit_names(),
-        default="stretch",
-        help="the reflex model to fit (default: %(default)s); each model's own options "
-        "are listed below under its name",
-    )
-    parser.add_argument("--subjects", type=int, default=40, help="subjects per level in the fit")
-    parser.add_argument(
-        "--verify-subjects", type=int, default=200, help="subjects per level of the check"
-    )
-    parser.add_argument(
-        "--seed",
-        type=int,
-        default=CALIBRATION_ROOT_SEED,
-        help=f"root seed of the fit's subjects (default: the calibration root "
-        f"{CALIBRATION_ROOT_SEED}; the evaluation root {EVALUATION_ROOT_SEED} is refused); the "
-        "verification runs on the evaluation root",
-    )
-    parser.add_argument(
-        "--out", type=Path, default=None, help="folder for calibration.md and .csv (optional)"
-    )
-    parser.add_argument(
-        "--write",
-        action="store_true",
-        help="make the fit the package's (myoexo/assets/fits/reflex_<model>.json, with its "
-        "provenance), which the reflex model then reads; models: "
-        + ", ".join(fit.model for fit in _FITS.values() if fit.writes),
-    )
+    """Options of ``myoexo twin calibrate``: :class:`CalibrationConfig`'s fields, then each
+    model's own (the fields of its fit's options), grouped by the models that take them."""
+    add_options(parser, CalibrationConfig)
     groups: dict[str, argparse._ArgumentGroup] = {}
     added: set[str] = set()
     owners = _owners()
     for fit in _FITS.values():
-        for option in fit.options:
-            if option.flag in added:
+        names = list(_fit_fields(fit))
+        for name in names:
+            if name in added or fit.options is None:
                 continue
-            title = "--reflex " + ", ".join(owners[option.flag])
-            group = groups.get(title) or groups.setdefault(title, parser.add_argument_group(title))
-            kwargs = dict(option.kwargs)
-            kwargs["help"] = f"{kwargs.get('help', '')} (default: {option.default})".strip()
-            group.add_argument(option.flag, default=argparse.SUPPRESS, **kwargs)
-            added.add(option.flag)
+            models = owners[name][1]
+            title = "--reflex " + ", ".join(models)
+            if title not in groups:
+                about = "; ".join(f"{m}: {_FITS[m].help}" for m in models)
+                groups[title] = parser.add_argument_group(title, about)
+            group = groups[title]
+            others = [n for n in names if n != name]
+            add_options(group, fit.options, exclude=others, given_only=True)
+            added.add(name)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo calibrate``: the registered fit of ``--reflex``."""
-    for name in ("subjects", "verify_subjects"):
-        if getattr(args, name) < 2:
-            raise ValueError(f"--{name.replace('_', '-')} = {getattr(args, name)} must be >= 2")
-    model = getattr(args, "reflex", "stretch")
-    if model not in _FITS:
-        raise ValueError(f"--reflex {model!r} has no fit; fits: {', '.join(fit_names())}")
-    fit = _FITS[model]
-    mine = {option.flag for option in fit.options}
-    for flag, models in _owners().items():
-        if flag not in mine and hasattr(args, _dest(flag)):
+    """Run ``myoexo twin calibrate``: the registered fit of ``--reflex``."""
+    config = from_options(CalibrationConfig, args)
+    fit = _FITS[config.reflex]
+    mine = _fit_fields(fit)
+    for name, (field, models) in _owners().items():
+        if name not in mine and hasattr(args, name):
             raise ValueError(
-                f"{flag} is an option of --reflex {' / '.join(models)}, not of --reflex {model}"
+                f"{flag_of(field)} is an option of --reflex {' / '.join(models)}, not of "
+                f"--reflex {config.reflex}"
             )
-    for option in fit.options:
-        if not hasattr(args, option.dest):
-            setattr(args, option.dest, option.default)
-    if getattr(args, "write", False) and not fit.writes:
-        writers = ", ".join(f.model for f in _FITS.values() if f.writes)
-        raise ValueError(
-            f"--write with --reflex {model}: its parameters are chosen, not fitted; --write "
-            f"takes {writers}"
-        )
-    return fit.run(args)
+    options = None if fit.options is None else from_options(fit.options, args)
+    if options is not None:
+        check_fields(options)  # a plug-in's options class may not check its own
+    return fit.run(config, options)
 
 
-def _run_threshold_fit(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class ThresholdFitOptions:
+    """The options of the threshold fit (``--reflex stretch`` and ``spindle``)."""
+
+    delay_s: float = option(STRETCH_DELAY_S, "reflex delay", low=0.0, high=1.0, unit="s")
+    extensor_gain: float = option(
+        1.0, "gain of the extensors' reflex at levels 1-3, fixed", low=0.0
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class PersistentFitOptions:
+    """The options of the ``persistent`` fit (:func:`calibrate_persistent`)."""
+
+    level1_fraction: float = option(
+        0.5, "level 1's gain as a fraction of level 2's", low=0.0, high=1.0
+    )
+    ramp_s: float = option(
+        3.0, "ramp of the gentle PID checked after the fit", low=0.0, high=60.0, unit="s"
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class TsrtFitOptions:
+    """The options of the ``tsrt`` fit (:func:`myoexo.studies.joint_fit.calibrate_tsrt`)."""
+
+    clinical_subjects: int = option(
+        1, "subjects per level of the clinical tests in the fit", low=1, high=10_000
+    )
+    sweeps: int = option(2, "coordinate sweeps of the joint fit", low=0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def _run_threshold_fit(config: CalibrationConfig, options: ThresholdFitOptions) -> int:
     """The stretch or spindle reflex: the flexors' threshold shift at levels 2-3."""
-    reflex = args.reflex
+    reflex = config.reflex
     base: StretchReflex = StretchReflex()
     if reflex == "spindle":
         from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
 
         base = SpindleReflex(geometry=spindle_geometry())
     result = calibrate(
-        args.subjects,
-        args.verify_subjects,
-        args.delay,
-        extensor_gain=args.extensor_gain,
-        root_seed=args.seed,
+        config.subjects,
+        config.verify_subjects,
+        options.delay_s,
+        extensor_gain=options.extensor_gain,
+        root_seed=config.root_seed,
         base=base,
     )
-    code = _report(reflex, result.calibration.note, "", result, args.out)
-    if getattr(args, "write", False):
+    code = _report(reflex, result.calibration.note, "", result, config.out)
+    if config.write:
         if reflex == "spindle":
             from myoexo.spasticity.spindle import SPINDLE_FIT
 
@@ -748,58 +832,46 @@ def _report(model: str, note: str, constant: str, result: Any, out: Path | None)
     return 0
 
 
-def _run_persistent(args: argparse.Namespace) -> int:
-    if not (math.isfinite(args.level1_fraction) and 0.0 <= args.level1_fraction <= 1.0):
-        raise ValueError(f"--level1-fraction = {args.level1_fraction!r} is outside [0, 1]")
+def _run_persistent(config: CalibrationConfig, options: PersistentFitOptions) -> int:
     result = calibrate_persistent(
-        args.subjects,
-        args.verify_subjects,
-        level1_fraction=args.level1_fraction,
-        ramp_s=args.ramp_s,
-        root_seed=args.seed,
+        config.subjects,
+        config.verify_subjects,
+        level1_fraction=options.level1_fraction,
+        ramp_s=options.ramp_s,
+        root_seed=config.root_seed,
     )
-    return _report("persistent", result.params.note, "PERSISTENT", result, args.out)
+    return _report("persistent", result.params.note, "PERSISTENT", result, config.out)
 
 
-def _run_tsrt(args: argparse.Namespace) -> int:
+def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
     from myoexo.studies.joint_fit import calibrate_tsrt
 
-    if args.clinical_subjects < 1:
-        raise ValueError(f"--clinical-subjects = {args.clinical_subjects} must be >= 1")
     result = calibrate_tsrt(
-        pid_subjects=args.subjects,
-        clinical_subjects=args.clinical_subjects,
-        sweeps=args.sweeps,
-        verify_subjects=args.verify_subjects,
-        root_seed=args.seed,
+        pid_subjects=config.subjects,
+        clinical_subjects=options.clinical_subjects,
+        sweeps=options.sweeps,
+        verify_subjects=config.verify_subjects,
+        root_seed=config.root_seed,
     )
     text = result.markdown()
     print(text)
-    if args.out is not None:
+    if config.out is not None:
         from myoexo.runtime.files import write_study_files
 
-        write_study_files(args.out, {"calibration.md": text})
-    if getattr(args, "write", False):
+        write_study_files(config.out, {"calibration.md": text})
+    if config.write:
         from myoexo.spasticity.tsrt import TSRT_FIT
 
         _write_calibration(TSRT_FIT, result.calibration, result.fit_root_seed)
     return 0
 
 
-_THRESHOLD_OPTIONS = (
-    FitOption("--delay", STRETCH_DELAY_S, {"type": float, "help": "reflex delay, s"}),
-    FitOption(
-        "--extensor-gain",
-        1.0,
-        {"type": float, "help": "gain of the extensors' reflex at levels 1-3, fixed"},
-    ),
-)
 register_fit(
     ReflexFit(
         "stretch",
         "the flexors' threshold shift at levels 2-3, to the paper's PID",
         _run_threshold_fit,
-        _THRESHOLD_OPTIONS,
+        ThresholdFitOptions,
     )
 )
 register_fit(
@@ -807,7 +879,7 @@ register_fit(
         "spindle",
         "the same fit on the muscles' fibre lengths measured on the twin",
         _run_threshold_fit,
-        _THRESHOLD_OPTIONS,
+        ThresholdFitOptions,
     )
 )
 register_fit(
@@ -815,18 +887,7 @@ register_fit(
         "persistent",
         "the after-discharge gains at levels 2-3 by bisection (chosen, not written)",
         _run_persistent,
-        (
-            FitOption(
-                "--level1-fraction",
-                0.5,
-                {"type": float, "help": "level 1's gain as a fraction of level 2's"},
-            ),
-            FitOption(
-                "--ramp-s",
-                3.0,
-                {"type": float, "help": "ramp of the gentle PID checked after the fit, s"},
-            ),
-        ),
+        PersistentFitOptions,
         writes=False,
     )
 )
@@ -835,13 +896,6 @@ register_fit(
         "tsrt",
         "jointly to the PID table and the clinical rows (myoexo.studies.joint_fit)",
         _run_tsrt,
-        (
-            FitOption(
-                "--clinical-subjects",
-                1,
-                {"type": int, "help": "subjects per level of the clinical tests in the fit"},
-            ),
-            FitOption("--sweeps", 2, {"type": int, "help": "coordinate sweeps of the joint fit"}),
-        ),
+        TsrtFitOptions,
     )
 )

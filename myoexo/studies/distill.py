@@ -1,4 +1,4 @@
-"""``myoexo distill``: DAgger distillation of the full-state teacher into an exo-sensor student.
+"""``myoexo policy distill``: distil the full-state teacher into an exo-sensor student (DAgger).
 
 The teacher is the shipped full-state policy (``sac``: it reads the human knee, the muscles
 and the straps, which only the simulation knows). The student is a
@@ -33,12 +33,13 @@ finished round)::
 
 Examples::
 
-    myoexo distill --run-dir runs/distill --rounds 8 --episodes 96 --robust-fraction 0.5
-    myoexo distill --run-dir runs/distill_s0 --fine-gain 20 --fine-width 0.02 \
+    myoexo policy distill --run-dir runs/distill --rounds 8 --episodes-per-round 96 \
+        --robust-fraction 0.5
+    myoexo policy distill --run-dir runs/distill_s0 --fine-gain 20 --fine-width-rad 0.02 \
         --teacher-guard --seed 0                                # the shipped recipe, seed 0
-    myoexo distill --resume runs/distill
-    myoexo distill --resume runs/distill --rounds 12            # more rounds
-    myoexo distill --ship runs/distill_s0 runs/distill_s1 runs/distill_s2 \
+    myoexo policy distill --resume runs/distill
+    myoexo policy distill --resume runs/distill --rounds 12            # more rounds
+    myoexo policy distill --ship runs/distill_s0 runs/distill_s1 runs/distill_s2 \
         --name student_exo --seed-copies runs/student_seeds      # the seed rule picks one
 
 Several seeds: each is its own run folder (``--seed``); ``--ship`` chooses one by the seed
@@ -74,8 +75,18 @@ from myoexo.policies.student import (
     load_student,
     save_student,
 )
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    flag_of,
+    from_options,
+    option,
+    option_fields,
+)
 from myoexo.runtime.files import package_versions, savez_atomic, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock
+from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training.checkpoints import CONFIG_FILE
 
 #: Files of a distillation run folder besides the settings (``CONFIG_FILE``, named as in a
@@ -87,87 +98,89 @@ BEST_STEM = "student"
 
 @dataclass(frozen=True)
 class DistillConfig:
-    """Settings of a distillation run (``config.json``).
+    """Settings of a distillation run (``config.json``); each field is an option of
+    ``myoexo policy distill`` of its own name (``--episodes-per-round``).
 
-    Attributes:
-        rounds: DAgger rounds (round 0: the teacher drives; behaviour cloning).
-        episodes_per_round: Episodes collected per round (levels in turn).
-        levels: Spasticity levels of the collected subjects.
-        robust_fraction: Share of episodes on perturbed twins (``robustness=True``).
-        beta_decay: ``beta_r = beta_decay ** r``: probability that the teacher's command is
-            executed at a step of round ``r``.
-        action_noise_std: Gaussian noise added to the executed command (exploration; the
-            label stays the teacher's clean action).
-        n_frames: Frames the student sees; ``stride``: steps between them.
-        hidden: Hidden layer widths; ``activation``: their activation.
-        epochs_first: Training epochs after round 0; ``epochs``: after later rounds.
-        batch_size, lr, weight_decay: Adam settings.
-        teacher: Shipped full-state policy labelling the states.
-        fine_gain: Privileged fine-positioning term added to the teacher's label,
-            ``-fine_gain * e * exp(-(e / fine_width_rad)^2)`` with ``e`` the true knee error
-            (rad): active only within about a degree of the target (the teacher ``sac``
-            settles 0.5-0.7 deg short at levels 0-1), zero far from it (levels 2-3, the
-            transient); 0 labels with the teacher alone.
-        fine_width_rad: Width of that term (rad).
-        teacher_guard: Label with the teacher under the stall guard
-            (:class:`~myoexo.control.guard.StallGuard`, its default settings, on the true
-            knee error): once the knee has stalled far from the target, the labels carry the
-            guard's integral action along the visited trajectory, so that the student, whose
-            frames hold its last command, can learn to keep pushing (``guard:sac`` is the
-            shipped full-state controller). ``False``: the teacher alone.
-        root_seed: Root seed of the training and selection subjects (never the evaluation
-            root 0).
-        subject_offset: First subject index of the training episodes (selection uses
-            ``0..selection_subjects-1``).
-        selection_subjects: Selection subjects per level and twin (0: no selection, the
-            last round is the student).
-        twin: The twin distilled on (:class:`~myoexo.envs.options.TwinOptions`: task, e.g.
-            ``episode_duration_s``, and reflex model; the teacher reads the full observation,
-            the student the exo sensors; robustness is drawn per episode with
-            ``robust_fraction``).
-        seed: Seed of the mixture draws, noise and torch.
+    ``fine_gain`` adds a privileged fine-positioning term to the teacher's label,
+    ``-fine_gain * e * exp(-(e / fine_width_rad)^2)`` with ``e`` the true knee error (rad):
+    active only within about a degree of the target (the teacher ``sac`` settles 0.5-0.7 deg
+    short at levels 0-1), zero far from it (levels 2-3, the transient). ``teacher_guard``
+    labels with the teacher under the stall guard
+    (:class:`~myoexo.control.guard.StallGuard`, its default settings, on the true knee
+    error): once the knee has stalled far from the target, the labels carry the guard's
+    integral action along the visited trajectory, so that the student, whose frames hold its
+    last command, can learn to keep pushing (``guard:sac`` is the shipped full-state
+    controller). ``twin``: the twin distilled on (task, e.g. ``episode_duration_s``, and
+    reflex model; the teacher reads the full observation, the student the exo sensors;
+    robustness is drawn per episode with ``robust_fraction``).
     """
 
-    rounds: int = 8
-    episodes_per_round: int = 96
-    levels: tuple[int, ...] = (0, 1, 2, 3)
-    robust_fraction: float = 0.5
-    beta_decay: float = 0.5
-    action_noise_std: float = 0.0
-    n_frames: int = 10
-    stride: int = 2
-    hidden: tuple[int, ...] = (256, 256)
-    activation: str = "elu"
-    epochs_first: int = 20
-    epochs: int = 8
-    batch_size: int = 512
-    lr: float = 1e-3
-    weight_decay: float = 0.0
-    teacher: str = "sac"
-    fine_gain: float = 0.0
-    fine_width_rad: float = 0.02
-    teacher_guard: bool = False
-    root_seed: int = SELECTION_ROOT_SEED
-    subject_offset: int = 10_000
-    selection_subjects: int = 8
-    twin: TwinOptions = field(default_factory=TwinOptions)
-    seed: int = 0
+    rounds: int = option(8, "DAgger rounds (round 0: the teacher drives)", low=1)
+    episodes_per_round: int = option(96, "episodes collected per round (levels in turn)", low=1)
+    levels: tuple[int, ...] = option(
+        (0, 1, 2, 3), "spasticity levels of the collected subjects", choices=VALID_LEVELS,
+        metavar="LEVEL",
+    )  # fmt: skip
+    robust_fraction: float = option(
+        0.5, "share of episodes on perturbed twins (sensors, latency, twin changes)",
+        low=0.0, high=1.0,
+    )  # fmt: skip
+    beta_decay: float = option(
+        0.5, "the teacher's command is executed with probability beta_decay ** round",
+        low=0.0, high=1.0,
+    )  # fmt: skip
+    action_noise_std: float = option(
+        0.0, "Gaussian noise on the executed command (the label stays the teacher's)", low=0.0
+    )
+    n_frames: int = option(10, "frames the student sees", low=1)
+    stride: int = option(2, "control steps between two frames", low=1)
+    hidden: tuple[int, ...] = option((256, 256), "hidden layer widths of the student", low=1)
+    activation: str = option(
+        "elu", "hidden activation of the student", choices=("gelu", "relu", "tanh", "elu")
+    )
+    epochs_first: int = option(20, "training epochs after round 0", low=1)
+    epochs: int = option(8, "training epochs after each later round", low=1)
+    batch_size: int = option(512, "Adam minibatch size", low=1)
+    lr: float = option(1e-3, "Adam step size", low=0.0, above=True)
+    weight_decay: float = option(0.0, "Adam weight decay", low=0.0)
+    teacher: str = option("sac", "shipped full-state policy that labels the states")
+    fine_gain: float = option(
+        0.0, "privileged fine-positioning term on the teacher's labels (0: the teacher alone)",
+        low=0.0,
+    )  # fmt: skip
+    fine_width_rad: float = option(
+        0.02, "width of the fine-positioning term", low=0.0, above=True, unit="rad"
+    )
+    teacher_guard: bool = option(
+        False, "label with the teacher under the stall guard (guard:sac) on the true knee"
+    )
+    root_seed: int = option(
+        SELECTION_ROOT_SEED,
+        "root seed of the training and selection subjects (never the evaluation root)",
+        low=0,
+    )
+    subject_offset: int = option(10_000, "first subject index of the training episodes", low=0)
+    selection_subjects: int = option(
+        8, "selection subjects per level and twin (0: the last round is the student)", low=0
+    )
+    twin: TwinOptions = option(doc="the twin distilled on", default_factory=TwinOptions, flag="")
+    seed: int = option(0, "seed of the mixture draws, the noise and torch", low=0)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
-        object.__setattr__(self, "hidden", tuple(int(v) for v in self.hidden))
+        object.__setattr__(self, "levels", tuple(self.levels))
+        object.__setattr__(self, "hidden", tuple(self.hidden))
+        check_fields(self)
         check_fit_root(self.root_seed, "distillation (it trains and selects the student)")
-        for name in ("rounds", "episodes_per_round", "n_frames", "stride", "batch_size"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} = {getattr(self, name)!r} must be >= 1")
-        if not 0.0 <= self.robust_fraction <= 1.0:
-            raise ValueError(f"robust_fraction = {self.robust_fraction} must be in [0, 1]")
-        if not 0.0 <= self.beta_decay <= 1.0:
-            raise ValueError(f"beta_decay = {self.beta_decay} must be in [0, 1]")
         if self.subject_offset < self.selection_subjects:
-            raise ValueError("subject_offset must exceed selection_subjects (disjoint subjects)")
-        if not self.levels:
-            raise ValueError("levels is empty")
+            raise FieldError(
+                "DistillConfig",
+                "subject_offset",
+                self.subject_offset,
+                f"must exceed selection_subjects = {self.selection_subjects} (disjoint subjects)",
+            )
+        for name in ("levels", "hidden"):
+            if not getattr(self, name):
+                raise FieldError("DistillConfig", name, (), "is empty")
         if self.twin.robustness:
             raise ValueError(
                 "twin robustness = true: distillation draws perturbed twins per episode with "
@@ -358,7 +371,7 @@ def collect_episode(
         frames.append(np.asarray(obs, np.float64)[idx])
         labels.append(float(a_teacher[0]))
         if student is not None:
-            a_student = student.act(obs, info)
+            a_student = student.act(obs)  # its exo sensors are in the observation
             a = a_teacher if rng.random() < beta else a_student
         else:
             a = a_teacher
@@ -715,7 +728,7 @@ def _provenance(
     scores: dict[str, float],
 ) -> dict[str, Any]:
     return {
-        "trained_by": "myoexo distill (DAgger)",
+        "trained_by": "myoexo policy distill (DAgger)",
         "teacher": config.teacher,
         "teacher_provenance": teacher,
         "fine_gain": config.fine_gain,
@@ -740,11 +753,18 @@ SHIP_RULE = (
 )
 
 
+def seed_group_name(name: str, n_seeds: int) -> str:
+    """The seed group of :func:`ship_students`'s seed copies: ``<name>_<n>seeds``."""
+    return f"{name}_{int(n_seeds)}seeds"
+
+
 def seed_copy_stem(folder: str | Path, name: str, n_seeds: int, seed: int, r: int) -> Path:
     """Where :func:`ship_students` writes one seed's student for an evaluation over seeds:
-    ``<folder>/<name>_<n>seeds-seed_<seed>-round_<r>`` (``myoexo evaluate`` groups such
-    labels as one controller, :func:`~myoexo.control.specs.seeds_folder_of`)."""
-    return Path(folder) / f"{name}_{int(n_seeds)}seeds-seed_{int(seed)}-round_{int(r):02d}"
+    ``<folder>/<group>-seed_<seed>-round_<r>`` (*group*: :func:`seed_group_name`, which the
+    copy's metadata records as ``seed_group``, so that ``myoexo evaluate`` pools the copies
+    into one controller: :attr:`~myoexo.control.specs.ControllerSpec.seed_group`)."""
+    group = seed_group_name(name, n_seeds)
+    return Path(folder) / f"{group}-seed_{int(seed)}-round_{int(r):02d}"
 
 
 def ship_students(
@@ -793,9 +813,14 @@ def ship_students(
         mark = "  <- shipped" if seed == ship else ""
         log(f"[distill] seed {seed}: round {r}, selection score {score:.2f} deg{mark}")
         if seed_copies is not None:
-            save_student(
-                student, seed_copy_stem(seed_copies, name or "student", len(seeds), seed, r)
+            group = seed_group_name(name or "student", len(seeds))
+            copy = StudentController(
+                student.actor,
+                n_frames=student.n_frames,
+                stride=student.stride,
+                metadata={**student.metadata, "seed_group": group},
             )
+            save_student(copy, seed_copy_stem(seed_copies, name or "student", len(seeds), seed, r))
     chosen = students[ship][0]
     chosen.metadata.update(distill_seeds=seeds, ship_seed=ship, ship_rule=SHIP_RULE)
     for target in ([Path(stem)] if stem else []) + ([shipped_path(name)] if name else []):
@@ -805,110 +830,99 @@ def ship_students(
 
 
 # ---------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo distill``."""
-    d = DistillConfig()
-    parser.add_argument("--run-dir", help="output folder (default: runs/distill_<timestamp>)")
-    parser.add_argument(
-        "--ship",
-        nargs="+",
-        metavar="DIR",
-        help="choose among finished runs of several seeds by the seed rule (closest_seed on "
+@dataclass(frozen=True)
+class DistillRun:
+    """The run of ``myoexo policy distill``: its folder (or the run it continues), the
+    finished seeds it ships instead, where it writes the chosen student, how much it tells."""
+
+    run_dir: Path | None = option(
+        None, "output folder (default: runs/distill_<timestamp>)", folder=True
+    )
+    ship: tuple[str, ...] | None = option(
+        None,
+        "choose among finished runs of several seeds by the seed rule (closest_seed on "
         "the selection errors) instead of distilling; with --name, --export, --seed-copies",
-    )
-    parser.add_argument(
-        "--name", help="with --ship: write the chosen student into the package under NAME"
-    )
-    parser.add_argument(
-        "--seed-copies",
         metavar="DIR",
-        help="with --ship: every seed's student as DIR/<name>_<n>seeds-seed_<s>-round_<r>, "
+    )
+    name: str | None = option(
+        None, "with --ship: write the chosen student into the package under NAME", metavar="NAME"
+    )
+    seed_copies: Path | None = option(
+        None,
+        "with --ship: every seed's student as DIR/<name>_<n>seeds-seed_<s>-round_<r>, "
         "for `myoexo evaluate --controllers DIR/*.npz` (one controller over seeds)",
+        metavar="DIR",
+        folder=True,
     )
-    parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
-    parser.add_argument("--rounds", type=int, help=f"DAgger rounds (default {d.rounds})")
-    parser.add_argument(
-        "--episodes", type=int, default=d.episodes_per_round, help="episodes per round"
+    resume: str | None = option(
+        None,
+        "continue the run in DIR with its saved settings (--rounds: raise their number)",
+        metavar="DIR",
     )
-    parser.add_argument(
-        "--robust-fraction",
-        type=float,
-        default=d.robust_fraction,
-        help="share of episodes on perturbed twins (sensor noise, latency, twin changes)",
-    )
-    parser.add_argument("--beta-decay", type=float, default=d.beta_decay)
-    parser.add_argument("--action-noise", type=float, default=d.action_noise_std)
-    parser.add_argument("--n-frames", type=int, default=d.n_frames)
-    parser.add_argument("--stride", type=int, default=d.stride)
-    parser.add_argument(
-        "--hidden", default=",".join(map(str, d.hidden)), help="hidden widths, e.g. 256,256"
-    )
-    parser.add_argument("--epochs-first", type=int, default=d.epochs_first)
-    parser.add_argument("--epochs", type=int, default=d.epochs)
-    parser.add_argument(
-        "--fine-gain",
-        type=float,
-        default=d.fine_gain,
-        help="privileged fine-positioning term on the teacher's labels (0: teacher alone)",
-    )
-    parser.add_argument("--fine-width", type=float, default=d.fine_width_rad, help="rad")
-    parser.add_argument(
-        "--teacher-guard",
-        action="store_true",
-        help="label with the teacher under the stall guard (guard:sac) on the true knee",
-    )
-    parser.add_argument("--selection-subjects", type=int, default=d.selection_subjects)
+    export: str | None = option(None, "write the selected student to STEM", metavar="STEM")
+    onnx: str | None = option(None, "write the selected student as ONNX", metavar="FILE")
+    quiet: bool = option(False, "no per-epoch lines", short="q")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.ship is not None and not self.ship:
+            raise FieldError("DistillRun", "ship", self.ship, "names no run folder")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo policy distill``: one per :class:`DistillConfig` field, the twin's
+    options, and the run's (:class:`DistillRun`)."""
+    add_options(parser, DistillRun)
+    add_options(parser.add_argument_group("distillation"), DistillConfig, given_only=True)
     add_twin_arguments(parser)
-    parser.add_argument("--seed", type=int, default=d.seed)
-    parser.add_argument("--export", metavar="STEM", help="write the selected student to STEM")
-    parser.add_argument("--onnx", metavar="FILE", help="write the selected student as ONNX")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no per-epoch lines")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo distill``; 0 when every round is done."""
+    """Run ``myoexo policy distill``; 0 when every round is done."""
     from myoexo.policies.student import export_student_onnx
 
+    options = from_options(DistillRun, args)
+
     def log(msg: str) -> None:
-        if not (args.quiet and "epoch" in msg):
+        if not (options.quiet and "epoch" in msg):
             print(msg, flush=True)
 
-    if args.ship:
-        ship_students(args.ship, args.name, args.export, args.seed_copies, log=log)
+    if options.ship:
+        ship_students(options.ship, options.name, options.export, options.seed_copies, log=log)
         return 0
-    if args.resume:
-        run_dir = Path(args.resume)
-        distill(DistillConfig(), run_dir, resume=True, rounds=args.rounds, log=log)
-    else:
-        config = DistillConfig(
-            episodes_per_round=args.episodes,
-            robust_fraction=args.robust_fraction,
-            beta_decay=args.beta_decay,
-            action_noise_std=args.action_noise,
-            n_frames=args.n_frames,
-            stride=args.stride,
-            hidden=tuple(int(h) for h in str(args.hidden).split(",") if h),
-            epochs_first=args.epochs_first,
-            epochs=args.epochs,
-            selection_subjects=args.selection_subjects,
-            fine_gain=args.fine_gain,
-            fine_width_rad=args.fine_width,
-            teacher_guard=args.teacher_guard,
-            twin=twin_from_args(args),
-            seed=args.seed,
+    if options.resume:
+        given = [
+            flag_of(f)
+            for f in option_fields(DistillConfig)
+            if hasattr(args, f.name) and f.name != "rounds"
+        ]
+        if twin_from_args(args) != TwinOptions():
+            given.append("the twin options")
+        if given:
+            raise ValueError(
+                f"--resume keeps the run's saved settings (--rounds raises their number); "
+                f"drop {', '.join(given)}"
+            )
+        run_dir = Path(options.resume)
+        distill(
+            DistillConfig(), run_dir, resume=True, rounds=getattr(args, "rounds", None), log=log
         )
-        run_dir = Path(args.run_dir or f"runs/distill_{time.strftime('%Y%m%d-%H%M%S')}")
-        distill(config, run_dir, resume=False, rounds=args.rounds, log=log)
+    else:
+        config = from_options(DistillConfig, args, twin=twin_from_args(args))
+        run_dir = Path(options.run_dir or f"runs/distill_{time.strftime('%Y%m%d-%H%M%S')}")
+        distill(config, run_dir, resume=False, log=log)
     best = load_student(run_dir / BEST_STEM)
-    if args.export:
-        print(f"student: {save_student(best, args.export)[0]}")
-    if args.onnx:
-        print(f"onnx: {export_student_onnx(best, args.onnx)}")
+    if options.export:
+        print(f"student: {save_student(best, options.export)[0]}")
+    if options.onnx:
+        print(f"onnx: {export_student_onnx(best, options.onnx)}")
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="myoexo distill", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="myoexo policy distill", description=__doc__.split("\n")[0]
+    )
     add_arguments(parser)
     return run(parser.parse_args(argv))
 

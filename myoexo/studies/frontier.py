@@ -34,7 +34,7 @@ The study's SAC is placed at its reported reductions from *our* paper's-PID valu
 RMS reduced by the study's percentages, its settling times), so that it can be read against
 the frontier on this twin. With ``--seeds-dir`` (one or more folders), each seed's selected
 policy
-(``aggregate.json`` of ``myoexo seeds aggregate``) is a point of its own (the spread over
+(``aggregate.json`` of ``myoexo policy seeds aggregate``) is a point of its own (the spread over
 seeds). Files: ``frontier.csv`` (every point on the selection subjects, with
 ``accurate`` and ``on_frontier``, and for the frontier's points their ``confirmed_*``
 numbers and ``reachable``), ``frontier.md``, ``frontier_level<L>.png`` and ``frontier.png``
@@ -46,12 +46,14 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
 from myoexo.evaluation.config import SELECTION_ROOT_SEED
 from myoexo.evaluation.paper import PAPER_RESULTS
+from myoexo.runtime.fields import Execution, add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Ramp durations (s) of the ramped-setpoint PIDs.
@@ -95,11 +97,16 @@ def oracle_specs(sweep: Sequence[str] = ORACLE_SWEEP, base: str = CHEAP_ORACLE) 
 
 def points(table: Any) -> Any:
     """Per (controller, level): the means of :data:`POINT_METRICS` (settling time over the
-    settled episodes), the share of settled episodes and the episode count."""
+    settled episodes), the share of settled episodes, the episode count and the controller's
+    seed group (``seed_group``, where the table has the column)."""
+    from myoexo.evaluation.stats import SEED_GROUP
+
     grouped = table.groupby(["controller", "level"])
     out = grouped[list(POINT_METRICS)].mean()
     out["settled_share"] = grouped["settling_time_s"].apply(lambda s: float(s.notna().mean()))
     out["episodes"] = grouped.size()
+    if SEED_GROUP in table:
+        out[SEED_GROUP] = grouped[SEED_GROUP].first()
     return out.reset_index()
 
 
@@ -201,13 +208,10 @@ def paper_points(pts: Any, pid_label: str = "pid") -> Any:
 _GROUP_COLORS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "gold", "tab:gray")
 
 
-def point_group(label: str) -> str:
-    """Legend entry of a point: a seeds run's seeds share their folder's (``<seeds>-seed_<N>-
-    <step>`` -> ``<seeds> (seeds)``); any other label is its own."""
-    from myoexo.control.specs import seeds_folder_of
-
-    folder = seeds_folder_of(label)
-    return f"{folder} (seeds)" if folder else label
+def point_group(label: str, seed_group: Any = None) -> str:
+    """Legend entry of a point: the members of a seed group share their group's
+    (``<group> (seeds)``); any other label is its own."""
+    return f"{seed_group} (seeds)" if isinstance(seed_group, str) and seed_group else label
 
 
 def plot_frontier(pts: Any, level: int | None = None) -> Any:
@@ -223,7 +227,8 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
         "pid:feedback=exo": ("grey", "v", "device PID (exo encoder)"),
         "pid:tuned=exo": ("dimgrey", "<", "device PID, tuned on the encoder"),
     }
-    others = sorted({point_group(str(c)) for c in pts.controller})
+    groups = pts["seed_group"] if "seed_group" in pts else [None] * len(pts)
+    others = sorted({point_group(str(c), g) for c, g in zip(pts.controller, groups, strict=True)})
     legend: dict[str, Any] = {}
     for ax, lv in zip(axes, levels, strict=True):
         group = pts[pts.level == lv]
@@ -250,7 +255,7 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
             elif label.startswith("oracle"):
                 color, marker, name = "tab:purple", "P", "oracle (true state; settings)"
             else:
-                name = point_group(label)
+                name = point_group(label, p.get("seed_group"))
                 color = _GROUP_COLORS[others.index(name) % len(_GROUP_COLORS)]
                 marker = "D"
             handle = ax.scatter(
@@ -377,62 +382,73 @@ def parse_label(spec: str) -> str:
     return parse_controller_spec(spec).label
 
 
+@dataclass(frozen=True)
+class FrontierConfig:
+    """What ``myoexo frontier`` runs (each field is an option of the command; the twin's
+    options and :class:`~myoexo.runtime.fields.Execution`'s are its other options)."""
+
+    out: Path = option(Path("results/frontier"), "output folder", folder=True, metavar="DIR")
+    subjects: int = option(
+        10,
+        "selection subjects per level (the picking); with the default 10, the run takes about "
+        "400 s of a core (~4 min on 2 cores) without --oracle",
+        low=1,
+    )
+    confirm_subjects: int | None = option(
+        None,
+        "evaluation subjects per level that confirm the picked points (default: --subjects)",
+        low=1,
+        metavar="SUBJECTS",
+    )
+    controllers: tuple[str, ...] = option(
+        (), "more controller specs (e.g. sac oracle)", metavar="SPEC"
+    )
+    seeds_dir: tuple[Path, ...] = option(
+        (),
+        "aggregated `myoexo policy seeds` folders (each seed's selected checkpoint a point)",
+        metavar="DIR",
+    )
+    oracle: bool = option(
+        False,
+        "add the torque-aware oracle at its sweep settings (slow: ~23 s of a core per "
+        "episode, 4 settings: with 10 subjects about 1 h of a core more, ~30 min on 2 cores)",
+    )
+    accuracy_deg: float = option(
+        ACCURACY_DEG,
+        "accuracy band above the level's best mean |final error|",
+        low=0.0,
+        above=True,
+        unit="deg",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo frontier``."""
-    parser.add_argument("--out", type=Path, default=Path("results/frontier"))
-    parser.add_argument(
-        "--subjects", type=int, default=10, help="selection subjects per level (the picking)"
-    )
-    parser.add_argument(
-        "--confirm-subjects",
-        type=int,
-        default=None,
-        help="evaluation subjects per level that confirm the picked points (default: --subjects)",
-    )
-    parser.add_argument(
-        "--controllers", nargs="*", default=[], help="more controller specs (e.g. sac oracle)"
-    )
-    parser.add_argument(
-        "--seeds-dir",
-        type=Path,
-        nargs="+",
-        default=[],
-        help="aggregated `myoexo seeds` folders (each seed's selected checkpoint a point)",
-    )
-    parser.add_argument("--workers", type=int, help="worker processes (default: all cores)")
-    parser.add_argument(
-        "--oracle",
-        action="store_true",
-        help="add the torque-aware oracle at its sweep settings (slow: ~6 s per episode)",
-    )
-    parser.add_argument(
-        "--accuracy-deg",
-        type=float,
-        default=ACCURACY_DEG,
-        help="accuracy band above the level's best mean |final error| (deg)",
-    )
+    """Options of ``myoexo frontier``: :class:`FrontierConfig`'s fields, the twin's options
+    and :class:`~myoexo.runtime.fields.Execution`'s."""
+    add_options(parser, FrontierConfig)
     add_twin_arguments(parser)
-    parser.add_argument("--no-progress", action="store_true")
+    add_options(parser.add_argument_group("how to run"), Execution)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo frontier``."""
-    if args.subjects < 1:
-        raise ValueError(f"--subjects = {args.subjects} must be >= 1")
-    if args.confirm_subjects is not None and args.confirm_subjects < 1:
-        raise ValueError(f"--confirm-subjects = {args.confirm_subjects} must be >= 1")
+    config = from_options(FrontierConfig, args)
+    execution = from_options(Execution, args)
     pts = build_frontier(
-        args.out,
-        args.subjects,
-        args.controllers,
-        args.seeds_dir,
-        args.workers,
-        args.accuracy_deg,
-        progress=not args.no_progress,
-        oracle=args.oracle,
+        config.out,
+        config.subjects,
+        config.controllers,
+        config.seeds_dir,
+        execution.workers,
+        config.accuracy_deg,
+        progress=execution.progress,
+        oracle=config.oracle,
         twin=twin_from_args(args),
-        confirm_subjects=args.confirm_subjects,
+        confirm_subjects=config.confirm_subjects,
     )
     print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
-    print(f"wrote {args.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")
+    print(f"wrote {config.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")
     return 0

@@ -1,7 +1,7 @@
 """The joint fit of the ``"tsrt"`` reflex: the study's PID table and the clinical rows
 together, on the calibration root.
 
-``myoexo calibrate --reflex tsrt`` runs :func:`calibrate_tsrt`. Its objective is the
+``myoexo twin calibrate --reflex tsrt`` runs :func:`calibrate_tsrt`. Its objective is the
 validation table's (:mod:`myoexo.studies.validate`): the number of rows a candidate passes,
 with a small continuous term that breaks ties towards the study's PID final errors (6.3 / 9.3
 deg at levels 2-3, within 0.5 deg of the target at level 1), a velocity-dependent resistance
@@ -14,7 +14,7 @@ on the PID's mean final error (as the stretch reflex's calibration does), and th
 checked on the evaluation root. The fit reads the calibration root only (the evaluation root
 is refused).
 
-    myoexo calibrate --reflex tsrt --subjects 6 --clinical-subjects 1 --sweeps 2 \\
+    myoexo twin calibrate --reflex tsrt --subjects 6 --clinical-subjects 1 --sweeps 2 \\
         --verify-subjects 50 --out docs/studies/calibration_tsrt
 """
 
@@ -242,7 +242,7 @@ def calibrate_tsrt(
         lv: pid_outcome(lv, _model(levels), verify_subjects, check_root_seed) for lv in VALID_LEVELS
     }
     note = (
-        f"myoexo calibrate --reflex tsrt --subjects {pid_subjects} --clinical-subjects "
+        f"myoexo twin calibrate --reflex tsrt --subjects {pid_subjects} --clinical-subjects "
         f"{clinical_subjects} --sweeps {sweeps} --verify-subjects {verify_subjects} --seed "
         f"{root_seed}: fitted on root {root_seed} ({sum(ok for _, ok in rows.values())} of "
         f"{len(rows)} validation rows in-sample); check on root {check_root_seed}, PID final "

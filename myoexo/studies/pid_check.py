@@ -3,7 +3,7 @@
 :func:`pid_outcome` runs the paper's Ziegler-Nichols PID on subjects of one level and reduces
 the episodes to a :class:`PIDOutcome` (final error, overshoot, settling, peak exo torque);
 :func:`bisect_final_error` fits one reflex parameter whose growth moves that final error
-monotonically up. ``myoexo calibrate`` (:mod:`myoexo.studies.calibrate`), the joint fit of
+monotonically up. ``myoexo twin calibrate`` (:mod:`myoexo.studies.calibrate`), the joint fit of
 the ``"tsrt"`` reflex (:mod:`myoexo.studies.joint_fit`) and the validation table
 (:mod:`myoexo.studies.validate`) use them.
 """

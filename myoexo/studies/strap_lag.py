@@ -1,4 +1,4 @@
-"""``myoexo strap-lag``: how far the human knee lags the exo encoder per unit of command.
+"""``myoexo twin strap-lag``: how far the human knee lags the exo encoder per unit of command.
 
 The straps give under the motor's torque, so a knee held by spastic muscles against the motor
 is more flexed than the exo's encoder says. A controller that reads only the encoder (and its
@@ -22,46 +22,79 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.guard import STRAP_LAG_FIT
+from myoexo.evaluation.config import check_fit_root
+from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.spasticity.levels import VALID_LEVELS
 
 
 @dataclass(frozen=True)
 class StrapLagSettings:
-    """What the fit holds the subjects at.
+    """What the fit holds the subjects at (``root_seed`` and ``subjects`` are options of
+    ``myoexo twin strap-lag``; the fit records every field)."""
 
-    Attributes:
-        root_seed: Root of the subjects (not the evaluation root 0).
-        subjects: Subjects per level.
-        levels: Levels whose muscles hold the knee against the motor.
-        commands: Constant commands (extension negative), each held from the start.
-        hold_s: How long each command is held, s.
-        rest_window_s: The samples of the last ``rest_window_s`` count.
-        rest_speed_rad_s: ... if the knee moves slower than this.
-    """
-
-    root_seed: int = 3
-    subjects: int = 20
-    levels: tuple[int, ...] = (2, 3)
-    commands: tuple[float, ...] = (-0.7, -0.8, -0.9, -1.0)
-    hold_s: float = 4.0
-    rest_window_s: float = 1.0
-    rest_speed_rad_s: float = 0.01
+    root_seed: int = option(
+        3,
+        "root seed of the subjects (their own root: the evaluation root 0 is refused)",
+        low=0,
+        flag="seed",
+    )
+    subjects: int = option(20, "subjects per level", low=1, high=10_000)
+    levels: tuple[int, ...] = option(
+        (2, 3),
+        "levels whose muscles hold the knee against the motor",
+        choices=VALID_LEVELS,
+        flag="",
+    )
+    commands: tuple[float, ...] = option(
+        (-0.7, -0.8, -0.9, -1.0),
+        "constant commands (extension negative, in [-1, 0)), each held from the start",
+        low=-1.0,
+        high=0.0,
+        flag="",
+    )
+    hold_s: float = option(
+        4.0, "how long each command is held", low=0.0, above=True, unit="s", flag=""
+    )
+    rest_window_s: float = option(
+        1.0,
+        "the last part of each hold whose samples at rest enter the fit",
+        low=0.0,
+        above=True,
+        unit="s",
+        flag="",
+    )
+    rest_speed_rad_s: float = option(
+        0.01,
+        "a sample is at rest if the knee moves slower than this",
+        low=0.0,
+        above=True,
+        unit="rad/s",
+        flag="",
+    )
 
     def __post_init__(self) -> None:
-        from myoexo.evaluation.config import EVALUATION_ROOT_SEED
+        check_fields(self)
+        check_fit_root(self.root_seed, "the strap-lag fit")
+        if not self.commands:
+            raise ValueError("commands is empty: name at least one command in [-1, 0)")
+        if 0.0 in self.commands:
+            raise FieldError(type(self).__name__, "commands", self.commands, "is outside [-1, 0)")
+        if not self.rest_window_s < self.hold_s:
+            raise ValueError(
+                f"rest_window_s = {self.rest_window_s!r} must be shorter than hold_s = "
+                f"{self.hold_s!r}"
+            )
 
-        if self.root_seed == EVALUATION_ROOT_SEED or self.root_seed < 0:
-            raise ValueError(
-                f"root_seed = {self.root_seed!r}: the fit may not see the evaluation root "
-                f"{EVALUATION_ROOT_SEED}; accepted: another root >= 0"
-            )
-        if not 1 <= self.subjects <= 10_000:
-            raise ValueError(f"subjects = {self.subjects!r} is outside [1, 10000]")
-        if not self.commands or any(not -1.0 <= c < 0.0 for c in self.commands):
-            raise ValueError(f"commands = {self.commands!r}: each must be in [-1, 0)")
-        if not 0.0 < self.rest_window_s < self.hold_s:
-            raise ValueError(
-                f"rest_window_s = {self.rest_window_s!r} must be in (0, hold_s = {self.hold_s})"
-            )
+
+@dataclass(frozen=True)
+class StrapLagOutput:
+    """What ``myoexo twin strap-lag`` does with the fit (an option of the command)."""
+
+    write: bool = option(
+        False,
+        "make the fit the package's (myoexo/assets/fits/strap_lag.json), which the encoder "
+        "guard reads",
+    )
 
 
 @dataclass(frozen=True)
@@ -129,24 +162,19 @@ def fit_strap_lag(settings: StrapLagSettings, log: Any = None) -> StrapLagFit:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``myoexo strap-lag``."""
-    d = StrapLagSettings()
-    parser.add_argument("--seed", type=int, default=d.root_seed, help="root seed of the subjects")
-    parser.add_argument("--subjects", type=int, default=d.subjects, help="subjects per level")
-    parser.add_argument(
-        "--write",
-        action="store_true",
-        help="make the fit the package's (myoexo/assets/fits/strap_lag.json), which the "
-        "encoder guard reads",
-    )
+    """Options of ``myoexo twin strap-lag``: :class:`StrapLagSettings`' and
+    :class:`StrapLagOutput`'s fields."""
+    add_options(parser, StrapLagSettings)
+    add_options(parser, StrapLagOutput)
 
 
 def run(args: argparse.Namespace) -> int:
-    """``myoexo strap-lag``: print the fitted lag; with ``--write``, make it the package's."""
+    """``myoexo twin strap-lag``: print the fitted lag; with ``--write``, make it the package's."""
     from myoexo.model import TWIN_VERSION
     from myoexo.runtime.fits import provenance, write_fit
 
-    settings = StrapLagSettings(root_seed=args.seed, subjects=args.subjects)
+    settings = from_options(StrapLagSettings, args)
+    output = from_options(StrapLagOutput, args)
     result = fit_strap_lag(settings, log=print)
     print(
         f"strap lag: {result.lag_deg_per_command:.3f} deg per unit command "
@@ -154,8 +182,10 @@ def run(args: argparse.Namespace) -> int:
         f"{result.max_residual_deg:.3f}; {result.samples} control steps at rest, levels "
         f"{list(settings.levels)}, {settings.subjects} subjects each of root {settings.root_seed})"
     )
-    if args.write:
-        command = f"myoexo strap-lag --seed {settings.root_seed} --subjects {settings.subjects}"
+    if output.write:
+        command = (
+            f"myoexo twin strap-lag --seed {settings.root_seed} --subjects {settings.subjects}"
+        )
         path = write_fit(
             STRAP_LAG_FIT,
             asdict(result),
@@ -165,4 +195,4 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["StrapLagFit", "StrapLagSettings", "fit_strap_lag"]
+__all__ = ["StrapLagFit", "StrapLagOutput", "StrapLagSettings", "fit_strap_lag"]

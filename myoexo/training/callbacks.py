@@ -5,7 +5,7 @@
 * :class:`PaperMetricsEvalCallback`: every ``eval_every_steps``, the deterministic policy on
   a few fixed subjects per level, next to the PID on the same subjects: final error, peak
   and RMS interaction torque (docs/reference.md section 5), and the score that ranks
-  checkpoints (:func:`myoexo.evaluation.criteria.score`).
+  checkpoints (:func:`myoexo.evaluation.criteria.ranking_score`).
 * :class:`PeriodicCheckpointCallback`: model + replay buffer + normalization statistics +
   step counter every ``every_s`` seconds or ``every_steps`` transitions, whichever comes
   first, a first one soon after learning starts, and at the end of training.
@@ -158,7 +158,7 @@ class PaperMetricsEvalCallback(BaseCallback):
     """Small periodic evaluation of the deterministic policy against the PID.
 
     Logs ``eval/L<level>/<metric>`` and ``eval/L<level>/peak_vs_pid_pct`` (negative = less
-    peak torque than the PID) and ``eval/score`` (:func:`myoexo.evaluation.criteria.score`)
+    peak torque than the PID) and ``eval/score`` (:func:`myoexo.evaluation.criteria.ranking_score`)
     to the SB3 logger,
     appends the rows to ``<run>/eval.csv`` and keeps :attr:`last_score` for the
     checkpoints. The PID's numbers are computed once per run (``eval_pid.json``).
@@ -248,7 +248,9 @@ class PaperMetricsEvalCallback(BaseCallback):
             lv: _level_means(actor, lv, self.spec, self._env(lv), self.stop)
             for lv in self.spec.levels
         }
-        score = criteria.score(criteria.compare(sac, {lv: self._pid[lv] for lv in sac}))
+        score = criteria.ranking_score(
+            criteria.compare_with_pid(sac, {lv: self._pid[lv] for lv in sac})
+        )
         rows = []
         for level, m in sac.items():
             pid_peak = self._pid[level]["peak_interaction_torque_nm"]

@@ -2,7 +2,8 @@
 
 ::
 
-    <run>/config.json              preset, seed, env, observation keys, package versions
+    <run>/config.json              training config (seed included), env, observation keys,
+                                   package versions
     <run>/sessions.jsonl           one line per training session (start/end step, wall time)
     <run>/eval.csv                 the periodic small evaluation (one row per level and step)
     <run>/eval_pid.json            the PID's metrics on the same fixed subjects (computed once)
@@ -183,7 +184,7 @@ def _model_members(checkpoint: Path) -> tuple[str, ...]:
     from myoexo.policies.algorithms import ALGORITHMS
 
     try:
-        algorithm = read_config(checkpoint.parent.parent)["preset"]["algorithm"]
+        algorithm = read_run_config(checkpoint.parent.parent).algorithm
     except (OSError, ValueError, KeyError, TypeError):
         return MODEL_MEMBERS
     known = ALGORITHMS.get(str(algorithm).lower())
@@ -304,6 +305,16 @@ def read_config(run_dir: Path) -> dict[str, Any]:
     if not path.is_file():
         raise ValueError(f"{str(run_dir)!r} is not a training run folder (no {CONFIG_FILE})")
     return json.loads(path.read_text())
+
+
+def read_run_config(run_dir: Path) -> Any:
+    """The :class:`~myoexo.training.config.TrainConfig` of a run (its ``config.json``; one
+    written before the config held ``algorithm_kwargs`` is converted,
+    :func:`~myoexo.training.config.config_from_record`); ``ValueError`` if the folder holds
+    no run."""
+    from myoexo.training.config import config_from_record
+
+    return config_from_record(read_config(run_dir))
 
 
 def resolve_checkpoint(path: str | os.PathLike[str], which: str = "latest") -> Path:

@@ -1,108 +1,228 @@
-"""``myoexo train``: train SAC on MyoExoKneeRandom-v0, or resume an interrupted run.
+"""``myoexo policy train``: train a learner on MyoExoKneeRandom-v0, or resume an interrupted run.
 
 Examples::
 
-    myoexo train --preset cpu --seed 0 --run-dir runs/cpu_seed0
-    myoexo train --preset cpu --set total_timesteps=500000 --set n_envs=2
-    myoexo train --resume runs/cpu_seed0                 # continues the step counter
-    myoexo train --restart runs/cpu_seed0                # a start that never checkpointed
+    myoexo policy train --preset cpu --seed 0 --run-dir runs/cpu_seed0
+    myoexo policy train --preset cpu --total-timesteps 500000 --n-envs 2 \\
+        --algorithm sbx_sac --algorithm-kwargs train_freq=16,gradient_steps=64 \\
+        --reward-weights inter:-0.1 --reflex persistent
+    myoexo policy train --config runs/cpu_seed0/config.json --seed 1   # its settings, seed 1
+    myoexo policy train --resume runs/cpu_seed0                 # continues the step counter
+    myoexo policy train --restart runs/cpu_seed0                # a start that never checkpointed
     tensorboard --logdir runs/cpu_seed0/tb
 
+Every field of the training config (:class:`~myoexo.training.config.TrainConfig`) is an
+option of its own name (``--total-timesteps``), the algorithm's arguments one mapping
+(``--algorithm-kwargs NAME=VALUE,...``, merged into the preset's), the twin's options their
+own (``--reflex``, ``--episode-duration-s``, ``--obs-preset``, ``--reward-weights``); an
+option not given keeps the preset's value. The earlier ``--set NAME=VALUE`` is refused with
+the option that replaces it.
+
 SIGTERM or Ctrl-C (SIGINT) ends training after the current step with a resumable checkpoint
-and one line on stderr (``myoexo train: stopped by SIGTERM at step N; checkpoint step_...;
-resume with: myoexo train --resume DIR``); the exit status is then 128 + the signal number
-(143 for SIGTERM, 130 for SIGINT). A run folder in use by another process, or ``--resume``
-on a folder without a checkpoint, is a one-line error with exit status 2. See
+and one line on stderr (``myoexo policy train: stopped by SIGTERM at step N; checkpoint
+step_...; resume with: myoexo policy train --resume DIR``); the exit status is then 128 + the
+signal number (143 for SIGTERM, 130 for SIGINT). A run folder in use by another process, or
+``--resume`` on a folder without a checkpoint, is a one-line error with exit status 2. See
 ``docs/long_runs.md``.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import signal
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from myoexo.training.presets import PRESETS, apply_overrides, get_preset
+from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
+from myoexo.runtime.fields import (
+    add_options,
+    check_fields,
+    flag_of,
+    from_options,
+    option,
+    option_fields,
+)
+from myoexo.training.config import PRESETS, TrainConfig, get_preset, read_config_file
+
+#: The preset of a command that names none.
+DEFAULT_PRESET = "cpu"
+
+
+def new_spelling(item: str) -> str:
+    """The option that replaces an earlier ``--set NAME=VALUE`` item."""
+    name, _, value = (p.strip() for p in item.partition("="))
+    fields = {f.name: f for f in option_fields(TrainConfig)}
+    if name in fields:
+        flag = flag_of(fields[name])
+    elif TwinOptions.is_option(name):
+        flag = "--" + name.replace("_", "-")
+    else:
+        return f"--algorithm-kwargs {name}={value}"
+    if value.lower() in ("true", "false"):  # a switch
+        return flag if value.lower() == "true" else f"--no-{flag[2:]}"
+    if name in ("net_arch_pi", "net_arch_qf", "eval_levels", "obs_keys"):  # several values
+        value = " ".join(v for v in value.replace("-", ",").split(",") if v)
+    return f"{flag} {value}"
+
+
+class _RemovedSet(argparse.Action):
+    """``--set NAME=VALUE``: gone; one line names the option that replaces it."""
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: Any = None):
+        parser.error(
+            f"--set is gone, every setting is an option of its own: --set {values} is now "
+            f"{new_spelling(str(values))}"
+        )
+
+
+@dataclass(frozen=True)
+class TrainBase:
+    """What a training config starts from: a named preset or a saved config (one of the
+    two; neither: :data:`DEFAULT_PRESET`)."""
+
+    preset: str | None = option(
+        None,
+        f"the named config the options change (default: {DEFAULT_PRESET})",
+        choices=sorted(PRESETS),
+    )
+    config: str | None = option(
+        None,
+        "start from a saved config instead: a run's config.json or a seeds folder's seeds.json",
+        metavar="FILE",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class TrainRun:
+    """Where ``myoexo policy train`` writes its run (or which run it continues) and how
+    much it tells."""
+
+    run_dir: Path | None = option(
+        None,
+        "output folder (default: runs/<algorithm>_<preset>_seed<seed>_<timestamp>)",
+        folder=True,
+    )
+    resume: str | None = option(
+        None,
+        "continue the run in DIR from its newest checkpoint (with --total-timesteps: a "
+        "new step budget)",
+        metavar="DIR",
+    )
+    restart: str | None = option(
+        None,
+        "start the run in DIR again from step 0 with its saved settings (for a run that "
+        "ended before its first checkpoint; its logs are deleted)",
+        metavar="DIR",
+    )
+    progress: bool = option(True, "show a progress bar (--no-progress: for logs / background runs)")
+    verbose: int = option(1, "0 quiet, 1 checkpoints/evals, 2 SB3 tables", low=0, short="v")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_config_arguments(parser: argparse.ArgumentParser, *, seed: bool = True) -> None:
+    """The options of a training config: ``--preset`` or ``--config`` (the base,
+    :class:`TrainBase`), one option per :class:`~myoexo.training.config.TrainConfig` field
+    (without *seed*: not ``--seed``), the twin's options; ``--set`` (gone) says what
+    replaced it."""
+    add_options(parser.add_mutually_exclusive_group(), TrainBase)
+    cpu = PRESETS[DEFAULT_PRESET]
+    defaults = {f.name: getattr(cpu, f.name) for f in option_fields(TrainConfig)}
+    defaults["algorithm_kwargs"] = ",".join(f"{k}={v}" for k, v in cpu.algorithm_kwargs.items())
+    group = parser.add_argument_group(
+        "training config",
+        f"each option not given keeps the preset's value (shown: {DEFAULT_PRESET}'s)",
+    )
+    add_options(
+        group, TrainConfig, given_only=True, defaults=defaults, exclude=() if seed else ("seed",)
+    )
+    add_twin_arguments(parser, observation=True)
+    parser.add_argument("--set", action=_RemovedSet, metavar="NAME=VALUE", help=argparse.SUPPRESS)
+
+
+def given_config_options(args: argparse.Namespace) -> list[str]:
+    """The config options *args* holds (given on the command line), as typed."""
+    given = [flag_of(f) for f in option_fields(TrainConfig) if hasattr(args, f.name)]
+    given += [f"--{k}" for k in ("preset", "config") if getattr(args, k, None)]
+    if twin_from_args(args) != TwinOptions():
+        given.append("a twin option")
+    return given
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The config of the command line: ``--preset`` (or ``--config``) with every option
+    given applied (``algorithm_kwargs`` merged into the base's, the twin's options on top of
+    the base's twin)."""
+    if getattr(args, "config", None):
+        base = read_config_file(args.config)
+    else:
+        base = get_preset(getattr(args, "preset", None) or DEFAULT_PRESET)
+    given = {
+        f.name: getattr(args, f.name) for f in option_fields(TrainConfig) if hasattr(args, f.name)
+    }
+    config = base.replace(**given) if given else base
+    twin = twin_from_args(args, base=config.twin)
+    return config if twin == config.twin else config.replace(twin=twin)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo train``."""
-    parser.add_argument(
-        "--preset", choices=sorted(PRESETS), default="cpu", help="hyper-parameters (default: cpu)"
-    )
-    parser.add_argument("--seed", type=int, default=0, help="seed of learner and envs (default 0)")
-    parser.add_argument(
-        "--run-dir", help="output folder (default: runs/sac_<preset>_seed<seed>_<timestamp>)"
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="FIELD=VALUE",
-        help="override a preset field (--set n_envs=2) or a twin option by its own name "
-        "(--set reflex=persistent, --set robustness=true, --set episode_duration_s=4, "
-        "--set reward_weights=inter:-0.5, --set obs_preset=exo); repeatable",
-    )
-    parser.add_argument(
-        "--total-timesteps", type=int, help="step budget (new run: a preset override)"
-    )
-    parser.add_argument(
-        "--resume", metavar="DIR", help="continue the run in DIR from its newest checkpoint"
-    )
-    parser.add_argument(
-        "--restart",
-        metavar="DIR",
-        help="start the run in DIR again from step 0 with its saved settings (for a run that "
-        "ended before its first checkpoint; its logs are deleted)",
-    )
-    parser.add_argument(
-        "--no-progress", action="store_true", help="no progress bar (for logs / background runs)"
-    )
-    parser.add_argument(
-        "-v", "--verbose", type=int, default=1, help="0 quiet, 1 checkpoints/evals, 2 SB3 tables"
-    )
+    """Arguments of ``myoexo policy train``."""
+    add_options(parser, TrainRun)
+    add_config_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo train``: 0 when the step budget is reached, 128 + the signal number when
-    stopped by SIGINT / SIGTERM (a checkpoint is written)."""
+    """Run ``myoexo policy train``: 0 when the step budget is reached, 128 + the signal number
+    when stopped by SIGINT / SIGTERM (a checkpoint is written)."""
     from myoexo.runtime.lifecycle import signal_exit_status
     from myoexo.training.train import restart, resume, train
 
-    progress = not args.no_progress
+    options = from_options(TrainRun, args)
+    progress = options.progress
     if args.resume and args.restart:
         raise ValueError("--resume and --restart exclude each other")
     if args.resume or args.restart:
-        option = "--resume" if args.resume else "--restart"
-        if args.set or args.run_dir:
-            raise ValueError(f"{option} takes the run's saved settings; drop --set/--run-dir")
+        which = "--resume" if args.resume else "--restart"
+        given = [
+            g for g in given_config_options(args) if not (args.resume and g == "--total-timesteps")
+        ]
+        if args.run_dir:
+            given.append("--run-dir")
+        if given:
+            raise ValueError(f"{which} takes the run's saved settings; drop {', '.join(given)}")
         if args.resume:
             run_dir = Path(args.resume)
-            result = resume(run_dir, args.total_timesteps, progress, args.verbose)
+            result = resume(
+                run_dir, getattr(args, "total_timesteps", None), progress, options.verbose
+            )
         else:
-            if args.total_timesteps is not None:
-                raise ValueError("--restart takes the run's saved settings; drop --total-timesteps")
             run_dir = Path(args.restart)
-            result = restart(run_dir, progress, args.verbose)
+            result = restart(run_dir, progress, options.verbose)
     else:
-        preset = apply_overrides(get_preset(args.preset), args.set)
-        if args.total_timesteps is not None:
-            preset = dataclasses.replace(preset, total_timesteps=args.total_timesteps)
+        config = config_from_args(args)
+        config.resolved_kwargs()  # an argument its algorithm does not take stops here
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(args.run_dir or f"runs/sac_{preset.name}_seed{args.seed}_{stamp}")
+        run_dir = Path(
+            args.run_dir or f"runs/{config.algorithm}_{config.name}_seed{config.seed}_{stamp}"
+        )
         print(
-            f"[train] preset {preset.name}, seed {args.seed}, {preset.twin.describe()} -> "
-            f"{run_dir}",
+            f"[train] {config.algorithm} ({config.name}), seed {config.seed}, "
+            f"{config.twin.describe()} -> {run_dir}",
             flush=True,
         )
-        result = train(preset, run_dir, args.seed, progress, args.verbose)
+        result = train(config, run_dir, progress, options.verbose)
     if result.stopped_by is not None:
         print(
-            f"myoexo train: stopped by {result.stopped_by} at step {result.num_timesteps}; "
-            f"checkpoint {result.checkpoint.name}; resume with: myoexo train --resume {run_dir}",
+            f"myoexo policy train: stopped by {result.stopped_by} at step "
+            f"{result.num_timesteps}; checkpoint {result.checkpoint.name}; resume with: "
+            f"myoexo policy train --resume {run_dir}",
             file=sys.stderr,
             flush=True,
         )

@@ -3,11 +3,11 @@ as a small numpy actor (``.npz`` + ``.json``, what :func:`myoexo.load_policy` re
 
 CLI::
 
-    myoexo export-policy RUN --onnx actor.onnx            # newest checkpoint of RUN
-    myoexo export-policy RUN --checkpoint best --out my_actor
-    myoexo export-policy RUN --checkpoint 1200000 --ship   # into myoexo/policies/
+    myoexo policy export RUN --onnx actor.onnx            # newest checkpoint of RUN
+    myoexo policy export RUN --checkpoint best --out my_actor
+    myoexo policy export RUN --checkpoint 1200000 --ship   # into myoexo/policies/
 
-``RUN`` is a run folder (``myoexo train``) or one of its ``checkpoints/step_*`` folders.
+``RUN`` is a run folder (``myoexo policy train``) or one of its ``checkpoints/step_*`` folders.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,7 @@ import numpy as np
 from myoexo.envs.options import TwinOptions
 from myoexo.model import recorded_twin_version
 from myoexo.policies.actor import MLPActor, save_actor
+from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 from myoexo.training import checkpoints as ck
 
 #: Reference observations stored with an exported actor (seeded standard normal, scaled).
@@ -36,7 +38,7 @@ def actor_from_sac(
     """The deterministic actor of a SAC-family model as an :class:`MLPActor`.
 
     Args:
-        model: A SAC / TQC model of stable-baselines3, sb3-contrib or SBX (JAX) with an MLP
+        model: A SAC / TQC model of stable-baselines3 or SBX (JAX) with an MLP
             actor on a flat Box observation.
         vec_normalize: The ``VecNormalize`` the model was trained behind (``None``: the
             model's own, if any); its observation statistics become the actor's.
@@ -164,12 +166,15 @@ def _checkpoint_parts(
     from stable_baselines3.common.vec_env import VecNormalize
 
     from myoexo.policies.algorithms import algorithm_class
+    from myoexo.training.config import RECORD_KEYS, config_from_record
 
     checkpoint = Path(checkpoint)
     run_dir = checkpoint.parent.parent
     config = ck.read_config(run_dir) if (run_dir / ck.CONFIG_FILE).is_file() else {}
-    preset = config.get("preset", {})
-    algorithm = preset.get("algorithm", "sac")
+    holds_config = any(k in config for k in RECORD_KEYS)
+    train_config = config_from_record(config) if holds_config else None
+    state = ck.read_state(checkpoint)
+    algorithm = train_config.algorithm if train_config else state.get("algorithm", "sac")
     model = algorithm_class(algorithm).load(checkpoint / ck.MODEL_FILE, device="cpu")
     vn = None
     if (checkpoint / ck.VECNORM_FILE).is_file():
@@ -179,10 +184,12 @@ def _checkpoint_parts(
             vn = pickle.load(f)
         if not isinstance(vn, VecNormalize):
             raise ValueError(f"{checkpoint / ck.VECNORM_FILE} is not a VecNormalize pickle")
-    state = ck.read_state(checkpoint)
     # the twin the policy was trained on: the checkpoint's own record (older checkpoints:
-    # the run's preset)
-    twin = TwinOptions.from_dict(state.get("twin") or preset.get("twin") or {})
+    # the run's config)
+    if state.get("twin"):
+        twin = TwinOptions.from_dict(state["twin"])
+    else:
+        twin = train_config.twin if train_config else TwinOptions()
     meta = {
         "env_id": config.get("env_id"),
         "obs_keys": config.get("obs_keys"),
@@ -193,9 +200,9 @@ def _checkpoint_parts(
         "selection_root_seed": (
             selection_root_seed
             if selection_root_seed is not None
-            else state.get("selection_root_seed")  # recorded by myoexo select
+            else state.get("selection_root_seed")  # recorded by myoexo policy select
         ),
-        "preset": preset.get("name"),
+        "preset": train_config.name if train_config else None,
         "algorithm": algorithm,
         "seed": config.get("seed"),
         "num_timesteps": state.get("num_timesteps"),
@@ -213,10 +220,10 @@ def load_checkpoint_actor(
     """:class:`MLPActor` of a checkpoint folder, with provenance and reference pairs.
 
     Args:
-        checkpoint: A ``checkpoints/step_*`` folder of a ``myoexo train`` run.
+        checkpoint: A ``checkpoints/step_*`` folder of a ``myoexo policy train`` run.
         with_reference: Store (and check) reference observation/action pairs.
         selection_root_seed: Root seed of the subjects that selected this checkpoint
-            (``myoexo select``), recorded so that an evaluation on that root is refused.
+            (``myoexo policy select``), recorded so that an evaluation on that root is refused.
     """
     model, vn, meta = _checkpoint_parts(checkpoint, selection_root_seed)
     actor = actor_from_sac(model, vn, metadata=meta)
@@ -257,49 +264,56 @@ def export_onnx(actor: MLPActor, path: str | Path, opset: int = 17) -> Path:
 
 
 # ---------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo export-policy``."""
-    parser.add_argument("run", help="training run folder, or one of its checkpoints/step_* folders")
-    parser.add_argument(
-        "--checkpoint",
-        default="latest",
-        help="'latest' (default), 'best' (highest small-evaluation score) or a step number",
+@dataclass(frozen=True)
+class ExportRun:
+    """What ``myoexo policy export`` exports (a run's checkpoint) and where it writes it."""
+
+    run: str = option("", "training run folder, or one of its checkpoints/step_* folders", flag="")
+    checkpoint: str = option(
+        "latest",
+        "'latest', 'best' (highest small-evaluation score) or a step number",
+        metavar="CHECKPOINT",
     )
-    parser.add_argument("--onnx", metavar="FILE", help="write the actor as ONNX to FILE")
-    parser.add_argument(
-        "--out", metavar="STEM", help="write the numpy actor to STEM.npz + STEM.json"
-    )
-    parser.add_argument(
-        "--ship",
-        nargs="?",
-        const="sac",
+    onnx: str | None = option(None, "write the actor as ONNX to FILE", metavar="FILE")
+    out: str | None = option(None, "write the numpy actor to STEM.npz + STEM.json", metavar="STEM")
+    ship: str | None = option(
+        None,
+        "write the numpy actor into the package as NAME (default 'sac', what "
+        "myoexo.load_policy() returns; 'student_exo' is written by myoexo policy distill)",
         metavar="NAME",
-        help="write the numpy actor into the package as NAME (default 'sac', what "
-        "myoexo.load_policy() returns; 'student_exo' is written by myoexo distill)",
+        const="sac",
     )
-    parser.add_argument(
-        "--selection-root-seed",
-        type=int,
-        default=None,
-        help="root seed of the subjects that chose this checkpoint (myoexo select's "
-        "--root-seed); recorded, and evaluations on that root are refused",
+    selection_root_seed: int | None = option(
+        None,
+        "root seed of the subjects that chose this checkpoint (myoexo policy select's "
+        "--root-seed); recorded, and evaluations on that root are refused (default: none)",
     )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo policy export`` (:class:`ExportRun`)."""
+    add_positional(parser, ExportRun, "run")
+    add_options(parser, ExportRun)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo export-policy``."""
-    if not (args.onnx or args.out or args.ship):
-        raise SystemExit("export-policy: nothing to do; give --onnx FILE, --out STEM or --ship")
-    checkpoint = ck.resolve_checkpoint(args.run, args.checkpoint)
-    actor = load_checkpoint_actor(checkpoint, selection_root_seed=args.selection_root_seed)
+    """Run ``myoexo policy export``."""
+    options: ExportRun = from_options(ExportRun, args, run=args.run)
+    if not (options.onnx or options.out or options.ship):
+        raise SystemExit("policy export: nothing to do; give --onnx FILE, --out STEM or --ship")
+    checkpoint = ck.resolve_checkpoint(options.run, options.checkpoint)
+    actor = load_checkpoint_actor(checkpoint, selection_root_seed=options.selection_root_seed)
     print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")
-    if args.onnx:
-        print(f"onnx:  {export_onnx(actor, args.onnx)}")
-    stems = [Path(args.out)] if args.out else []
-    if args.ship:
+    if options.onnx:
+        print(f"onnx:  {export_onnx(actor, options.onnx)}")
+    stems = [Path(options.out)] if options.out else []
+    if options.ship:
         from myoexo.policies import shipped_path
 
-        stems.append(shipped_path(args.ship))
+        stems.append(shipped_path(options.ship))
     for stem in stems:
         npz, js = save_actor(actor, stem)
         print(f"actor: {npz} + {js.name}")

@@ -1,24 +1,27 @@
 """Several seeds of one training configuration: trained in parallel, aggregated with their
 uncertainty.
 
-    myoexo seeds train runs/sbx5 --seeds 0 1 2 3 4 --set algorithm=sbx_sac --workers 2
-    myoexo seeds train runs/sbx5                   # again: resumes every unfinished seed
-    myoexo seeds aggregate runs/sbx5 --subjects 10
-    myoexo seeds ship runs/sbx5 --name sac         # the chosen seed into the package
-    myoexo seeds compare runs/algos/* --out results/algorithms   # several configurations
+    myoexo policy seeds train runs/sbx5 --seeds 0 1 2 3 4 --algorithm sbx_sac --workers 2
+    myoexo policy seeds train runs/sbx5                   # again: resumes every unfinished seed
+    myoexo policy seeds aggregate runs/sbx5 --subjects 10
+    myoexo policy seeds ship runs/sbx5 --name sac         # the chosen seed into the package
+    myoexo policy seeds compare runs/algos/* --out results/algorithms   # several configurations
 
-``train`` runs one ``myoexo train`` process per seed (``--workers`` at a time), each in its
+``train`` runs one ``myoexo policy train`` process per seed (``--workers`` at a time), each in its
 own run folder ``DIR/seed_<N>`` with its own checkpoints, so each seed is resumable on its own
 (running the same command again resumes the unfinished ones); ``DIR/seeds.json`` records the
-configuration. SIGTERM / SIGINT are passed on to the running seeds, which checkpoint and stop.
+configuration (the training config of ``myoexo policy train``'s options, read by each new
+seed's ``--config``). SIGTERM / SIGINT are passed on to the running seeds, which checkpoint
+and stop.
 
 ``aggregate`` selects each seed's checkpoint on the selection subjects (root seed
-:data:`~myoexo.evaluation.config.SELECTION_ROOT_SEED`, as ``myoexo select``), then reports
+:data:`~myoexo.evaluation.config.SELECTION_ROOT_SEED`, as ``myoexo policy select``), then reports
 per level, over seeds: the mean, the interquartile mean and a bootstrap 95 % confidence
 interval (``scipy.stats.bootstrap``, percentile method, resampling seeds; per level, so the
 levels are the strata) of the final error, the peak and RMS reductions against the PID and the
 settling time, and the fraction of seeds whose level passes the acceptance criteria
-(:func:`myoexo.evaluation.criteria.compare`; a Wilson 95 % interval). It names the seed to
+(:func:`myoexo.evaluation.criteria.compare_with_pid`; a Wilson 95 % interval):
+:func:`myoexo.evaluation.stats.summarize_seeds`. It names the seed to
 ship by a rule that does not pick the luckiest one: the seed closest to the aggregate (the
 smallest sum over levels and metrics of its distance to the across-seed mean, each metric
 divided by its across-seed spread). Files: ``aggregate_seeds.csv`` (one row per seed and
@@ -26,7 +29,7 @@ level), ``aggregate.csv`` / ``aggregate.md`` (the summary), ``aggregate.json`` (
 seed and checkpoints), ``seeds_spread.png``.
 
 ``compare`` puts several aggregated folders side by side (e.g. algorithms trained on the same
-wall-clock budget, ``--set max_wall_time_s=...``): per configuration, the mean over seeds of
+wall-clock budget, ``--max-wall-time-s ...``): per configuration, the mean over seeds of
 the training wall time, env steps, env steps/s and gradient updates/s, and per level the
 final error and peak reduction (mean [95 % CI]) and the share of seeds passing the criteria.
 """
@@ -34,6 +37,7 @@ final error and peak reduction (mean [95 % CI]) and the share of seeds passing t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import signal
@@ -41,16 +45,30 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
+from myoexo.evaluation.stats import summarize_seeds
 from myoexo.policies.run_files import AGGREGATE_FILE
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    add_positional,
+    check_fields,
+    from_options,
+    option,
+)
 from myoexo.runtime.files import write_json_atomic, write_text_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, signal_exit_status
+from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
+from myoexo.training.cli import add_config_arguments
+from myoexo.training.config import TrainConfig, config_from_record
+from myoexo.training.select import SelectionConfig
 
 #: Configuration file of a seeds folder.
 SEEDS_FILE = "seeds.json"
@@ -61,10 +79,21 @@ AGGREGATED: dict[str, str] = {
     "rms_reduction_pct": "RMS interaction torque reduction vs PID (%)",
     "settling_time_s": "settling time (s)",
 }
-#: Resamples of the bootstrap.
-BOOTSTRAP_RESAMPLES = 2_000
 #: Seconds between two looks at the running seeds.
 POLL_S = 1.0
+
+
+@dataclass(frozen=True)
+class SeedRuns:
+    """Which seeds ``myoexo policy seeds train`` trains, and how many at once."""
+
+    seeds: tuple[int, ...] = option((0, 1, 2, 3, 4), "training seeds, a run folder each", low=0)
+    workers: int = option(2, "seeds trained at once", low=1)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if len(set(self.seeds)) != len(self.seeds):
+            raise FieldError("SeedRuns", "seeds", self.seeds, "repeats a seed")
 
 
 def seed_dir(out: Path, seed: int) -> Path:
@@ -72,63 +101,67 @@ def seed_dir(out: Path, seed: int) -> Path:
     return Path(out) / f"seed_{int(seed)}"
 
 
-def train_command(
-    out: Path,
-    seed: int,
-    preset: str,
-    overrides: Sequence[str],
-    total_timesteps: int | None,
-) -> list[str]:
-    """The ``myoexo train`` command of one seed: a new run, a resume if it has a resumable
-    checkpoint, or a restart if it started but stopped before its first one."""
+def train_command(out: Path, seed: int, total_timesteps: int | None = None) -> list[str]:
+    """The ``myoexo policy train`` command of one seed: a new run with the folder's config
+    (``--config DIR/seeds.json``) and this seed, a resume if it has a resumable checkpoint
+    (with *total_timesteps*: its new step budget), or a restart if it started but stopped
+    before its first one."""
     run_dir = seed_dir(out, seed)
-    cmd = [sys.executable, "-m", "myoexo.cli", "train", "--no-progress"]
+    cmd = [sys.executable, "-m", "myoexo.cli", "policy", "train", "--no-progress"]
     if (run_dir / ck.CONFIG_FILE).is_file() and ck.resumable_checkpoints(run_dir):
         cmd += ["--resume", str(run_dir)]
-    elif (run_dir / ck.CONFIG_FILE).is_file():
+        if total_timesteps is not None:
+            cmd += ["--total-timesteps", str(total_timesteps)]
+        return cmd
+    if (run_dir / ck.CONFIG_FILE).is_file():
         return [*cmd, "--restart", str(run_dir)]  # --restart keeps the saved step budget
-    else:
-        cmd += ["--preset", preset, "--seed", str(seed), "--run-dir", str(run_dir)]
-        for item in overrides:
-            cmd += ["--set", item]
-    if total_timesteps is not None:
-        cmd += ["--total-timesteps", str(total_timesteps)]
-    return cmd
+    return [*cmd, "--config", str(out / SEEDS_FILE), "--seed", str(seed), "--run-dir", str(run_dir)]
 
 
-def _record_config(out: Path, args: argparse.Namespace) -> None:
-    """Write (first run) or check (later runs) the folder's configuration."""
+def _record_config(out: Path, config: TrainConfig, seeds: Sequence[int]) -> None:
+    """Write (first run) or check (later runs) the folder's configuration: a later run must
+    give the same config (its step budget may grow; an older ``seeds.json`` is read as its
+    config, :func:`~myoexo.training.config.config_from_record`)."""
     path = out / SEEDS_FILE
-    config = {"preset": args.preset, "set": list(args.set), "seeds": sorted(set(args.seeds))}
-    if path.is_file():
-        saved = json.loads(path.read_text())
-        if saved.get("preset") != config["preset"] or saved.get("set") != config["set"]:
+    record = json.loads(path.read_text()) if path.is_file() else {}
+    if record:
+
+        def compared(c: TrainConfig) -> dict[str, Any]:
+            return dataclasses.replace(c, seed=0, total_timesteps=1).to_dict()
+
+        saved, given = compared(config_from_record(record)), compared(config)
+        differ = sorted(k for k in given if given[k] != saved.get(k))
+        if differ:
             raise ValueError(
-                f"{str(out)!r} holds seeds of another configuration ({saved}); choose another "
-                "folder or repeat its settings"
+                f"{str(out)!r} holds seeds of another configuration (it differs in {differ}); "
+                f"choose another folder or repeat its settings (--config {path} gives them)"
             )
-        config["seeds"] = sorted(set(saved.get("seeds", [])) | set(config["seeds"]))
-    write_json_atomic(path, config)
+        seeds = [*record.get("seeds", []), *seeds]
+    record = {k: v for k, v in record.items() if k not in ("preset", "set")}  # older keys
+    record.update(config=config.to_dict(), seeds=sorted(set(seeds)))
+    write_json_atomic(path, record)
 
 
 def train_seeds(args: argparse.Namespace) -> int:
-    """``myoexo seeds train``: every seed in its own process, ``--workers`` at a time."""
+    """``myoexo policy seeds train``: every seed in its own process, ``--workers`` at a time."""
+    from myoexo.training.cli import config_from_args
+
     out = Path(args.out)
-    if any(s < 0 for s in args.seeds) or len(set(args.seeds)) != len(args.seeds):
-        raise ValueError(f"--seeds {args.seeds} must be distinct integers >= 0")
-    if args.workers < 1:
-        raise ValueError(f"--workers = {args.workers} must be >= 1")
+    runs = from_options(SeedRuns, args)
+    config = config_from_args(args)
+    config.resolved_kwargs()  # an argument the algorithm does not take stops here
+    total = config.total_timesteps if hasattr(args, "total_timesteps") else None
     out.mkdir(parents=True, exist_ok=True)
     with FolderLock(out, "seeds folder"), StopSignals() as stop:
-        _record_config(out, args)
-        queue = list(args.seeds)
+        _record_config(out, config, runs.seeds)
+        queue = list(runs.seeds)
         running: dict[int, subprocess.Popen[bytes]] = {}
         codes: dict[int, int] = {}
         t0 = time.monotonic()
         while queue or running:
-            while queue and len(running) < args.workers and stop.received is None:
+            while queue and len(running) < runs.workers and stop.received is None:
                 seed = queue.pop(0)
-                cmd = train_command(out, seed, args.preset, args.set, args.total_timesteps)
+                cmd = train_command(out, seed, total)
                 log = open(out / f"seed_{seed}.log", "ab")
                 running[seed] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
                 log.close()  # the child has its own copy of the file descriptor
@@ -149,7 +182,9 @@ def train_seeds(args: argparse.Namespace) -> int:
                         flush=True,
                     )
     if stop.received is not None:
-        print(f"myoexo seeds: stopped by {stop.name}; resume with the same command", flush=True)
+        print(
+            f"myoexo policy seeds: stopped by {stop.name}; resume with the same command", flush=True
+        )
         return signal_exit_status(signal.Signals[str(stop.name)])
     failed = {s: c for s, c in codes.items() if c != 0}
     if failed:
@@ -158,65 +193,6 @@ def train_seeds(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- aggregate
-def interquartile_mean(x: Any, axis: int = -1) -> Any:
-    """Mean of the middle 50 % (``scipy.stats.trim_mean(x, 0.25)``), rliable's IQM."""
-    from scipy.stats import trim_mean
-
-    return trim_mean(x, 0.25, axis=axis)
-
-
-def bootstrap_ci(values: Sequence[float], statistic: Any = np.mean, seed: int = 0) -> tuple:
-    """95 % percentile-bootstrap interval of ``statistic`` over *values* (resampling them);
-    ``(nan, nan)`` for fewer than two finite values."""
-    from scipy.stats import bootstrap
-
-    x = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
-    if x.size < 2 or np.all(x == x[0]):
-        v = float(x[0]) if x.size else math.nan
-        return (v, v) if x.size else (math.nan, math.nan)
-    res = bootstrap(
-        (x,),
-        lambda s, axis=-1: statistic(s, axis=axis),
-        n_resamples=BOOTSTRAP_RESAMPLES,
-        method="percentile",
-        rng=np.random.default_rng(seed),
-    )
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """Wilson 95 % interval of a proportion."""
-    if n == 0:
-        return math.nan, math.nan
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return centre - half, centre + half
-
-
-def summarize(per_seed: Any) -> Any:
-    """Per level: mean, IQM and bootstrap CI of every :data:`AGGREGATED` metric over seeds,
-    and the fraction of seeds passing the criteria with its Wilson interval."""
-    import pandas as pd
-
-    rows = []
-    for level, group in per_seed.groupby("level"):
-        row: dict[str, Any] = {"level": int(level), "seeds": len(group)}
-        for metric in AGGREGATED:
-            values = group[metric].to_numpy(dtype=float)
-            finite = values[np.isfinite(values)]
-            lo, hi = bootstrap_ci(finite, seed=int(level))
-            row[f"{metric}_mean"] = float(finite.mean()) if finite.size else math.nan
-            row[f"{metric}_iqm"] = float(interquartile_mean(finite)) if finite.size else math.nan
-            row[f"{metric}_ci_low"], row[f"{metric}_ci_high"] = lo, hi
-        passed = int(group["pass"].sum())
-        row["p_pass"] = passed / len(group)
-        row["p_pass_ci_low"], row["p_pass_ci_high"] = wilson_interval(passed, len(group))
-        rows.append(row)
-    return pd.DataFrame(rows).set_index("level")
-
-
 def closest_seed(per_seed: Any, metrics: Sequence[str] = tuple(AGGREGATED)) -> int:
     """The seed whose per-level *metrics* (columns of *per_seed*, beside ``seed`` and
     ``level``) lie closest to the across-seed means (each metric over its across-seed
@@ -333,10 +309,10 @@ def plot_spread(per_seed: Any, summary: Any) -> Any:
 
 
 def aggregate_seeds(args: argparse.Namespace) -> int:
-    """``myoexo seeds aggregate``."""
+    """``myoexo policy seeds aggregate``."""
     out = Path(args.out)
     per_seed, chosen = per_seed_table(out, args.subjects, args.last, args.top)
-    summary = summarize(per_seed)
+    summary = summarize_seeds(per_seed, AGGREGATED)
     ship = closest_seed(per_seed)
     per_seed.to_csv(out / "aggregate_seeds.csv", index=False)
     summary.to_csv(out / "aggregate.csv")
@@ -370,7 +346,7 @@ def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> A
 
     path = Path(out) / AGGREGATE_FILE
     if not path.is_file():
-        raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate` first")
+        raise ValueError(f"{str(path)!r} does not exist: run `myoexo policy seeds aggregate` first")
     chosen = json.loads(path.read_text())
     actor = load_checkpoint_actor(
         Path(chosen["ship_checkpoint"]), selection_root_seed=chosen["selection_root_seed"]
@@ -393,11 +369,12 @@ def gradient_updates(run_dir: Path, n_updates: int) -> int:
     minibatch updates."""
     from myoexo.policies.algorithms import get_algorithm
 
-    preset = ck.read_config(run_dir)["preset"]
-    if not get_algorithm(preset["algorithm"]).on_policy:
+    config = ck.read_run_config(run_dir)
+    if not get_algorithm(config.algorithm).on_policy:
         return int(n_updates)
-    rollout = int(preset["n_steps"]) * int(preset["n_envs"])
-    return int(n_updates) * math.ceil(rollout / int(preset["batch_size"]))
+    kwargs = config.resolved_kwargs()
+    rollout = int(kwargs["n_steps"]) * config.n_envs
+    return int(n_updates) * math.ceil(rollout / int(kwargs["batch_size"]))
 
 
 def training_speed(out: Path) -> Any:
@@ -434,8 +411,8 @@ def configuration_label(out: Path) -> str:
     first = next(iter(sorted(Path(out).glob("seed_*"))), None)
     if first is None:
         raise ValueError(f"{str(out)!r} holds no seed run folder")
-    preset = ck.read_config(first)["preset"]
-    return f"{preset['algorithm']} ({preset['name']})"
+    config = ck.read_run_config(first)
+    return f"{config.algorithm} ({config.name})"
 
 
 def compare_configurations(folders: Sequence[Path]) -> Any:
@@ -447,7 +424,9 @@ def compare_configurations(folders: Sequence[Path]) -> Any:
     for out in map(Path, folders):
         path = out / "aggregate.csv"
         if not path.is_file():
-            raise ValueError(f"{str(path)!r} does not exist: run `myoexo seeds aggregate {out}`")
+            raise ValueError(
+                f"{str(path)!r} does not exist: run `myoexo policy seeds aggregate {out}`"
+            )
         summary = pd.read_csv(path, index_col="level")
         speed = training_speed(out)
         row: dict[str, Any] = {
@@ -497,7 +476,7 @@ def markdown_comparison(table: Any) -> str:
 
 
 def compare_seeds(args: argparse.Namespace) -> int:
-    """``myoexo seeds compare``."""
+    """``myoexo policy seeds compare``."""
     table = compare_configurations(args.folders)
     text = markdown_comparison(table)
     if args.out:
@@ -511,41 +490,81 @@ def compare_seeds(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo seeds``."""
-    sub = parser.add_subparsers(dest="action", required=True)
-    tr = sub.add_parser("train", help="train (or resume) several seeds of one configuration")
-    tr.add_argument("out", help="folder of the seeds (one run folder seed_<N> each)")
-    tr.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    tr.add_argument("--preset", default="cpu", help="training preset (default: cpu)")
-    tr.add_argument(
-        "--set", action="append", default=[], metavar="FIELD=VALUE", help="preset override"
+@dataclass(frozen=True)
+class SeedsFolder:
+    """The seeds folder a ``myoexo policy seeds`` sub-command works on."""
+
+    out: Path = option(
+        Path(), "folder of the seeds (one run folder seed_<N> each)", flag="", folder=True
     )
-    tr.add_argument("--total-timesteps", type=int, help="step budget of every seed")
-    tr.add_argument("--workers", type=int, default=2, help="seeds trained at once (default 2)")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SeedsShip:
+    """Where ``myoexo policy seeds ship`` writes the aggregate's chosen seed (one or both)."""
+
+    to: Path | None = option(None, "write STEM.npz + STEM.json", metavar="STEM")
+    name: str | None = option(None, "write it into the package as NAME (e.g. sac)", metavar="NAME")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SeedsCompare:
+    """The aggregated seeds folders ``myoexo policy seeds compare`` puts side by side."""
+
+    folders: tuple[Path, ...] = option(
+        (), "folders aggregated by `seeds aggregate`", flag="", metavar="FOLDERS"
+    )
+    out: str | None = option(None, "write STEM.csv and STEM.md", metavar="STEM")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo policy seeds``."""
+    sub = parser.add_subparsers(dest="action", required=True)
+    tr = sub.add_parser(
+        "train",
+        help="train (or resume) several seeds of one configuration",
+        description="The options of `myoexo policy train` (without --seed) give the one "
+        "configuration; --total-timesteps on a later run is every seed's new step budget.",
+    )
+    add_positional(tr, SeedsFolder, "out", metavar="out")
+    add_options(tr, SeedRuns)
+    add_config_arguments(tr, seed=False)
     ag = sub.add_parser("aggregate", help="select each seed's checkpoint and aggregate them")
-    ag.add_argument("out", help="folder written by `myoexo seeds train`")
-    ag.add_argument("--subjects", type=int, default=10, help="selection subjects per level")
-    ag.add_argument("--last", type=int, default=2, help="newest checkpoints per seed")
-    ag.add_argument("--top", type=int, default=4, help="best checkpoints by eval.csv per seed")
+    add_positional(
+        ag, SeedsFolder, "out", metavar="out", help="folder written by `myoexo policy seeds train`"
+    )
+    add_options(ag, SelectionConfig, exclude=("levels", "root_seed"))
     sh = sub.add_parser("ship", help="export the aggregate's chosen seed as a numpy actor")
-    sh.add_argument("out", help="an aggregated `myoexo seeds` folder")
-    sh.add_argument("--to", type=Path, help="write STEM.npz + STEM.json")
-    sh.add_argument("--name", help="write it into the package as NAME (e.g. sac)")
+    add_positional(
+        sh, SeedsFolder, "out", metavar="out", help="an aggregated `myoexo policy seeds` folder"
+    )
+    add_options(sh, SeedsShip)
     co = sub.add_parser("compare", help="aggregated seeds folders side by side (speed, criteria)")
-    co.add_argument("folders", nargs="+", type=Path, help="folders aggregated by `seeds aggregate`")
-    co.add_argument("--out", help="write STEM.csv and STEM.md")
+    add_positional(co, SeedsCompare, "folders", nargs="+", type=Path, metavar="folders")
+    add_options(co, SeedsCompare)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo seeds train|aggregate|ship|compare``."""
+    """Run ``myoexo policy seeds train|aggregate|ship|compare``."""
     if args.action == "train":
         return train_seeds(args)
+    if args.action == "aggregate":
+        from_options(SelectionConfig, args, levels=VALID_LEVELS)  # checks the options
     if args.action == "compare":
         return compare_seeds(args)
     if args.action == "ship":
-        if not (args.to or args.name):
-            raise ValueError("myoexo seeds ship: give --to STEM and/or --name NAME")
-        ship_seed(Path(args.out), args.to, args.name)
+        where = from_options(SeedsShip, args)
+        if not (where.to or where.name):
+            raise ValueError("myoexo policy seeds ship: give --to STEM and/or --name NAME")
+        ship_seed(Path(args.out), where.to, where.name)
         return 0
     return aggregate_seeds(args)

@@ -1,21 +1,58 @@
 """Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
 harness and check the acceptance criteria (:mod:`myoexo.evaluation.criteria`).
 
-    myoexo select runs/cpu_main --subjects 10 --last 2 --top 4
-    myoexo select results/eval --table    # after `myoexo evaluate`
+    myoexo policy select runs/cpu_main --subjects 10 --last 2 --top 4
+    myoexo policy select results/eval --table    # after `myoexo evaluate`
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
-from myoexo.evaluation.criteria import compare, level_means, shortfall
+from myoexo.evaluation.criteria import compare_with_pid, level_means, shortfall
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    add_positional,
+    check_fields,
+    from_options,
+    option,
+)
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """Which checkpoints of a run are candidates and on which subjects they are compared
+    (each field is an option of ``myoexo policy select``; ``subjects``, ``last`` and
+    ``top`` also of ``myoexo policy seeds aggregate``)."""
+
+    subjects: int = option(10, "selection subjects per level", low=1)
+    levels: tuple[int, ...] = option(
+        VALID_LEVELS, "spasticity levels to evaluate", choices=VALID_LEVELS, metavar="LEVEL"
+    )
+    last: int = option(2, "newest checkpoints to consider", low=0)
+    top: int = option(4, "best checkpoints by the run's small evaluation (eval.csv)", low=0)
+    root_seed: int = option(
+        SELECTION_ROOT_SEED,
+        "root seed of the selection subjects (the reported evaluation uses another)",
+        low=0,
+    )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", tuple(sorted(set(self.levels))))
+        check_fields(self)
+        if self.last + self.top < 1:
+            raise FieldError(
+                "SelectionConfig", "top", self.top, "names no candidate checkpoint (last = 0)"
+            )
+        check_fit_root(self.root_seed, "checkpoint selection")
 
 
 def evaluate_pid(
@@ -88,7 +125,7 @@ def select_checkpoint(
     pid = evaluate_pid(subjects, levels, root_seed=root_seed)
     results = []
     for c in candidates:
-        table = compare(evaluate_checkpoint(c, subjects, levels, root_seed=root_seed), pid)
+        table = compare_with_pid(evaluate_checkpoint(c, subjects, levels, root_seed=root_seed), pid)
         key = (shortfall(table), -table.peak_reduction_pct.mean())
         results.append((key, c, table))
         if verbose:
@@ -115,7 +152,7 @@ def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any
     if missing:
         raise ValueError(f"{str(out_dir)!r} has no episodes of {sorted(missing)}")
     means = {c: level_means(table[table.controller == c]) for c in (sac, pid)}
-    return paper_checks(compare(means[sac], means[pid]), table[table.controller == sac])
+    return paper_checks(compare_with_pid(means[sac], means[pid]), table[table.controller == sac])
 
 
 #: Levels where the final error must be below 1 deg in the mean and 2 deg at the 95th
@@ -216,85 +253,79 @@ def markdown_table(table: Any) -> str:
     return str(pd.DataFrame(rows).to_markdown(index=False))
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo select`` (and ``python -m myoexo.training.select``)."""
-    parser.add_argument("run", type=Path, help="run folder, or an evaluation folder with --table")
-    parser.add_argument(
-        "--table",
-        action="store_true",
-        help="print the Markdown criteria table of `myoexo "
-        "evaluate --controllers pid sac` output in RUN instead",
+@dataclass(frozen=True)
+class SelectRun:
+    """What ``myoexo policy select`` reads (a run folder, or with ``table`` an evaluation
+    folder) and where it writes its table."""
+
+    run: Path = option(Path(), "run folder, or an evaluation folder with --table", flag="")
+    table: bool = option(
+        False,
+        "print the Markdown criteria table of `myoexo evaluate --controllers pid sac` output "
+        "in RUN instead",
     )
-    parser.add_argument(
-        "--controller",
-        default="sac",
-        help="with --table: the controller compared with the PID (default: sac)",
+    controller: str = option(
+        "sac", "with --table: the controller compared with the PID", metavar="CONTROLLER"
     )
-    parser.add_argument("--subjects", type=int, default=10, help="subjects per level")
-    parser.add_argument(
-        "--levels",
-        type=int,
-        nargs="+",
-        choices=VALID_LEVELS,
-        default=list(VALID_LEVELS),
-        metavar="LEVEL",
-        help="spasticity levels to evaluate (default: 0 1 2 3)",
-    )
-    parser.add_argument("--last", type=int, default=2, help="newest checkpoints to consider")
-    parser.add_argument("--top", type=int, default=4, help="best-scored checkpoints to consider")
-    parser.add_argument(
-        "--root-seed",
-        type=int,
-        default=SELECTION_ROOT_SEED,
-        help=f"root seed of the selection subjects (default {SELECTION_ROOT_SEED}; "
-        "the reported evaluation uses another)",
-    )
-    parser.add_argument(
-        "--out",
-        type=Path,
+    out: Path | None = option(
+        None,
+        "also write the comparison table: FILE.md (Markdown, next to the paper's numbers) or "
+        "FILE.csv (with the chosen checkpoint in a column)",
         metavar="FILE",
-        help="also write the comparison table: FILE.md (Markdown, next to the paper's "
-        "numbers) or FILE.csv (with the chosen checkpoint in a column)",
     )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.out is not None and self.out.suffix not in (".md", ".csv"):
+            raise FieldError("SelectRun", "out", str(self.out), "must end in .md or .csv")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo policy select`` (and ``python -m myoexo.training.select``):
+    :class:`SelectRun` and :class:`SelectionConfig`."""
+    add_positional(parser, SelectRun, "run")
+    add_options(parser, SelectRun, exclude=("out",))
+    add_options(parser, SelectionConfig)
+    add_options(parser, SelectRun, exclude=("table", "controller"))
 
 
 def run(args: argparse.Namespace) -> int:
     """Print the chosen checkpoint and its table (or, with ``--table``, the criteria table
     of an evaluation folder); write it to ``--out`` if given."""
-    levels = sorted(set(args.levels))
-    if args.out is not None and args.out.suffix not in (".md", ".csv"):
-        raise ValueError(f"--out {str(args.out)!r} must end in .md or .csv")
+    config = from_options(SelectionConfig, args)
+    options: SelectRun = from_options(SelectRun, args, run=args.run)
     chosen = None
-    if args.table:
-        table = compare_evaluation(args.run, sac=args.controller)
-        table = table[table.index.isin(levels)]
+    if options.table:
+        table = compare_evaluation(options.run, sac=options.controller)
+        table = table[table.index.isin(config.levels)]
         print(markdown_table(table))
     else:
-        if args.subjects < 1:
-            raise ValueError(f"--subjects {args.subjects} must be at least 1")
-        if args.last < 0 or args.top < 0 or args.last + args.top < 1:
-            raise ValueError("--last and --top must be >= 0 and name at least one candidate")
-        if args.last == 0 and not (args.run / ck.EVAL_FILE).is_file():
-            raise ValueError(f"--top needs the run's {ck.EVAL_FILE}; {args.run} has none")
+        if config.last == 0 and not (options.run / ck.EVAL_FILE).is_file():
+            raise ValueError(f"--top needs the run's {ck.EVAL_FILE}; {options.run} has none")
         chosen, table = select_checkpoint(
-            args.run, args.subjects, args.last, args.top, args.root_seed, levels=levels
+            options.run,
+            config.subjects,
+            config.last,
+            config.top,
+            config.root_seed,
+            levels=config.levels,
         )
         print(f"chosen: {chosen}")
         print(table.round(2).to_string())
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        if args.out.suffix == ".md":
+    if options.out is not None:
+        options.out.parent.mkdir(parents=True, exist_ok=True)
+        if options.out.suffix == ".md":
             head = "" if chosen is None else f"chosen: `{chosen}`\n\n"
-            args.out.write_text(head + markdown_table(table) + "\n")
+            options.out.write_text(head + markdown_table(table) + "\n")
         else:
             table = table if chosen is None else table.assign(checkpoint=str(chosen))
-            table.to_csv(args.out)
-        print(f"wrote {args.out}")
+            table.to_csv(options.out)
+        print(f"wrote {options.out}")
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m myoexo.training.select RUN`` (same as ``myoexo select RUN``)."""
+    """``python -m myoexo.training.select RUN`` (same as ``myoexo policy select RUN``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))

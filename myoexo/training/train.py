@@ -1,16 +1,18 @@
-"""Train stable-baselines3 SAC on a myoexo env, with checkpoints that a killed run resumes from.
+"""Train a stable-baselines3 (or SBX) learner on a myoexo env, with checkpoints that a killed
+run resumes from.
 
     from myoexo.training import get_preset, train, resume
 
-    result = train(get_preset("cpu"), "runs/cpu_seed0", seed=0)
+    result = train(get_preset("cpu", seed=0), "runs/cpu_seed0")
     result = resume("runs/cpu_seed0")          # after an interruption: same run, same counter
 
 A run is one folder (layout in :mod:`myoexo.training.checkpoints`). ``train`` writes its
-``config.json`` (preset, seed, env, observation keys, package versions) before the first
-step; ``resume`` rebuilds everything from that file and the newest resumable checkpoint
-(model, optimizer states, entropy coefficient, replay buffer, observation statistics, step
-counter) and continues with SB3's ``reset_num_timesteps=False``, so logs, checkpoints and
-the total step budget continue where they stopped. The resumed envs are seeded with
+``config.json`` (the :class:`~myoexo.training.config.TrainConfig`, env, observation keys,
+package versions) before the first step; ``resume`` rebuilds everything from that file and
+the newest resumable checkpoint (model, optimizer states, entropy coefficient, replay
+buffer, observation statistics, step counter) and continues with SB3's
+``reset_num_timesteps=False``, so logs, checkpoints and the total step budget continue where
+they stopped. The resumed envs are seeded with
 ``seed + num_timesteps``: a resumed run is deterministic, though not bit-identical to an
 uninterrupted one (the envs' RNG streams restart).
 
@@ -43,7 +45,7 @@ from myoexo.policies.algorithms import algorithm_class, get_algorithm
 from myoexo.runtime.files import package_versions, write_json_atomic
 from myoexo.runtime.lifecycle import FolderLock, StopSignals, ignore_signals
 from myoexo.training import checkpoints as ck
-from myoexo.training.presets import SACPreset, preset_from_dict
+from myoexo.training.config import TrainConfig
 
 
 @dataclass(frozen=True)
@@ -120,24 +122,25 @@ class _EnvFactory:
         return Monitor(env)
 
 
-def make_vec_env(preset: SACPreset, seed: int) -> Any:
-    """The training envs: ``n_envs`` copies in a Dummy/SubprocVecEnv, seeded ``seed + i``,
-    wrapped in ``VecNormalize`` (observations and/or rewards) if the preset says so."""
+def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
+    """The training envs: ``n_envs`` copies in a Dummy/SubprocVecEnv, seeded ``seed + i``
+    (default: the config's seed), wrapped in ``VecNormalize`` (observations and/or rewards)
+    if the config says so."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    subproc = preset.vec_env == "subproc"
+    subproc = config.vec_env == "subproc"
     fns: list[Callable[[], Any]] = [
-        _EnvFactory(preset.env_id, i, preset.twin, in_worker=subproc) for i in range(preset.n_envs)
+        _EnvFactory(config.env_id, i, config.twin, in_worker=subproc) for i in range(config.n_envs)
     ]
-    venv: Any = DummyVecEnv(fns) if preset.vec_env == "dummy" else SubprocVecEnv(fns)
-    venv.seed(seed)
-    if preset.normalize_obs or preset.normalize_reward:
+    venv: Any = DummyVecEnv(fns) if config.vec_env == "dummy" else SubprocVecEnv(fns)
+    venv.seed(config.seed if seed is None else seed)
+    if config.normalize_obs or config.normalize_reward:
         venv = VecNormalize(
             venv,
-            norm_obs=preset.normalize_obs,
-            norm_reward=preset.normalize_reward,
-            clip_obs=preset.clip_obs,
-            gamma=preset.gamma,
+            norm_obs=config.normalize_obs,
+            norm_reward=config.normalize_reward,
+            clip_obs=config.clip_obs,
+            gamma=config.resolved_kwargs()["gamma"],
         )
     return venv
 
@@ -161,51 +164,29 @@ def _activation(name: str, framework: str) -> Any:
     return {"gelu": nn.GELU, "relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}[name]
 
 
-def build_model(preset: SACPreset, venv: Any, seed: int) -> Any:
-    """An untrained agent of the preset's algorithm with the preset's networks and
-    hyper-parameters: off-policy (SB3 SAC by default; TQC or CrossQ from sb3-contrib; SBX's
-    SAC, TQC or CrossQ in JAX) or on-policy (SB3 PPO: ``net_arch_qf`` is its value
-    network)."""
-    algorithm = get_algorithm(preset.algorithm, trainable=True)
-    cls = algorithm.load_class()
-    activation = _activation(preset.activation, algorithm.framework)
-    common: dict[str, Any] = {
-        "learning_rate": preset.learning_rate,
-        "batch_size": preset.batch_size,
-        "gamma": preset.gamma,
-        "ent_coef": preset.ent_coef,
-        "seed": seed,
-        "device": "cpu",
-        "verbose": 0,
-    }
-    if algorithm.on_policy:
-        return cls(
-            "MlpPolicy",
-            venv,
-            n_steps=preset.n_steps,
-            n_epochs=preset.n_epochs,
-            gae_lambda=preset.gae_lambda,
-            clip_range=preset.clip_range,
-            policy_kwargs={
-                "net_arch": {"pi": list(preset.net_arch_pi), "vf": list(preset.net_arch_qf)},
-                "activation_fn": activation,
-            },
-            **common,
-        )
-    extra: dict[str, Any] = {} if algorithm.class_name == "CrossQ" else {"tau": preset.tau}
-    return cls(
+def build_model(config: TrainConfig, venv: Any) -> Any:
+    """An untrained agent of the config's algorithm: its class (SB3's SAC or PPO, SBX's SAC,
+    TQC or CrossQ) given ``algorithm_kwargs`` as they are, the config's networks (PPO:
+    ``net_arch_qf`` is its value network) and seed, on the CPU.
+
+    Raises:
+        FieldError: An argument the class does not take, or arguments that do not fit
+            together (:meth:`~myoexo.training.config.TrainConfig.resolved_kwargs`).
+    """
+    algorithm = get_algorithm(config.algorithm)
+    config.resolved_kwargs()  # every argument one the class takes
+    critic = "vf" if algorithm.on_policy else "qf"
+    return algorithm.load_class()(
         "MlpPolicy",
         venv,
-        buffer_size=preset.buffer_size,
-        learning_starts=preset.learning_starts,
-        **extra,
-        train_freq=(preset.train_freq, "step"),
-        gradient_steps=preset.gradient_steps,
+        **config.algorithm_kwargs,
         policy_kwargs={
-            "net_arch": {"pi": list(preset.net_arch_pi), "qf": list(preset.net_arch_qf)},
-            "activation_fn": activation,
+            "net_arch": {"pi": list(config.net_arch_pi), critic: list(config.net_arch_qf)},
+            "activation_fn": _activation(config.activation, algorithm.framework),
         },
-        **common,
+        seed=config.seed,
+        device="cpu",
+        verbose=0,
     )
 
 
@@ -239,15 +220,16 @@ def _next_session(run_dir: Path) -> int:
     return max(len(_sessions(run_dir)), max(logged, default=-1) + 1)
 
 
-def checkpoint_cadence(preset: SACPreset) -> dict[str, Any]:
-    """The checkpoint cadence of a run (recorded in its ``config.json``)."""
+def checkpoint_cadence(config: TrainConfig, learning_starts: int = 0) -> dict[str, Any]:
+    """The checkpoint cadence of a run (recorded in its ``config.json``; *learning_starts*:
+    the algorithm's, 0 for an on-policy one)."""
     return {
-        "every_s": preset.checkpoint_every_s,
-        "every_steps": preset.checkpoint_every_steps,
-        "first_after_learning_starts_steps": preset.first_checkpoint_steps,
-        "first_after_s": preset.first_checkpoint_s,
-        "learning_starts": preset.learning_starts,
-        "keep_resumable": preset.keep_resumable_checkpoints,
+        "every_s": config.checkpoint_every_s,
+        "every_steps": config.checkpoint_every_steps,
+        "first_after_learning_starts_steps": config.first_checkpoint_steps,
+        "first_after_s": config.first_checkpoint_s,
+        "learning_starts": int(learning_starts),
+        "keep_resumable": config.keep_resumable_checkpoints,
         "rule": "a resumable checkpoint when either cadence is due (whichever comes first); "
         "the first one once learning_starts + first_after_learning_starts_steps transitions "
         "are collected or first_after_s seconds have passed; the newest keep_resumable keep "
@@ -276,7 +258,7 @@ class SessionOptions:
 
 
 def _run_callbacks(
-    preset: SACPreset, run_dir: Path, wall_time_offset_s: float, verbose: int, stop: StopSignals
+    config: TrainConfig, run_dir: Path, wall_time_offset_s: float, verbose: int, stop: StopSignals
 ) -> tuple[Any, Any]:
     """The run's periodic evaluator (``None`` without one) and its checkpointer."""
     from myoexo.training.callbacks import (
@@ -286,31 +268,31 @@ def _run_callbacks(
     )
 
     evaluator = None
-    if preset.eval_every_steps > 0 and is_myoexo_env(preset.env_id):
+    if config.eval_every_steps > 0 and is_myoexo_env(config.env_id):
         spec = SmallEvalSpec(
-            levels=preset.eval_levels,
-            subjects=preset.eval_subjects,
-            twin=preset.twin.replace(robustness=False),  # on the nominal twin
+            levels=config.eval_levels,
+            subjects=config.eval_subjects,
+            twin=config.twin.replace(robustness=False),  # on the nominal twin
         )
         evaluator = PaperMetricsEvalCallback(
-            run_dir, preset.eval_every_steps, spec, verbose, stop=stop
+            run_dir, config.eval_every_steps, spec, verbose, stop=stop
         )
     checkpointer = PeriodicCheckpointCallback(
         run_dir,
-        every_s=preset.checkpoint_every_s,
-        every_steps=preset.checkpoint_every_steps,
+        every_s=config.checkpoint_every_s,
+        every_steps=config.checkpoint_every_steps,
         wall_time_offset_s=wall_time_offset_s,
         evaluator=evaluator,
-        keep_replay=preset.keep_resumable_checkpoints,
+        keep_replay=config.keep_resumable_checkpoints,
         verbose=verbose,
-        first_after_steps=preset.first_checkpoint_steps,
-        first_after_s=preset.first_checkpoint_s,
-        max_wall_time_s=preset.max_wall_time_s,
+        first_after_steps=config.first_checkpoint_steps,
+        first_after_s=config.first_checkpoint_s,
+        max_wall_time_s=config.max_wall_time_s,
         provenance={
-            "twin": preset.twin.to_dict(),
+            "twin": config.twin.to_dict(),
             "twin_version": TWIN_VERSION,
-            "env_id": preset.env_id,
-            "algorithm": preset.algorithm,
+            "env_id": config.env_id,
+            "algorithm": config.algorithm,
         },
     )
     return evaluator, checkpointer
@@ -322,7 +304,7 @@ def _utc_now() -> str:
 
 def _learn(
     model: Any,
-    preset: SACPreset,
+    config: TrainConfig,
     run_dir: Path,
     total_timesteps: int,
     wall_time_offset_s: float,
@@ -336,16 +318,16 @@ def _learn(
 
     from myoexo.training.callbacks import RewardTermsCallback, StopOnSignalCallback
 
-    torch.set_num_threads(preset.torch_threads)
+    torch.set_num_threads(config.torch_threads)
     session = _next_session(run_dir)
     model.set_logger(_make_logger(run_dir, session, options.verbose))
     stop = StopSignals(enabled=options.graceful_stop)
     evaluator, checkpointer = _run_callbacks(
-        preset, run_dir, wall_time_offset_s, options.verbose, stop
+        config, run_dir, wall_time_offset_s, options.verbose, stop
     )
     start_step = int(model.num_timesteps)
     remaining = max(int(total_timesteps) - start_step, 0)
-    budget_spent = 0 < preset.max_wall_time_s <= wall_time_offset_s
+    budget_spent = 0 < config.max_wall_time_s <= wall_time_offset_s
     if budget_spent:
         remaining = 0  # earlier sessions spent the wall-time budget
     record: dict[str, Any] = {
@@ -370,7 +352,7 @@ def _learn(
                 callback=CallbackList(callbacks),
                 reset_num_timesteps=start_step == 0,
                 progress_bar=options.progress_bar,
-                log_interval=max(1, preset.n_envs),
+                log_interval=max(1, config.n_envs),
             )
         elapsed = time.monotonic() - t0
         last = _final_checkpoint(run_dir, checkpointer)
@@ -404,30 +386,29 @@ def _final_checkpoint(run_dir: Path, checkpointer: Any) -> Path:
 
 
 @contextlib.contextmanager
-def _saved_run(run_dir: Path) -> Iterator[tuple[SACPreset, int]]:
-    """Lock an existing run folder and yield its saved ``(preset, seed)``; a folder that is
-    not a run is refused before anything is written (``ValueError``)."""
-    ck.read_config(run_dir)
+def _saved_run(run_dir: Path) -> Iterator[TrainConfig]:
+    """Lock an existing run folder and yield its saved config (a folder written before the
+    config held ``algorithm_kwargs`` is read as its config,
+    :func:`~myoexo.training.config.config_from_record`); a folder that is not a run is
+    refused before anything is written (``ValueError``)."""
+    ck.read_run_config(run_dir)
     with FolderLock(run_dir, RUN_FOLDER):
-        config = ck.read_config(run_dir)
-        yield preset_from_dict(config["preset"]), int(config["seed"])
+        yield ck.read_run_config(run_dir)
 
 
 def train(
-    preset: SACPreset,
+    config: TrainConfig,
     run_dir: str | Path,
-    seed: int = 0,
     progress_bar: bool = False,
     verbose: int = 1,
     graceful_stop: bool = True,
     callbacks: Sequence[Any] = (),
 ) -> TrainResult:
-    """Train a new SAC run in ``run_dir`` (created; must not already hold a run).
+    """Train a new run of *config* in ``run_dir`` (created; must not already hold a run).
 
     Args:
-        preset: Hyper-parameters (:func:`~myoexo.training.presets.get_preset`).
+        config: The run (:func:`~myoexo.training.config.get_preset`, its seed included).
         run_dir: Output folder.
-        seed: Seed of the learner (torch, numpy) and of the envs (``seed + i``).
         progress_bar: Show SB3's tqdm/rich progress bar.
         verbose: 0 silent, 1 one line per checkpoint/evaluation, 2 also SB3's log tables.
         graceful_stop: Handle SIGINT / SIGTERM during ``learn`` (main thread only): stop
@@ -436,74 +417,78 @@ def train(
             stops the session early, with a final resumable checkpoint).
 
     Raises:
-        ValueError: A bad seed, a folder that already holds a run, or a folder in use by
+        ValueError: An algorithm argument its class does not take (checked before the
+            folder is made), a folder that already holds a run, or a folder in use by
             another process (:class:`~myoexo.runtime.lifecycle.FolderInUseError`).
     """
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed = {seed!r} must be an integer >= 0")
+    config.resolved_kwargs()
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     with FolderLock(run_dir, RUN_FOLDER):
         if (run_dir / ck.CONFIG_FILE).exists():
             raise ValueError(
                 f"{str(run_dir)!r} already holds a run; continue it with resume() / "
-                "`myoexo train --resume DIR` (or, if it never wrote a checkpoint, start it "
-                "again with `myoexo train --restart DIR`), or choose another folder"
+                "`myoexo policy train --resume DIR` (or, if it never wrote a checkpoint, start it "
+                "again with `myoexo policy train --restart DIR`), or choose another folder"
             )
         options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
-        return _start(preset, run_dir, seed, options)
+        return _start(config, run_dir, options)
 
 
-def _start(preset: SACPreset, run_dir: Path, seed: int, options: SessionOptions) -> TrainResult:
+def _start(config: TrainConfig, run_dir: Path, options: SessionOptions) -> TrainResult:
     """A new run in ``run_dir`` (locked by the caller): ``config.json``, then ``learn``."""
     ck.clean_interrupted_writes(run_dir)
-    venv = make_vec_env(preset, seed)
+    resolved = config.resolved_kwargs()
+    venv = make_vec_env(config)
     try:
         try:
             obs_keys = venv.get_attr("obs_keys", [0])[0]
         except AttributeError:
             obs_keys = None
-        config = {
-            "preset": preset.to_dict(),
-            "seed": seed,
-            "env_id": preset.env_id,
+        record = {
+            "config": config.to_dict(),
+            "seed": config.seed,
+            "env_id": config.env_id,
             "obs_dim": int(venv.observation_space.shape[0]),
             "obs_keys": list(obs_keys) if obs_keys is not None else None,
-            "updates_per_transition": preset.updates_per_transition,
-            "checkpoint_cadence": checkpoint_cadence(preset),
+            "updates_per_transition": config.updates_per_transition(resolved),
+            "checkpoint_cadence": checkpoint_cadence(
+                config, int(resolved.get("learning_starts", 0))
+            ),
             "versions": package_versions(),
             "platform": platform.platform(),
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }
-        write_json_atomic(run_dir / ck.CONFIG_FILE, config)
-        model = build_model(preset, venv, seed)
-        return _learn(model, preset, run_dir, preset.total_timesteps, 0.0, options)
+        write_json_atomic(run_dir / ck.CONFIG_FILE, record)
+        model = build_model(config, venv)
+        return _learn(model, config, run_dir, config.total_timesteps, 0.0, options)
     finally:
         venv.close()
 
 
-def _load_checkpoint(checkpoint: Path, preset: SACPreset, seed: int) -> tuple[Any, Any]:
+def _load_checkpoint(checkpoint: Path, config: TrainConfig) -> tuple[Any, Any]:
     """``(model, venv)`` restored from a resumable checkpoint (raises if it cannot be)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     step = int(ck.read_state(checkpoint)["num_timesteps"])
-    venv = make_vec_env(preset, seed + step)
+    seed = config.seed + step
+    venv = make_vec_env(config, seed)
     try:
-        if preset.normalize_obs or preset.normalize_reward:
+        if config.normalize_obs or config.normalize_reward:
             venv = VecNormalize.load(str(checkpoint / ck.VECNORM_FILE), venv.venv)
             venv.training = True
-        cls = algorithm_class(preset.algorithm)
+        cls = algorithm_class(config.algorithm)
         model = cls.load(checkpoint / ck.MODEL_FILE, env=venv, device="cpu")
         if (checkpoint / ck.REPLAY_FILE).is_file():  # off-policy; on-policy has none
             model.load_replay_buffer(checkpoint / ck.REPLAY_FILE)
-        model.set_random_seed(seed + step)
+        model.set_random_seed(seed)
     except BaseException:
         venv.close()
         raise
     return model, venv
 
 
-def _restore_newest(run_dir: Path, preset: SACPreset, seed: int) -> tuple[Any, Any, Path]:
+def _restore_newest(run_dir: Path, config: TrainConfig) -> tuple[Any, Any, Path]:
     """``(model, venv, checkpoint)`` from the newest intact resumable checkpoint.
 
     A checkpoint that fails :func:`~myoexo.training.checkpoints.checkpoint_problem` is set
@@ -515,7 +500,7 @@ def _restore_newest(run_dir: Path, preset: SACPreset, seed: int) -> tuple[Any, A
         raise NoCheckpointError(
             f"{str(run_dir)!r} has no resumable checkpoint yet (its first session ended "
             "before writing one); start it again in the same folder, with its saved "
-            f"settings, with: myoexo train --restart {run_dir}"
+            f"settings, with: myoexo policy train --restart {run_dir}"
         )
     failures: list[str] = []
     for checkpoint in reversed(candidates):
@@ -525,7 +510,7 @@ def _restore_newest(run_dir: Path, preset: SACPreset, seed: int) -> tuple[Any, A
             failures.append(f"{checkpoint.name}: {problem}")
             continue
         try:
-            model, venv = _load_checkpoint(checkpoint, preset, seed)
+            model, venv = _load_checkpoint(checkpoint, config)
         except Exception as exc:
             reason = f"{type(exc).__name__}: {exc}"
             warnings.warn(
@@ -539,7 +524,7 @@ def _restore_newest(run_dir: Path, preset: SACPreset, seed: int) -> tuple[Any, A
         return model, venv, checkpoint
     raise NoCheckpointError(
         f"{str(run_dir)!r} has no intact resumable checkpoint ({'; '.join(failures)}); start "
-        f"it again with: myoexo train --restart {run_dir}"
+        f"it again with: myoexo policy train --restart {run_dir}"
     )
 
 
@@ -555,7 +540,7 @@ def resume(
 
     Args:
         run_dir: A folder written by :func:`train`.
-        total_timesteps: New total step budget of the run (default: the preset's).
+        total_timesteps: New total step budget of the run (default: its config's).
         progress_bar: Show SB3's progress bar.
         verbose: As in :func:`train`.
         graceful_stop: As in :func:`train`.
@@ -567,9 +552,9 @@ def resume(
     """
     run_dir = Path(run_dir)
     options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
-    with _saved_run(run_dir) as (preset, seed):
+    with _saved_run(run_dir) as config:
         ck.clean_interrupted_writes(run_dir)
-        model, venv, last = _restore_newest(run_dir, preset, seed)
+        model, venv, last = _restore_newest(run_dir, config)
         try:
             state = ck.read_state(last)
             step = int(state["num_timesteps"])
@@ -580,8 +565,8 @@ def resume(
                     "buffer",
                     flush=True,
                 )
-            total = preset.total_timesteps if total_timesteps is None else int(total_timesteps)
-            return _learn(model, preset, run_dir, total, float(state["wall_time_s"]), options)
+            total = config.total_timesteps if total_timesteps is None else int(total_timesteps)
+            return _learn(model, config, run_dir, total, float(state["wall_time_s"]), options)
         finally:
             venv.close()
 
@@ -597,7 +582,7 @@ def restart(
 
     For a run whose first session ended (a crash, a kill) before its first resumable
     checkpoint: its outputs (checkpoints, logs, evaluations) are deleted, its
-    ``config.json`` (preset, seed) is kept and rewritten.
+    ``config.json`` (its config, seed included) is kept and rewritten.
 
     Args:
         run_dir: A folder written by :func:`train`.
@@ -612,14 +597,14 @@ def restart(
     """
     run_dir = Path(run_dir)
     options = SessionOptions(progress_bar, verbose, graceful_stop, tuple(callbacks))
-    with _saved_run(run_dir) as (preset, seed):
+    with _saved_run(run_dir) as config:
         intact = [c for c in ck.resumable_checkpoints(run_dir) if ck.checkpoint_problem(c) is None]
         if intact:
             raise ValueError(
                 f"{str(run_dir)!r} holds the resumable checkpoint {intact[-1].name}; continue "
-                f"it with: myoexo train --resume {run_dir}"
+                f"it with: myoexo policy train --resume {run_dir}"
             )
         removed = ck.clear_run_outputs(run_dir)
         if verbose:
             print(f"[restart] {run_dir}: removed {removed} output(s) of the failed start")
-        return _start(preset, run_dir, seed, options)
+        return _start(config, run_dir, options)

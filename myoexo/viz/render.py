@@ -452,7 +452,7 @@ def record_episode(
     Args:
         env: A MyoExoKnee env (``gymnasium.make("MyoExoKnee-v2")``), wrappers allowed.
         controller: A :class:`~myoexo.control.Controller` (``reset(seed)``,
-            ``act(obs, info)``); wrap a policy with :func:`myoexo.control.as_controller`.
+            ``act(obs, measurements)``); wrap a policy with :func:`myoexo.control.as_controller`.
         seed: Episode seed (the subject and the start angle).
         every_s: Simulated time between two frames, s (a whole number of control steps is
             used: the nearest one, at least one).

@@ -30,10 +30,13 @@ from typing import Any
 import numpy as np
 
 from myoexo.model.scene import DEFAULT_CAMERA
+from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.spasticity.levels import VALID_LEVELS
 
 __all__ = [
     "OverlayStyle",
     "VideoConfig",
+    "VideoJob",
     "VideoSummary",
     "VideoWriter",
     "add_arguments",
@@ -50,44 +53,68 @@ VIDEO_SUFFIXES: tuple[str, ...] = (".mp4", ".gif")
 
 @dataclass(frozen=True)
 class VideoConfig:
-    """What to film and how.
+    """What to film and how (each field is an option of ``myoexo video``; ``camera`` is a
+    named camera of the twin or a view name of :data:`myoexo.viz.VIEWS`; ``cuff_force``
+    draws :class:`myoexo.viz.ForceArrowStyle`'s arrow)."""
 
-    Attributes:
-        level: Spasticity level 0..3 (or ``"random"``) of the env.
-        seed: Episode seed (subject and start angle).
-        camera: A named camera of the twin (or a view name of :data:`myoexo.viz.VIEWS`).
-        fps: Frames per second of simulated time (and of the file: it plays in real time).
-        width_px: Frame width, pixels.
-        height_px: Frame height, pixels.
-        duration_s: Simulated time to film, s (``None``: the whole episode, 8 s).
-        overlay: Draw the time / knee angle / exo torque overlay.
-        scene: Build the twin with its scene (floor, plinth, lights, skybox).
-        cuff_force: Draw the force the exo applies to the shank as an arrow from the shank
-            cuff (:class:`myoexo.viz.ForceArrowStyle`).
-    """
-
-    level: int | str = 2
-    seed: int = 0
-    camera: str = DEFAULT_CAMERA
-    fps: float = 25.0
-    width_px: int = 640
-    height_px: int = 480
-    duration_s: float | None = None
-    overlay: bool = True
-    scene: bool = True
-    cuff_force: bool = False
+    level: int | str = option(
+        2, "spasticity level of the env", choices=(*VALID_LEVELS, "random"), metavar="LEVEL"
+    )
+    seed: int = option(0, "episode seed (subject and start angle)", low=0)
+    camera: str = option(
+        DEFAULT_CAMERA,
+        "named camera: leg_three_quarter, knee_side, knee_front, knee_medial (or a view: side, "
+        "front, medial, oblique)",
+        metavar="NAME",
+    )
+    fps: float = option(
+        25.0,
+        "frames per second of simulated time (the file plays in real time)",
+        low=0.0,
+        above=True,
+    )
+    width_px: int = option(640, "frame width", low=16, unit="px")
+    height_px: int = option(480, "frame height", low=16, unit="px")
+    duration_s: float | None = option(
+        None,
+        "simulated time to film (default: the whole episode)",
+        low=0.0,
+        above=True,
+        unit="s",
+    )
+    overlay: bool = option(True, "draw the time, knee angle and exo torque over the frames")
+    scene: bool = option(
+        True, "film the twin in its scene (floor, plinth, lights, skybox; --no-scene: black)"
+    )
+    cuff_force: bool = option(
+        False, "draw the force the exo applies to the shank as an arrow from the shank cuff"
+    )
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.fps) and self.fps > 0.0):
-            raise ValueError(f"fps = {self.fps!r} must be > 0")
-        for name in ("width_px", "height_px"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 16:
-                raise ValueError(f"{name} = {value!r} must be an integer >= 16 pixels")
-        if self.duration_s is not None and not (
-            math.isfinite(self.duration_s) and self.duration_s > 0.0
-        ):
-            raise ValueError(f"duration_s = {self.duration_s!r} must be a positive time in s")
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class VideoJob:
+    """Whose episode ``myoexo video`` films and where it goes (options of the command)."""
+
+    controller: str = option(
+        "pid",
+        "'pid[:options]', 'sac' / 'student_exo' (the shipped policies), 'oracle' or an SB3 "
+        "model .zip",
+        metavar="SPEC",
+    )
+    out: Path = option(Path("episode.mp4"), "output .mp4 or .gif file", metavar="FILE")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if Path(self.out).suffix.lower() not in VIDEO_SUFFIXES:
+            raise FieldError(
+                type(self).__name__,
+                "out",
+                str(self.out),
+                f"is not a {' or '.join(VIDEO_SUFFIXES)} file",
+            )
 
 
 @dataclass(frozen=True)
@@ -375,68 +402,17 @@ def write_episode_video(
         env.close()
 
 
-def _level(text: str) -> int | str:
-    return text if text == "random" else int(text)
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``video`` arguments to ``parser``."""
-    d = VideoConfig()
-    parser.add_argument(
-        "--controller",
-        default="pid",
-        help="'pid[:options]', 'sac' (the shipped policy) or an SB3 model .zip (default: pid)",
-    )
-    parser.add_argument(
-        "--level", type=_level, default=d.level, help=f"spasticity level 0..3 (default {d.level})"
-    )
-    parser.add_argument("--seed", type=int, default=d.seed, help="episode seed (default 0)")
-    parser.add_argument(
-        "--camera",
-        default=d.camera,
-        help=f"named camera: leg_three_quarter, knee_side, knee_front, knee_medial "
-        f"(default {d.camera})",
-    )
-    parser.add_argument(
-        "--out", type=Path, default=Path("episode.mp4"), help="output .mp4 or .gif file"
-    )
-    parser.add_argument(
-        "--fps", type=float, default=d.fps, help=f"frames per second (default {d.fps:g})"
-    )
-    parser.add_argument("--width", type=int, default=d.width_px, help="frame width, pixels")
-    parser.add_argument("--height", type=int, default=d.height_px, help="frame height, pixels")
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        help="simulated seconds to film (default: the whole episode)",
-    )
-    parser.add_argument("--no-overlay", action="store_true", help="no text overlay")
-    parser.add_argument(
-        "--no-scene", action="store_true", help="no floor, plinth or skybox (black background)"
-    )
-    parser.add_argument(
-        "--cuff-force",
-        action="store_true",
-        help="draw the force the exo applies to the shank as an arrow from the shank cuff",
-    )
+    """Options of ``myoexo video``: :class:`VideoJob`'s and :class:`VideoConfig`'s fields."""
+    add_options(parser, VideoJob)
+    add_options(parser, VideoConfig)
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the video and print a one-line summary; return the exit code."""
-    config = VideoConfig(
-        level=args.level,
-        seed=args.seed,
-        camera=args.camera,
-        fps=args.fps,
-        width_px=args.width,
-        height_px=args.height,
-        duration_s=args.duration,
-        overlay=not args.no_overlay,
-        scene=not args.no_scene,
-        cuff_force=args.cuff_force,
-    )
-    summary = write_episode_video(args.out, args.controller, config)
+    job = from_options(VideoJob, args)
+    config = from_options(VideoConfig, args)
+    summary = write_episode_video(job.out, job.controller, config)
     print(
         f"wrote {summary.path}: {summary.n_frames} frames ({summary.duration_s:.2f} s at "
         f"{config.fps:g} fps, {config.width_px}x{config.height_px}, camera {summary.camera}); "

@@ -1,20 +1,24 @@
-"""``myoexo sweep FILE``: Ray Tune over SAC training configurations, ranked on the paper's
+"""``myoexo policy sweep FILE``: Ray Tune over training configurations, ranked on the paper's
 acceptance criteria, resumable after the driver is killed.
 
-    myoexo sweep sweeps/reward.yaml                       # a local cluster of every core
-    myoexo sweep sweeps/reward.yaml --address auto        # the cluster of `ray start`
+    myoexo policy sweep sweeps/reward.yaml                       # a local cluster of every core
+    myoexo policy sweep sweeps/reward.yaml --address auto        # the cluster of `ray start`
 
 The sweep file (YAML, or TOML with the same keys)::
 
     name: reward-inter              # folder under --out (default: the file's name)
     preset: cpu                     # a preset name, or a list of them (searched)
     seeds: [0, 1]                   # one trial per seed, crossed with the rest
-    set:                            # preset fields, the same in every trial
-      total_timesteps: 500000
+    set:                            # training-config fields (and the twin's options by
+      total_timesteps: 500000       # their own names), the same in every trial
       eval_every_steps: 25000
-    search:                         # preset fields searched: a list is a grid;
-      learning_rate: {loguniform: [1.0e-4, 1.0e-3]}   # or choice / uniform / loguniform /
-      batch_size: [128, 256]                          # randint: [low, high]
+      algorithm: sbx_sac
+      algorithm_kwargs: {train_freq: 16, gradient_steps: 64}  # merged into the preset's
+    search:                         # fields searched: a list is a grid; or choice /
+      n_envs: [2, 4]                # uniform / loguniform / randint: [low, high]
+      algorithm_kwargs:             # the algorithm's arguments, searched the same way
+        learning_rate: {loguniform: [1.0e-4, 1.0e-3]}
+        batch_size: [128, 256]
     reward_weights:                 # reward weights: a number (fixed), a list (grid) or a
       inter: [-0.5, -1.0]           # distribution, as in `search`
     num_samples: 1                  # draws of the distributions (each crossed with the grids)
@@ -25,8 +29,10 @@ The sweep file (YAML, or TOML with the same keys)::
     cpus_per_trial: 1
     max_concurrent_trials: 0        # 0: as many as the CPUs allow
 
-Only SAC is trained (:mod:`myoexo.training.train`) and the presets have no observation
-variants, so neither an algorithm nor an observation set is a sweep key.
+The keys of ``set`` and ``search`` are the fields of
+:class:`~myoexo.training.config.TrainConfig` (the options of ``myoexo policy train``, without
+the seed: ``seeds``) and the twin's options (``reflex``, ``episode_duration_s``,
+``obs_preset``, ...); an algorithm argument under ``algorithm_kwargs``.
 
 Each trial is a normal training run (:func:`~myoexo.training.train.train`) in
 ``<out>/<name>/runs/<trial id>/`` with its checkpoints, ``eval.csv`` and tensorboard logs.
@@ -36,7 +42,7 @@ is reported to Tune with the acceptance criteria of :mod:`myoexo.evaluation.crit
 score, the shortfall, whether it passes, and per level the final error and the peak / RMS
 torque reductions against the PID. When the sweep ends, ``results.parquet`` and
 ``results.md`` rank every trial on its best evaluation: smallest shortfall first (0 = passes
-every criterion), then largest mean peak-torque reduction, as ``myoexo select`` ranks
+every criterion), then largest mean peak-torque reduction, as ``myoexo policy select`` ranks
 checkpoints; a policy snapshot exists for every evaluated step.
 
 Resuming: the Tune experiment lives in ``<out>/<name>/tune``. Running the same command again
@@ -47,7 +53,7 @@ not seen. Ray and PyYAML come with the ``ray`` extra; nothing here imports them 
 sweep runs.
 
 The modules, one job each: :mod:`~myoexo.studies.sweep.spec` (the sweep file, checked, and
-the preset of each trial), :mod:`~myoexo.studies.sweep.tune` (the Ray Tune glue: search
+the training config of each trial), :mod:`~myoexo.studies.sweep.tune` (the Ray Tune glue: search
 space, trainable, :func:`~myoexo.studies.sweep.tune.run_sweep`),
 :mod:`~myoexo.studies.sweep.table` (the evaluations scored on the acceptance criteria and the
 ranked table) and :mod:`~myoexo.studies.sweep.cli` (the command). Their public names are
@@ -56,8 +62,7 @@ also found here (each submodule is imported on first use).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from myoexo.runtime.lazy import lazy_exports
 
 #: Public name -> the submodule that defines it.
 _HOMES: dict[str, str] = {
@@ -70,10 +75,11 @@ _HOMES: dict[str, str] = {
     "SETTINGS_FILE": "spec",
     "TUNE_DIR": "spec",
     "SweepSpec": "spec",
-    "build_preset": "spec",
+    "CONFIG_FIELDS": "spec",
+    "build_config": "spec",
     "distribution": "spec",
     "read_sweep_file": "spec",
-    "trial_preset": "spec",
+    "trial_config": "spec",
     "REPORT_POLL_S": "tune",
     "STOP_TIMEOUT_S": "tune",
     "SweepResult": "tune",
@@ -93,7 +99,4 @@ _HOMES: dict[str, str] = {
 __all__ = sorted(_HOMES)
 
 
-def __getattr__(name: str) -> Any:
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)

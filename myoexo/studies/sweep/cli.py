@@ -1,4 +1,4 @@
-"""``myoexo sweep FILE``: run or continue a sweep and list its best trials (the sweep file:
+"""``myoexo policy sweep FILE``: run or continue a sweep and list its best trials (the sweep file:
 :mod:`myoexo.studies.sweep`)."""
 
 from __future__ import annotations
@@ -6,38 +6,49 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 from myoexo.studies.sweep.spec import DEFAULT_OUT, RESULTS_STEM, read_sweep_file
 from myoexo.studies.sweep.tune import run_sweep
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``myoexo sweep``."""
-    parser.add_argument("file", type=Path, help="sweep file (.yaml or .toml)")
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=DEFAULT_OUT,
-        help=f"parent folder of the sweep (default: {DEFAULT_OUT}); the sweep lives in "
-        "OUT/<name>, and running the same command again continues it",
+@dataclass(frozen=True)
+class SweepRun:
+    """The sweep ``myoexo policy sweep`` runs or continues, where, and on which cluster."""
+
+    file: Path = option(Path(), "sweep file (.yaml or .toml)", flag="")
+    out: Path = option(
+        DEFAULT_OUT,
+        "parent folder of the sweep; the sweep lives in OUT/<name>, and running the same "
+        "command again continues it",
+        metavar="OUT",
+        folder=True,
     )
-    parser.add_argument(
-        "--address",
-        default=None,
-        help="Ray cluster to join: HOST:PORT or 'auto' (default: the RAY_ADDRESS environment "
+    address: str | None = option(
+        None,
+        "Ray cluster to join: HOST:PORT or 'auto' (default: the RAY_ADDRESS environment "
         "variable, else a local cluster that ends with the command)",
+        metavar="ADDRESS",
     )
-    parser.add_argument(
-        "--num-cpus",
-        type=int,
-        default=None,
-        help="CPUs of the local cluster (default: every core; ignored with --address)",
+    num_cpus: int | None = option(
+        None,
+        "CPUs of the local cluster (default: every core; ignored with --address)",
+        low=0,
+        above=True,
     )
-    parser.add_argument(
-        "-v", "--verbose", type=int, default=1, help="0 quiet, 1 status and evaluations"
-    )
+    verbose: int = option(1, "0 quiet, 1 status and evaluations", low=0, short="v")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``myoexo policy sweep`` (:class:`SweepRun`)."""
+    add_positional(parser, SweepRun, "file")
+    add_options(parser, SweepRun)
 
 
 #: Trials listed on the terminal at the end of a sweep (the table holds them all).
@@ -57,11 +68,10 @@ def _lines(table: Any) -> Iterator[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``myoexo sweep``; 1 if a trial failed (its error is listed), else 0."""
-    if args.num_cpus is not None and args.num_cpus <= 0:
-        raise ValueError(f"--num-cpus {args.num_cpus} must be > 0")
-    spec = read_sweep_file(args.file)
-    result = run_sweep(spec, args.out, args.address, args.num_cpus, args.verbose)
+    """Run ``myoexo policy sweep``; 1 if a trial failed (its error is listed), else 0."""
+    options: SweepRun = from_options(SweepRun, args, file=args.file)
+    spec = read_sweep_file(options.file)
+    result = run_sweep(spec, options.out, options.address, options.num_cpus, options.verbose)
     what = "continued" if result.restored else "ran"
     print(f"[sweep] {what} {spec.name}: {len(result.table)} trials, ranked:")
     for line in _lines(result.table):

@@ -1,19 +1,21 @@
 """What a sweep is: its file, read and checked (:func:`read_sweep_file`: a bad value stops the
-sweep before Ray starts) into a :class:`SweepSpec`, the preset of each of its trials
-(:func:`build_preset`, :func:`trial_preset`) and the files of its folder. The keys of a sweep
+sweep before Ray starts) into a :class:`SweepSpec`, the training config of each of its trials
+(:func:`build_config`, :func:`trial_config`) and the files of its folder. The keys of a sweep
 file: :mod:`myoexo.studies.sweep`."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
-from myoexo.training.presets import PRESETS, SACPreset, get_preset, parse_override
+from myoexo.runtime.fields import FieldError, check_fields, convert, literal, option
+from myoexo.training.config import KNOWN_KWARGS, PRESETS, TrainConfig, get_preset, typed_kwarg
 from myoexo.training.train import is_myoexo_env
 
 #: Default parent folder of the sweeps (``results/`` is git-ignored).
@@ -37,6 +39,12 @@ DISTRIBUTIONS: dict[str, int | None] = {
 METRICS: dict[str, str] = {"score": "max", "shortfall": "min"}
 
 SCHEDULERS: tuple[str, ...] = ("asha", "median")
+
+#: Training-config fields a sweep file may set or search (the seed is the sweep's ``seeds``,
+#: the preset its ``preset``), beside the twin's options by their own names.
+CONFIG_FIELDS: frozenset[str] = frozenset(
+    f.name for f in dataclasses.fields(TrainConfig) if f.name not in ("name", "twin", "seed")
+)
 
 #: Keys of a sweep file.
 _KEYS = frozenset(
@@ -67,8 +75,10 @@ class SweepSpec:
         name: Folder of the sweep under the output folder.
         presets: Preset names; more than one is a grid.
         seeds: Training seeds, a grid.
-        fixed: Preset fields set in every trial (``set``).
-        search: Preset field -> list (grid) or ``{distribution: args}``.
+        fixed: Training-config fields (and twin options) set in every trial (``set``;
+            ``algorithm_kwargs``: a mapping, merged into the preset's).
+        search: Config field (or twin option) -> list (grid) or ``{distribution: args}``;
+            ``algorithm_kwargs``: argument name -> list or distribution.
         reward_weights: Reward term -> weight, list (grid) or ``{distribution: args}``.
         num_samples: Draws of the distributions (Tune's ``num_samples``).
         scheduler: ``None``, ``"asha"`` or ``"median"``.
@@ -79,55 +89,51 @@ class SweepSpec:
         max_concurrent_trials: Trials at once (0: as many as the CPUs allow).
     """
 
-    name: str
-    presets: tuple[str, ...] = ("cpu",)
-    seeds: tuple[int, ...] = (0,)
+    name: str = option("", "folder of the sweep under the output folder")
+    presets: tuple[str, ...] = option(("cpu",), "preset names (a grid)", choices=sorted(PRESETS))
+    seeds: tuple[int, ...] = option((0,), "training seeds (a grid)", low=0)
     fixed: Mapping[str, Any] = field(default_factory=dict)
     search: Mapping[str, Any] = field(default_factory=dict)
     reward_weights: Mapping[str, Any] = field(default_factory=dict)
-    num_samples: int = 1
-    scheduler: str | None = None
-    grace_evals: int = 1
-    reduction_factor: int = 2
-    metric: str = "score"
-    cpus_per_trial: float = 1.0
-    max_concurrent_trials: int = 0
+    num_samples: int = option(1, "draws of the distributions", low=1)
+    scheduler: str | None = option(None, "early stopping", choices=SCHEDULERS)
+    grace_evals: int = option(1, "evaluations before a trial may be stopped", low=1)
+    reduction_factor: int = option(2, "ASHA's halving rate", low=1)
+    metric: str = option("score", "what the scheduler compares", choices=sorted(METRICS))
+    cpus_per_trial: float = option(1.0, "CPUs reserved per trial", low=0.0, above=True)
+    max_concurrent_trials: int = option(0, "trials at once (0: as the CPUs allow)", low=0)
 
     def __post_init__(self) -> None:
         _check(bool(self.name) and "/" not in self.name, f"name {self.name!r} is not a folder")
         _check(bool(self.presets), "preset: name at least one")
-        unknown = sorted(set(self.presets) - set(PRESETS))
-        _check(not unknown, f"unknown preset(s) {unknown}; accepted: {sorted(PRESETS)}")
-        _check(
-            bool(self.seeds) and all(_is_int(s) and s >= 0 for s in self.seeds),
-            f"seeds {list(self.seeds)} must be integers >= 0",
-        )
-        for key in ("num_samples", "grace_evals", "reduction_factor"):
-            value = getattr(self, key)
-            _check(_is_int(value) and value >= 1, f"{key} = {value!r} must be an integer >= 1")
-        _check(
-            _is_int(self.max_concurrent_trials) and self.max_concurrent_trials >= 0,
-            f"max_concurrent_trials = {self.max_concurrent_trials!r} must be an integer >= 0",
-        )
-        _check(
-            isinstance(self.cpus_per_trial, (int, float)) and self.cpus_per_trial > 0,
-            f"cpus_per_trial = {self.cpus_per_trial!r} must be > 0",
-        )
-        _check(
-            self.scheduler is None or self.scheduler in SCHEDULERS,
-            f"scheduler {self.scheduler!r}; accepted: {SCHEDULERS} or none",
-        )
-        _check(self.metric in METRICS, f"metric {self.metric!r}; accepted: {sorted(METRICS)}")
-        fields = {f.name for f in dataclasses.fields(SACPreset)} - {"name", "twin"}
-        fields |= {*TASK_FIELDS, *OPTION_FIELDS}  # the twin's options, by their own names
+        _check(bool(self.seeds), "seeds: name at least one")
+        try:
+            check_fields(self)
+        except FieldError as exc:
+            section = {"presets": "preset"}.get(exc.field, exc.field)
+            raise ValueError(f"sweep file: {exc.describe(section)}") from None
+        accepted = sorted(CONFIG_FIELDS | {*TASK_FIELDS, *OPTION_FIELDS})
         for section, keys in (("set", self.fixed), ("search", self.search)):
-            bad = sorted(set(keys) - fields)
-            _check(not bad, f"{section}: unknown preset field(s) {bad}; accepted: {sorted(fields)}")
+            bad = sorted(set(keys) - set(accepted))
+            hint = [k for k in bad if k in KNOWN_KWARGS]
+            _check(
+                not bad,
+                f"{section}: unknown training field(s) {bad}; accepted: {accepted}"
+                + (f" ({hint} belong under algorithm_kwargs)" if hint else ""),
+            )
+        for section, kwargs in (
+            ("set", self.fixed.get("algorithm_kwargs", {})),
+            ("search", self.search.get("algorithm_kwargs", {})),
+        ):
+            _check(
+                isinstance(kwargs, Mapping),
+                f"{section}.algorithm_kwargs: a mapping of the algorithm's arguments",
+            )
         _check(
             "reward_weights" not in self.search,
             "search: put reward weights in the reward_weights section",
         )
-        for key, value in self.search.items():
+        for key, value in _search_entries(self.search):
             _check(
                 isinstance(value, list) or distribution(value) is not None,
                 f"search.{key}: a list of values (grid) or {{distribution: args}}, got {value!r}",
@@ -137,29 +143,36 @@ class SweepSpec:
                 isinstance(value, (int, float, list)) or distribution(value) is not None,
                 f"reward_weights.{key}: a number, a list or {{distribution: args}}, got {value!r}",
             )
-        self._check_presets()
+        self._check_configs()
 
-    def _check_presets(self) -> None:
-        """Build the preset of every grid value (the low bound of each distribution) once,
-        so that a bad value stops the sweep before Ray starts."""
+    def _check_configs(self) -> None:
+        """Build the config of every grid value (the low bound of each distribution) once,
+        and check its algorithm's arguments, so that a bad value stops the sweep before Ray
+        starts."""
         probes: list[tuple[str, dict[str, Any], dict[str, float]]] = []
         for name in self.presets:
             probes.append((name, {}, {}))
-            for key, value in self.search.items():
-                probes.extend((name, {key: v}, {}) for v in _probe_values(value))
+            for key, value in _search_entries(self.search):
+                probes.extend((name, _nested(key, v), {}) for v in _probe_values(value))
             for key, value in self.reward_weights.items():
                 probes.extend((name, {}, {key: float(v)}) for v in _probe_values(value))
         for name, search, weights in probes:
-            preset = build_preset(name, self.fixed, search, weights)
+            try:
+                config = build_config(name, self.fixed, search, weights)
+                config.resolved_kwargs()
+            except FieldError as exc:
+                raise ValueError(
+                    f"sweep file: preset {name!r}: {exc.describe(exc.field)}"
+                ) from None
             _check(
-                preset.eval_every_steps > 0 and is_myoexo_env(preset.env_id),
+                config.eval_every_steps > 0 and is_myoexo_env(config.env_id),
                 f"preset {name!r}: a sweep ranks trials on the periodic evaluation; set "
                 "eval_every_steps > 0 on a MyoExoKnee env",
             )
             _check(
-                preset.eval_every_steps <= preset.total_timesteps,
-                f"preset {name!r}: eval_every_steps = {preset.eval_every_steps} exceeds "
-                f"total_timesteps = {preset.total_timesteps}: no evaluation to rank",
+                config.eval_every_steps <= config.total_timesteps,
+                f"preset {name!r}: eval_every_steps = {config.eval_every_steps} exceeds "
+                f"total_timesteps = {config.total_timesteps}: no evaluation to rank",
             )
 
     def to_dict(self) -> dict[str, Any]:
@@ -173,8 +186,23 @@ def _check(ok: bool, message: str) -> None:
         raise ValueError(f"sweep file: {message}")
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
+def _search_entries(search: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """``(key, grid or distribution)`` of a search section, an algorithm argument as
+    ``algorithm_kwargs.NAME``."""
+    out: list[tuple[str, Any]] = []
+    for key, value in search.items():
+        if key == "algorithm_kwargs" and isinstance(value, Mapping):
+            out += [(f"algorithm_kwargs.{k}", v) for k, v in value.items()]
+        else:
+            out.append((key, value))
+    return out
+
+
+def _nested(key: str, value: Any) -> dict[str, Any]:
+    """``{key: value}``, an ``algorithm_kwargs.NAME`` key as ``{"algorithm_kwargs": {NAME:
+    value}}``."""
+    head, _, name = key.partition(".")
+    return {head: {name: value}} if name else {key: value}
 
 
 def distribution(value: Any) -> tuple[str, list[Any]] | None:
@@ -216,9 +244,9 @@ def _as_list(value: Any) -> list[Any]:
 
 
 def _coerce(value: Any, field_name: str | None = None) -> Any:
-    """A searched value typed after its preset field (``field_name``) or as a reward weight
-    (a number): YAML reads ``1e-4`` as text. Distributions keep their form; their bounds
-    are checked by :func:`distribution`."""
+    """A searched value typed after its config field or algorithm argument (``field_name``)
+    or as a reward weight (a number): YAML reads ``1e-4`` as text. Distributions keep their
+    form; their bounds are checked by :func:`distribution`."""
 
     def one(v: Any) -> Any:
         if not isinstance(v, str):
@@ -270,11 +298,16 @@ def read_sweep_file(path: str | Path) -> SweepSpec:
     for section in ("set", "search", "reward_weights"):
         _check(isinstance(data.get(section, {}), dict), f"{section} must be a mapping")
     scheduler = data.get("scheduler")
-    search = {str(k): _coerce(v, str(k)) for k, v in data.get("search", {}).items()}
+    search: dict[str, Any] = {}
+    for key, value in data.get("search", {}).items():
+        if key == "algorithm_kwargs" and isinstance(value, Mapping):
+            search[key] = {str(k): _coerce(v, f"algorithm_kwargs.{k}") for k, v in value.items()}
+        else:
+            search[str(key)] = _coerce(value, str(key))
     weights = {str(k): _coerce(v) for k, v in data.get("reward_weights", {}).items()}
     return SweepSpec(
         name=str(data.get("name", path.stem)),
-        presets=tuple(_as_list(data.get("preset", "cpu"))),
+        presets=tuple(str(p) for p in _as_list(data.get("preset", "cpu"))),
         seeds=tuple(_as_list(data.get("seeds", 0))),
         fixed=dict(data.get("set", {})),
         search=search,
@@ -291,41 +324,50 @@ def read_sweep_file(path: str | Path) -> SweepSpec:
 
 # ----------------------------------------------------------------------------- trials
 def _typed(key: str, value: Any) -> Any:
-    """A sweep file's value for preset field ``key``: text typed after the field (YAML reads
-    ``1e-4`` as text), lists as tuples."""
+    """A sweep file's value for config field, twin option or algorithm argument ``key``
+    (``algorithm_kwargs.NAME``): text typed after it (YAML reads ``1e-4`` as text), lists as
+    tuples."""
+    _, _, name = key.partition(".")
+    if name:  # an algorithm argument
+        return typed_kwarg(name, literal(value) if isinstance(value, str) else value)
     if isinstance(value, str) and TwinOptions.is_option(key):
         options = TwinOptions().with_override(f"{key}={value}")
         return dict(options.task).get(key) if key in TASK_FIELDS else getattr(options, key)
-    if isinstance(value, str) and key != "name":
-        return parse_override(f"{key}={value}")[1]
+    hint = typing.get_type_hints(TrainConfig).get(key)
+    if isinstance(value, str) and hint is not None and hint is not str:
+        return convert(value, hint, key)
     if isinstance(value, list):
         return tuple(tuple(v) if isinstance(v, list) else v for v in value)
     return value
 
 
-def build_preset(
+def build_config(
     name: str,
     fixed: Mapping[str, Any],
     search: Mapping[str, Any],
     weights: Mapping[str, float],
-) -> SACPreset:
-    """The preset of one trial: ``name`` with the fixed fields, the trial's searched fields,
-    and its reward weights on top of any fixed ones."""
-    overrides = {k: _typed(k, v) for k, v in {**fixed, **search}.items()}
-    merged: dict[str, float] = {}
+    seed: int = 0,
+) -> TrainConfig:
+    """The training config of one trial: preset ``name`` with the fixed fields, the trial's
+    searched fields (``algorithm_kwargs`` of both merged into the preset's), its reward
+    weights on top of any fixed ones, and its seed."""
+    changes = {k: v for k, v in {**fixed, **search}.items() if k != "algorithm_kwargs"}
+    kwargs = {**fixed.get("algorithm_kwargs", {}), **search.get("algorithm_kwargs", {})}
     base = fixed.get("reward_weights", {})
-    if isinstance(base, Mapping):
-        merged.update({str(k): float(v) for k, v in base.items()})
-    else:
-        merged.update({str(k): float(v) for k, v in base})
+    if isinstance(base, str):
+        base = convert(base, dict[str, float], "reward_weights")
+    merged = {str(k): float(v) for k, v in (base.items() if isinstance(base, Mapping) else base)}
     merged.update({str(k): float(v) for k, v in weights.items()})
-    overrides["reward_weights"] = tuple(sorted(merged.items()))
-    return get_preset(name, **overrides)
+    changes["reward_weights"] = tuple(sorted(merged.items()))
+    return get_preset(name, **changes, algorithm_kwargs=kwargs, seed=int(seed))
 
 
-def trial_preset(config: Mapping[str, Any]) -> tuple[SACPreset, int]:
-    """``(preset, seed)`` of a trial's resolved config."""
-    preset = build_preset(
-        config["preset"], config.get("set", {}), config["search"], config["reward_weights"]
+def trial_config(config: Mapping[str, Any]) -> TrainConfig:
+    """The training config of a trial's resolved Tune config (its seed included)."""
+    return build_config(
+        config["preset"],
+        config.get("set", {}),
+        config["search"],
+        config["reward_weights"],
+        int(config["seed"]),
     )
-    return preset, int(config["seed"])

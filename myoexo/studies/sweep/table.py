@@ -13,7 +13,7 @@ from typing import Any
 
 from myoexo.evaluation import criteria
 from myoexo.evaluation.criteria import CRITERIA_METRICS
-from myoexo.studies.sweep.spec import RESULTS_STEM, RUNS_DIR, SweepSpec, trial_preset
+from myoexo.studies.sweep.spec import RESULTS_STEM, RUNS_DIR, SweepSpec, trial_config
 from myoexo.training import checkpoints as ck
 
 
@@ -41,11 +41,11 @@ def evaluation_metrics(
     run_dir: Path, levels: Sequence[int], after: int = -1
 ) -> list[dict[str, Any]]:
     """One dict per evaluated step after step ``after`` of a run (every level present),
-    oldest first: the step,
-    :func:`~myoexo.evaluation.criteria.score`, :func:`~myoexo.evaluation.criteria.shortfall`,
-    ``passes`` (every criterion met), the mean peak-torque reduction against the PID, the
-    fraction of unstable episodes, and per level ``L<l>_abs_final_error_deg``,
-    ``L<l>_peak_reduction_pct``, ``L<l>_rms_reduction_pct`` and ``L<l>_pass``."""
+    oldest first: the step, :func:`~myoexo.evaluation.criteria.ranking_score`,
+    :func:`~myoexo.evaluation.criteria.shortfall`, ``passes`` (every criterion met), the mean
+    peak-torque reduction against the PID, the fraction of unstable episodes, and per level
+    ``L<l>_abs_final_error_deg``, ``L<l>_peak_reduction_pct``, ``L<l>_rms_reduction_pct``
+    and ``L<l>_pass``."""
     pid_path = Path(run_dir) / ck.EVAL_PID_FILE
     rows = read_eval_rows(run_dir)
     if not rows or not pid_path.is_file():
@@ -56,10 +56,10 @@ def evaluation_metrics(
         if not all((step, lv) in rows and lv in pid for lv in levels):
             continue
         sac = {lv: {m: rows[(step, lv)][m] for m in CRITERIA_METRICS} for lv in levels}
-        table = criteria.compare(sac, {lv: pid[lv] for lv in levels})
+        table = criteria.compare_with_pid(sac, {lv: pid[lv] for lv in levels})
         metrics: dict[str, Any] = {
             "step": int(step),
-            "score": criteria.score(table),
+            "score": criteria.ranking_score(table),
             "shortfall": criteria.shortfall(table),
             "passes": bool(table["pass"].all()),
             "mean_peak_reduction_pct": float(table.peak_reduction_pct.mean()),
@@ -78,7 +78,7 @@ def evaluation_metrics(
 
 def rank_key(metrics: Mapping[str, Any]) -> tuple[float, float]:
     """Order of evaluations and trials (smaller is better): shortfall, then the negated
-    mean peak-torque reduction (as ``myoexo select`` orders checkpoints)."""
+    mean peak-torque reduction (as ``myoexo policy select`` orders checkpoints)."""
     shortfall = float(metrics.get("shortfall", math.inf))
     peak = float(metrics.get("mean_peak_reduction_pct", -math.inf))
     return (shortfall if math.isfinite(shortfall) else math.inf, -peak)
@@ -106,12 +106,12 @@ def results_table(spec: SweepSpec, sweep_dir: Path, trials: Sequence[Mapping[str
     for trial in trials:
         config = trial["config"]
         run_dir = sweep_dir / RUNS_DIR / trial["trial_id"]
-        preset, seed = trial_preset(config)
-        evals = evaluation_metrics(run_dir, preset.eval_levels) if run_dir.is_dir() else []
+        train_config = trial_config(config)
+        evals = evaluation_metrics(run_dir, train_config.eval_levels) if run_dir.is_dir() else []
         steps = _run_steps(run_dir) if run_dir.is_dir() else 0
         if trial.get("error"):
             status = "error"
-        elif steps >= preset.total_timesteps:
+        elif steps >= train_config.total_timesteps:
             status = "done"
         else:
             status = "stopped"  # by the scheduler, or interrupted
@@ -119,16 +119,20 @@ def results_table(spec: SweepSpec, sweep_dir: Path, trials: Sequence[Mapping[str
             "trial": trial["trial_id"],
             "status": status,
             "preset": config["preset"],
-            "seed": seed,
+            "seed": train_config.seed,
         }
-        row.update({k: _scalar(v) for k, v in config["search"].items()})
+        for key, value in config["search"].items():
+            if key == "algorithm_kwargs":
+                row.update({k: _scalar(v) for k, v in value.items()})
+            else:
+                row[key] = _scalar(value)
         row.update({f"w_{k}": float(v) for k, v in config["reward_weights"].items()})
         row.update(steps=steps, evaluations=len(evals))
         best = min(evals, key=rank_key) if evals else {}
         row["best_step"] = best.get("step")
         for key in ("shortfall", "passes", "mean_peak_reduction_pct", "score"):
             row[key] = best.get(key)
-        for lv in preset.eval_levels:
+        for lv in train_config.eval_levels:
             for metric in ("abs_final_error_deg", "peak_reduction_pct"):
                 row[f"L{lv}_{metric}"] = best.get(f"L{lv}_{metric}")
         row["last_step"] = evals[-1]["step"] if evals else None

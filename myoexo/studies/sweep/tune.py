@@ -23,13 +23,13 @@ from myoexo.studies.sweep.spec import (
     SETTINGS_FILE,
     TUNE_DIR,
     SweepSpec,
-    build_preset,
+    build_config,
     distribution,
-    trial_preset,
+    trial_config,
 )
 from myoexo.studies.sweep.table import evaluation_metrics, results_table, write_results
 from myoexo.training import checkpoints as ck
-from myoexo.training.presets import SACPreset
+from myoexo.training.config import TrainConfig
 
 #: Seconds between two looks of a trial at its run's ``eval.csv``.
 REPORT_POLL_S = 1.0
@@ -40,8 +40,9 @@ STOP_TIMEOUT_S = 60.0
 
 # ----------------------------------------------------------------------------- trials
 def param_space(spec: SweepSpec) -> dict[str, Any]:
-    """Tune's search space of a sweep: ``preset``, ``seed``, ``set``, ``search`` and
-    ``reward_weights`` (a trial's config has the same keys, resolved)."""
+    """Tune's search space of a sweep: ``preset``, ``seed``, ``set``, ``search`` (its
+    ``algorithm_kwargs`` a mapping of searched arguments) and ``reward_weights`` (a trial's
+    config has the same keys, resolved)."""
     from ray import tune
 
     def grid(values: Sequence[Any]) -> Any:
@@ -60,7 +61,10 @@ def param_space(spec: SweepSpec) -> dict[str, Any]:
         "preset": grid(spec.presets),
         "seed": grid(spec.seeds),
         "set": dict(spec.fixed),
-        "search": {k: domain(v) for k, v in spec.search.items()},
+        "search": {
+            k: {a: domain(x) for a, x in v.items()} if k == "algorithm_kwargs" else domain(v)
+            for k, v in spec.search.items()
+        },
         "reward_weights": {k: domain(v) for k, v in spec.reward_weights.items()},
     }
 
@@ -81,9 +85,9 @@ class _Training(threading.Thread):
     trial's own thread reports its evaluations; setting :attr:`stop` ends it at the next
     step, with a resumable checkpoint."""
 
-    def __init__(self, preset: SACPreset, run_dir: Path, seed: int, verbose: int) -> None:
+    def __init__(self, config: TrainConfig, run_dir: Path, verbose: int) -> None:
         super().__init__(name="myoexo-training", daemon=True)
-        self.preset, self.run_dir, self.seed, self.verbose = preset, run_dir, seed, verbose
+        self.config, self.run_dir, self.verbose = config, run_dir, verbose
         self.stop = threading.Event()
         self.error: BaseException | None = None
 
@@ -97,7 +101,7 @@ class _Training(threading.Thread):
                     resume(self.run_dir, verbose=self.verbose, callbacks=callbacks)
                     return
                 shutil.rmtree(self.run_dir)  # stopped before its first checkpoint: anew
-            train(self.preset, self.run_dir, self.seed, verbose=self.verbose, callbacks=callbacks)
+            train(self.config, self.run_dir, verbose=self.verbose, callbacks=callbacks)
         except BaseException as exc:
             self.error = exc
 
@@ -114,14 +118,14 @@ def run_trial(config: dict[str, Any], runs_dir: str, verbose: int = 0) -> None:
     report each new evaluation of its ``eval.csv`` (:func:`evaluation_metrics`)."""
     from ray import tune
 
-    preset, seed = trial_preset(config)
+    train_config = trial_config(config)
     run_dir = Path(runs_dir) / tune.get_context().get_trial_id()
     reported = -1
     restored = tune.get_checkpoint()
     if restored is not None:
         with restored.as_directory() as folder:
             reported = int(json.loads((Path(folder) / "reported.json").read_text())["step"])
-    training = _Training(preset, run_dir, seed, verbose)
+    training = _Training(train_config, run_dir, verbose)
     # a trial stopped by the scheduler ends with its process: stop the training cleanly
     # first (a daemon thread still printing at interpreter exit aborts it)
     atexit.register(training.end)
@@ -129,7 +133,7 @@ def run_trial(config: dict[str, Any], runs_dir: str, verbose: int = 0) -> None:
     try:
         while True:
             running = training.is_alive()  # before reading: the last rows are then seen
-            for metrics in evaluation_metrics(run_dir, preset.eval_levels, after=reported):
+            for metrics in evaluation_metrics(run_dir, train_config.eval_levels, after=reported):
                 _report(metrics)
                 reported = int(metrics["step"])
             if not running:
@@ -164,11 +168,8 @@ def _scheduler(spec: SweepSpec) -> Any:
     from ray.tune.schedulers import ASHAScheduler, MedianStoppingRule
 
     if spec.scheduler == "asha":
-        max_evals = max(
-            build_preset(p, spec.fixed, {}, {}).total_timesteps
-            // build_preset(p, spec.fixed, {}, {}).eval_every_steps
-            for p in spec.presets
-        )
+        configs = [build_config(p, spec.fixed, {}, {}) for p in spec.presets]
+        max_evals = max(c.total_timesteps // c.eval_every_steps for c in configs)
         return ASHAScheduler(
             time_attr="training_iteration",
             max_t=max(max_evals, spec.grace_evals),
@@ -227,13 +228,13 @@ def run_sweep(
     """
     from myoexo.runtime.ray_cluster import ray_session, require_ray
 
-    require_ray("myoexo sweep")
+    require_ray("myoexo policy sweep")
     sweep_dir = Path(out).resolve() / spec.name
     sweep_dir.mkdir(parents=True, exist_ok=True)
     _check_folder(sweep_dir, spec)
     runs_dir = sweep_dir / RUNS_DIR
     runs_dir.mkdir(exist_ok=True)
-    with ray_session(num_cpus, address, "myoexo sweep"):
+    with ray_session(num_cpus, address, "myoexo policy sweep"):
         from ray import tune
 
         trainable = tune.with_resources(
