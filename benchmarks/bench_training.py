@@ -10,11 +10,11 @@ A learner is ``ALGORITHM[:K]``: an algorithm of the training config (``sac``, ``
 ``K x n_envs`` gradient updates, i.e. one update per transition for every ``K`` (default 1;
 a larger ``K`` runs many compiled updates per call). ``sbx_sac:KxN`` trains ``N`` seeds
 together, their updates in one compiled call (``jax.vmap`` over seeds,
-:class:`myoexo.training.vmap.SeedBatchedSAC`); its rates are *seed-updates* per second (every
-seed's updates counted), the unit that compares it with one seed trained alone. Every
-learner uses the ``cpu`` preset's
-networks (64-64 GELU), batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). Measured in one
-process, one learner after the other:
+``SeedBatchedSAC`` of ``seed_batched_sac.py`` beside this script); its rates are
+*seed-updates* per second (every seed's updates counted), the unit that compares it with
+one seed trained alone. Every learner uses the ``cpu`` preset's networks (64-64 GELU),
+batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). Measured in one process, one
+learner after the other:
 
 1. **env**: transitions/s of the vector env under random actions (once: the simulator's
    share);
@@ -189,8 +189,9 @@ def measure_batched(
 ) -> dict:
     """The updates and learn measurements of ``n_seeds`` seeds trained together, their
     updates vmapped in one call (rates in seed-updates/s and seed-transitions/s)."""
+    from seed_batched_sac import SeedBatchedSAC, learn_seed_batched  # beside this script
+
     from myoexo.training.callbacks import RewardTermsCallback
-    from myoexo.training.vmap import SeedBatchedSAC, learn_seed_batched
 
     if algorithm != "sbx_sac":
         raise SystemExit(f"{learner}: only sbx_sac batches seeds")

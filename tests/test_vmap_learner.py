@@ -1,13 +1,23 @@
-"""Seeds trained together (``jax.vmap`` over seeds): the same algorithm as each seed alone."""
+"""Seeds trained together (``jax.vmap`` over seeds, ``benchmarks/seed_batched_sac.py``, the
+learner ``benchmarks/bench_training.py`` times): the same algorithm as each seed alone."""
 
 from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from myoexo.training import get_preset
 from myoexo.training.train import build_model, make_vec_env
-from myoexo.training.vmap import SeedBatchedSAC, learn_seed_batched
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "seed_batched_sac.py"
+_SPEC = importlib.util.spec_from_file_location("seed_batched_sac", _PATH)
+assert _SPEC is not None and _SPEC.loader is not None
+_MODULE = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(_MODULE)
+SeedBatchedSAC, learn_seed_batched = _MODULE.SeedBatchedSAC, _MODULE.learn_seed_batched
 
 
 @pytest.fixture(scope="module", autouse=True)
