@@ -41,7 +41,8 @@ evaluated on a few subjects per level (``myoexo evaluate
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+import typing
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
@@ -49,6 +50,7 @@ import numpy as np
 
 from myoexo.envs.sensors import Measurements
 from myoexo.envs.twin import Twin
+from myoexo.runtime.fields import convert, parse_assignments
 from myoexo.spasticity.stage import SpasticityStage
 
 #: Scale of the interaction torque in the cost (Nm): the motor's peak torque.
@@ -124,17 +126,12 @@ class OracleConfig:
 def parse_oracle_options(text: str) -> dict[str, Any]:
     """``"samples=16,horizon_s=0.4"`` -> typed :class:`OracleConfig` keyword arguments
     (validated)."""
-    types = {f.name: f.type for f in fields(OracleConfig)}
+    types = typing.get_type_hints(OracleConfig)
     options: dict[str, Any] = {}
-    for item in filter(None, (s.strip() for s in text.split(","))):
-        key, _, value = item.partition("=")
-        key = key.strip()
+    for key, value in parse_assignments(text, "oracle option").items():
         if key not in types:
             raise ValueError(f"unknown oracle option {key!r}; accepted: {sorted(types)}")
-        try:
-            options[key] = int(value) if types[key] in ("int", int) else float(value)
-        except ValueError:
-            raise ValueError(f"oracle option {key}={value!r} is not a number") from None
+        options[key] = convert(value, types[key], f"oracle option {key}")
     OracleConfig(**options)
     return options
 

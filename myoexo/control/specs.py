@@ -72,6 +72,7 @@ from myoexo.policies.run_files import (
     VECNORM_FILE,
     read_state,
 )
+from myoexo.runtime.fields import convert, parse_assignments
 
 _PID_KEYS = (
     "kp",
@@ -268,19 +269,17 @@ def _checkpoint_algorithm(checkpoint: Path) -> str:
 
 def _pid_options(tail: str) -> dict[str, Any]:
     options: dict[str, Any] = {}
-    for item in filter(None, (s.strip() for s in tail.split(","))):
-        key, eq, value = item.partition("=")
-        key = key.strip().lower()
+    given = parse_assignments(tail, f"PID option in 'pid:{tail}'", bare=_PID_KEYS)
+    for key, value in ((k.lower(), v) for k, v in given.items()):
         if key not in _PID_KEYS:
             raise ValueError(f"unknown PID option {key!r} in 'pid:{tail}'; accepted: {_PID_KEYS}")
         if key == "textbook":
             options["derivative_on_measurement"] = False
             options.setdefault("anti_windup", "none")
         elif key in ("kp", "ki", "kd", "ramp_s", "limit"):
-            try:
-                options["output_limit" if key == "limit" else key] = float(value)
-            except ValueError:
-                raise ValueError(f"PID option {key}={value!r} is not a number") from None
+            options["output_limit" if key == "limit" else key] = convert(
+                value, float, f"PID option {key}"
+            )
         elif key == "tuned":
             from myoexo.control.tuned import tuned_pid
 
@@ -293,7 +292,7 @@ def _pid_options(tail: str) -> dict[str, Any]:
             if value not in ("measurement", "error"):
                 raise ValueError(f"PID option derivative={value!r}; accepted: measurement, error")
             options["derivative_on_measurement"] = value == "measurement"
-        elif not eq:
+        elif not value:
             raise ValueError(f"PID option {key!r} needs a value ({key}=...)")
         else:
             options[key] = value

@@ -28,7 +28,7 @@ from typing import Any
 
 from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TASK_FIELDS, TaskParams
 from myoexo.envs.observation import OBS_PRESETS
-from myoexo.runtime.fields import add_options, convert, option
+from myoexo.runtime.fields import add_options, convert, option, parse_assignments
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import get_reflex, reflex_parameters
 
@@ -230,9 +230,11 @@ class TwinOptions:
         Raises:
             ValueError: A malformed override or a bad value (naming the accepted ones).
         """
-        name, eq, raw = text.partition("=")
-        name, raw = name.strip(), raw.strip()
-        if not eq or not self.is_option(name):
+        try:
+            ((name, raw),) = parse_assignments([text], "twin option").items()
+        except ValueError:
+            name, raw = "", ""
+        if not self.is_option(name):
             raise ValueError(
                 f"bad twin option {text!r}: expected NAME=VALUE with NAME in "
                 f"{[*TASK_FIELDS, *OPTION_FIELDS]}"

@@ -196,10 +196,14 @@ def _integer_fields(cls: type) -> frozenset[str]:
 
 
 # ----------------------------------------------------------------------------- NAME=VALUE
-def parse_assignments(text: str | Iterable[str], what: str = "option") -> dict[str, str]:
+def parse_assignments(
+    text: str | Iterable[str], what: str = "option", bare: Iterable[str] = ()
+) -> dict[str, str]:
     """``"a=1,b=x"`` (or the items of an iterable, each ``NAME=VALUE``) as a dict of raw
-    strings, in order. Raises ``ValueError`` naming *what* for an item without ``=``, an
-    empty name or a repeated name."""
+    strings, in order; a name of *bare* may stand alone (its value ``""``). Raises
+    ``ValueError`` naming *what* for an item without ``=``, an empty name or a repeated
+    name."""
+    alone = set(bare)
     items = [p for p in text.split(",")] if isinstance(text, str) else list(text)
     out: dict[str, str] = {}
     for item in (i.strip() for i in items):
@@ -207,7 +211,7 @@ def parse_assignments(text: str | Iterable[str], what: str = "option") -> dict[s
             continue
         name, eq, raw = item.partition("=")
         name = name.strip()
-        if not eq or not name:
+        if not name or not (eq or name in alone):
             raise ValueError(f"bad {what} {item!r}: expected NAME=VALUE")
         if name in out:
             raise ValueError(f"{what} {name!r} is given twice")
@@ -264,7 +268,14 @@ def convert(raw: str, tp: Any, name: str = "value") -> Any:
             if low not in ("true", "false", "1", "0", "yes", "no"):
                 raise ValueError("expected true or false")
             return low in ("true", "1", "yes")
-        if tp in (int, float, str, Path):
+        if tp is int or tp is float:
+            try:
+                return tp(raw)
+            except ValueError:
+                raise ValueError(
+                    "is not a whole number" if tp is int else "is not a number"
+                ) from None
+        if tp in (str, Path):
             return tp(raw)
         if origin is tuple:
             (item, *_rest) = typing.get_args(tp)
@@ -275,7 +286,8 @@ def convert(raw: str, tp: Any, name: str = "value") -> Any:
             pairs = [p.split(":", 1) for p in raw.split(",") if p.strip()]
             return {k.strip(): float(v) for k, v in pairs}
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} = {raw!r}: {exc}") from None
+        sep = " " if str(exc).startswith("is ") else ": "
+        raise ValueError(f"{name} = {raw!r}{sep}{exc}") from None
     raise TypeError(f"{name}: no conversion from text to {tp!r}")
 
 

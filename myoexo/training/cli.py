@@ -44,6 +44,7 @@ from myoexo.runtime.fields import (
     from_options,
     option,
     option_fields,
+    parse_assignments,
 )
 from myoexo.training.config import PRESETS, TrainConfig, get_preset, read_config_file
 
@@ -53,7 +54,7 @@ DEFAULT_PRESET = "cpu"
 
 def new_spelling(item: str) -> str:
     """The option that replaces an earlier ``--set NAME=VALUE`` item."""
-    name, _, value = (p.strip() for p in item.partition("="))
+    ((name, value),) = parse_assignments([item], "--set item").items()
     fields = {f.name: f for f in option_fields(TrainConfig)}
     if name in fields:
         flag = flag_of(fields[name])
