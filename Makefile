@@ -23,8 +23,9 @@ export NO_MKDOCS_2_WARNING := 1
 
 .PHONY: demo test test-fast install lint format clean bench docs docs-build dist-check
 
-# the package and what it needs to run (`make demo`)
-$(RUN_STAMP): pyproject.toml Makefile
+# the package and what it needs to run (`make demo`); the developer tools (`make test` and
+# the targets below it) come with the `dev` extra, in one pass when nothing is installed yet
+define install_package
 	@# headless rendering (notebooks, videos) uses Mesa's EGL; install it where it is missing
 	@ldconfig -p | grep -q libEGL_mesa || { apt-get update -qq && \
 		apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri; } || \
@@ -32,13 +33,16 @@ $(RUN_STAMP): pyproject.toml Makefile
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e . "torch==2.13.0"
+	$(PY) -m pip install -q -e "$(1)" "torch==2.13.0"
+endef
+
+$(RUN_STAMP): pyproject.toml Makefile
+	$(call install_package,.)
 	touch $(RUN_STAMP)
 
-# + the developer tools (`make test` and the targets below it)
-$(DEV_STAMP): $(RUN_STAMP)
-	$(PY) -m pip install -q -e ".[dev]" "torch==2.13.0"
-	touch $(DEV_STAMP)
+$(DEV_STAMP): pyproject.toml Makefile
+	$(call install_package,.[dev])
+	touch $(DEV_STAMP) $(RUN_STAMP)
 
 install: $(DEV_STAMP)
 
