@@ -555,9 +555,10 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         at = self.obs_layout.at
         knee_deg = math.degrees(values[at["knee_angle_rad"]])
         exo_deg = math.degrees(values[at["exo_angle_rad"]])
-        measured = values if self._sensor is None else sensed[: len(values)].tolist()
-        measured_knee_deg = math.degrees(measured[at["knee_angle_rad"]])
-        measured_exo_deg = math.degrees(measured[at["exo_angle_rad"]])
+        # the sensed entries read one by one (a perturbed twin's buffer is the whole state)
+        read = values.__getitem__ if self._sensor is None else sensed.item
+        measured_knee_deg = math.degrees(read(at["knee_angle_rad"]))
+        measured_exo_deg = math.degrees(read(at["exo_angle_rad"]))
         target_deg = self.task.target_angle_deg
         thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
         exo_nm, muscle_nm = values[at["exo_torque_nm"]], values[at["muscle_knee_torque_nm"]]
@@ -570,9 +571,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             misalignment_deg=knee_deg - exo_deg,
             measured_knee_angle_deg=measured_knee_deg,
             measured_exo_angle_deg=measured_exo_deg,
-            measured_knee_velocity_deg_s=math.degrees(measured[at["knee_vel_rad_s"]]),
-            measured_exo_velocity_deg_s=math.degrees(measured[at["exo_vel_rad_s"]]),
-            measured_exo_torque_nm=measured[at["exo_torque_nm"]],
+            measured_knee_velocity_deg_s=math.degrees(read(at["knee_vel_rad_s"])),
+            measured_exo_velocity_deg_s=math.degrees(read(at["exo_vel_rad_s"])),
+            measured_exo_torque_nm=read(at["exo_torque_nm"]),
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,
