@@ -28,7 +28,7 @@ import math
 import numbers
 import types
 import typing
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -434,11 +434,6 @@ def option_of(parser: argparse.ArgumentParser, dest: str) -> str | None:
         if action.dest == dest and action.option_strings:
             return max(action.option_strings, key=len)
     return None
-
-
-def field_names(cls: type) -> Sequence[str]:
-    """Names of the fields of *cls* declared with :func:`option`."""
-    return [f.name for f in dataclasses.fields(cls) if field_spec(f) is not None]
 
 
 @dataclasses.dataclass(frozen=True)
