@@ -92,6 +92,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "myoexo.training.select",
         "pick the checkpoint of a run that best meets the acceptance criteria",
     ),
+    "policy gentleness": (
+        "myoexo.training.gentleness",
+        "a gentleness-trained policy across its weights against the PID; the default weight",
+    ),
     "policy export": ("myoexo.training.export", "export a trained policy (ONNX)"),
     "policy distill": (
         "myoexo.studies.distill",

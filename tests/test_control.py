@@ -299,6 +299,45 @@ def test_ramped_setpoint_and_clipped_command():
         PIDConfig(output_limit=1.5)
 
 
+def test_pid_along_a_minimum_jerk_ramp():
+    start, target, ramp = math.radians(90.0), math.radians(7.0), 1.0
+    steps = round(ramp / DT) + 5
+    linear = PID(PIDConfig(ramp_s=ramp), dt_s=DT)
+    minjerk = PID(PIDConfig(ramp_s=ramp, reference="minjerk"), dt_s=DT)
+    lin = np.array([linear.setpoint_rad(target, start) for _ in range(steps)])
+    mj = np.array([minjerk.setpoint_rad(target, start) for _ in range(steps)])
+    assert lin[0] == mj[0] == start
+    at_ramp = round(ramp / DT)  # the setpoint of the step ramp_s after the first
+    assert mj[at_ramp] == pytest.approx(target) and mj[-1] == pytest.approx(target)
+    assert lin[at_ramp] == pytest.approx(target)
+    # the minimum-jerk setpoint starts slower, is level with the linear one at mid-ramp
+    assert mj[10] > lin[10]  # still nearer the start (flexed) after 0.1 s
+    assert mj[50] == pytest.approx(lin[50])
+    assert mj[90] < lin[90]  # and nearer the target near the end
+    assert np.all(np.diff(mj) <= 0.0)
+    # the default stays the linear ramp; the shape is in the repr and checked
+    assert PIDConfig().reference == "linear"
+    assert "reference='minjerk'" in repr(minjerk)
+    with pytest.raises(ValueError, match="reference"):
+        PIDConfig(reference="cubic")
+    # the commands differ once the setpoints do
+    a = PID(PIDConfig(ramp_s=ramp), dt_s=DT)
+    b = PID(PIDConfig(ramp_s=ramp, reference="minjerk"), dt_s=DT)
+    knee = sensed(90.0)
+    ua = [a.act(None, knee)[0] for _ in range(20)]
+    ub = [b.act(None, knee)[0] for _ in range(20)]
+    assert ua[0] == ub[0] and ua != ub
+
+
+def test_minimum_jerk_pid_spec_parses():
+    spec = parse_controller_spec("pid:reference=minjerk,ramp_s=1")
+    assert spec.kind == "pid" and spec.label == "pid:reference=minjerk,ramp_s=1"
+    config = pid_config(spec.options)
+    assert config.reference == "minjerk" and config.ramp_s == 1.0
+    with pytest.raises(ValueError, match="reference"):
+        parse_controller_spec("pid:reference=cubic,ramp_s=1")
+
+
 # ----------------------------------------------------------------------------- sensors
 class _Spy:
     """Records the sensor records it is given; commands nothing."""
@@ -362,6 +401,8 @@ def test_a_controller_receives_only_the_record_of_its_sensors():
         ("guard:sac", True),
         ("pid:feedback=exo", False),
         ("guard:pid:feedback=exo", False),
+        ("impedance", True),
+        ("impedance:feedback=exo", False),
         ("student_exo", False),
         ("guard:student_exo", False),
         ("sac", False),  # its observation is the twin's full state; its record is the device's

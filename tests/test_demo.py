@@ -16,14 +16,20 @@ ROW = re.compile(r"^\s*(\d)\s+(\S+)((?:\s+\S+){6})\s*$")
 
 
 def test_the_default_demo_runs_the_shipped_controllers_against_the_papers_pid():
-    assert {"pid", "pid:ramp_s=1", "sac", "guard:sac", "student_exo", "guard:student_exo"} <= set(
-        DEMO_CONTROLLERS
-    )
+    assert {
+        "pid",
+        "pid:ramp_s=1",
+        "impedance",
+        "sac",
+        "guard:sac",
+        "student_exo",
+        "guard:student_exo",
+    } <= set(DEMO_CONTROLLERS)
     assert "oracle" not in " ".join(DEMO_CONTROLLERS)
 
 
 def test_the_demo_prints_one_table_and_a_paragraph_of_its_numbers(tmp_path, capsys):
-    controllers = ["pid", "pid:ramp_s=1", "sac"]
+    controllers = ["pid", "pid:ramp_s=1", "impedance", "sac"]  # impedance: not learned
     argv = ["demo", "--subjects", "1", "--controllers", *controllers, "--workers", "1"]
     argv += ["--out", str(tmp_path / "demo"), "--no-progress"]
     assert main(argv) == 0

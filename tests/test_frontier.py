@@ -70,6 +70,25 @@ def test_shaped_pid_specs_parse():
     configs = [pid_config(parse_controller_spec(s).options) for s in specs]
     assert {c.ramp_s for c in configs} >= set(F.RAMPS_S)
     assert {c.output_limit for c in configs} >= set(F.LIMITS)
+    minjerk = {c.ramp_s for c in configs if c.reference == "minjerk"}
+    assert minjerk == set(F.MINJERK_RAMPS_S) and max(F.RAMPS_S) >= 3.0
+
+
+def test_classical_specs_add_the_impedance_grid():
+    from myoexo.control.impedance import ImpedanceConfig
+    from myoexo.control.specs import parse_controller_spec
+
+    specs = F.classical_specs()
+    assert specs[: len(F.shaped_pid_specs())] == F.shaped_pid_specs()
+    assert len(set(specs)) == len(specs)
+    parsed = [parse_controller_spec(s) for s in specs]
+    grid = [ImpedanceConfig(**p.options) for p in parsed if p.kind == "impedance"]
+    assert len(grid) == len(F.IMPEDANCE_STIFFNESSES) * len(F.IMPEDANCE_DURATIONS_S)
+    assert {(c.stiffness_nm_per_rad, c.duration_s) for c in grid} == {
+        (k, t) for k in F.IMPEDANCE_STIFFNESSES for t in F.IMPEDANCE_DURATIONS_S
+    }
+    for c in grid:  # the paper's damping ratio Kd / Kp = 0.05 / 7
+        assert c.damping_nm_s_per_rad / c.stiffness_nm_per_rad == pytest.approx(0.05 / 7, rel=1e-2)
 
 
 def test_seed_checkpoints_of_several_seeds_folders_get_distinct_labels(tmp_path):

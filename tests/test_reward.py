@@ -277,7 +277,7 @@ def test_pure_reward_function_terms_from_their_definitions():
     assert rwd["sparse"] == -abs(e) and rwd["solved"] is False and rwd["done"] is False
     dense = sum(w * rwd[k] for k, w in DEFAULT_REWARD_WEIGHTS.items())
     assert rwd["dense"] == approx(dense)
-    assert set(rwd) == {*TERMS, "sparse", "solved", "done", "dense"}
+    assert set(rwd) == {*TERMS, "gentle", "sparse", "solved", "done", "dense"}
 
 
 @pytest.mark.parametrize(

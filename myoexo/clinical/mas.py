@@ -65,6 +65,7 @@ from myoexo.clinical.common import (
     simulate_drive,
     write_outputs,
 )
+from myoexo.control.reference import minimum_jerk_position, minimum_jerk_rate
 from myoexo.runtime.fields import check_fields, from_options, option
 from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -144,15 +145,16 @@ def minimum_jerk(
     time_s: np.ndarray, params: MASExamParams
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The exam's reference: held, a minimum-jerk move ``s = 10 u^3 - 15 u^4 + 6 u^5``
-    (``u`` = time / duration) from ``start_deg`` to ``end_deg``, held.
+    (``u`` = time / duration; :func:`myoexo.control.reference.minimum_jerk_position`) from
+    ``start_deg`` to ``end_deg``, held.
 
     Returns:
         ``(angle_deg, vel_rad_s, moving)``: reference angle and velocity (flexion positive)
         and whether the step is part of the motion.
     """
     u = np.clip((np.asarray(time_s, dtype=np.float64) - params.hold_s) / params.duration_s, 0, 1)
-    s = u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
-    ds_dt = 30.0 * u**2 * (1.0 - u) ** 2 / params.duration_s
+    s = minimum_jerk_position(u)
+    ds_dt = minimum_jerk_rate(u) / params.duration_s
     span_rad = math.radians(params.span_deg)
     moving = (time_s >= params.hold_s) & (time_s <= params.hold_s + params.duration_s)
     return params.start_deg - params.span_deg * s, -span_rad * ds_dt, moving

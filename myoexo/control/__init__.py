@@ -1,5 +1,6 @@
 """Controllers of the exoskeleton: the paper's PID baseline, its Ziegler-Nichols tuning on the
-twin, and adapters that make any learned policy a controller.
+twin, the impedance controller (a spring-damper on a minimum-jerk reference), and adapters
+that make any learned policy a controller.
 
 Every controller fits :class:`Controller` (``reset(seed)``, ``act(obs, measurements) ->
 action``): it sees the observation and the record of its sensors (:class:`Measurements`,
@@ -18,6 +19,7 @@ action``): it sees the observation and the record of its sensors (:class:`Measur
             break
 """
 
+from myoexo.control.impedance import ImpedanceConfig, ImpedanceController
 from myoexo.control.pid import ANTI_WINDUP_SCHEMES, PID, PIDConfig, PIDGains
 from myoexo.control.policy import CallableController, SB3Controller, as_controller
 from myoexo.control.protocol import Controller, declared_sensors
@@ -36,6 +38,8 @@ __all__ = [
     "CallableController",
     "Controller",
     "ControllerSpec",
+    "ImpedanceConfig",
+    "ImpedanceController",
     "KneeAngleMeasurements",
     "Measurements",
     "PIDConfig",

@@ -26,10 +26,13 @@ parallel PID ``u = Kp e + Ki int(e) dt + Kd de/dt``
   Hagglund's rule, with ``Ti = Kp / Ki`` and ``Td = Kd / Kp``).
 
 Two ways to start gently, for the torque-versus-settling trade-off (the cheap baselines of a
-learned controller): a **ramped setpoint** (``ramp_s``: the setpoint moves linearly from the
-angle measured at the first step to the target over ``ramp_s`` seconds of the controller's own
+learned controller): a **ramped setpoint** (``ramp_s``: the setpoint moves from the angle
+measured at the first step to the target over ``ramp_s`` seconds of the controller's own
 clock, the time since the command began; no episode clock) and a **clipped command**
-(``output_limit`` < 1: at most that fraction of the 100 Nm).
+(``output_limit`` < 1: at most that fraction of the 100 Nm). The ramp's shape is
+``reference`` (:mod:`myoexo.control.reference`): ``"linear"`` (constant speed, the default)
+or ``"minjerk"`` (minimum jerk, ``s = 10 u^3 - 15 u^4 + 6 u^5``, Flash and Hogan 1985: it
+starts and ends at rest, the bell-shaped speed of a human movement).
 
 Discretization at the env's control period ``dt``: backward-Euler integral and backward
 difference derivative, no derivative filter (Kd is small); the derivative is zero on the
@@ -44,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.control.reference import REFERENCE_SHAPES, reference_point
 from myoexo.envs.sensors import KNEE_ANGLE_SENSOR, KneeAngleMeasurements, Measurements
 
 #: Accepted anti-windup schemes.
@@ -68,12 +72,29 @@ def feedback_angle_deg(measurements: Measurements, feedback: str) -> float:
     """
     if feedback == "exo":
         return measurements.exo_angle_deg
+    return _knee_record(measurements).knee_angle_deg
+
+
+def feedback_velocity_deg_s(measurements: Measurements, feedback: str) -> float:
+    """The *feedback* angular velocity (deg/s) in a sensor record: the knee angle sensor's
+    (``"knee"``) or the exo encoder's (``"exo"``), as :func:`feedback_angle_deg` reads the
+    angle.
+
+    Raises:
+        ValueError: ``"knee"`` and the record has no knee angle sensor.
+    """
+    if feedback == "exo":
+        return measurements.exo_velocity_deg_s
+    return _knee_record(measurements).knee_velocity_deg_s
+
+
+def _knee_record(measurements: Measurements) -> KneeAngleMeasurements:
     if not isinstance(measurements, KneeAngleMeasurements):
         raise ValueError(
             f"knee feedback needs the knee angle sensor ({KNEE_ANGLE_SENSOR!r}); the record "
             f"holds the exoskeleton's sensors only ({type(measurements).__name__})"
         )
-    return measurements.knee_angle_deg
+    return measurements
 
 
 @dataclass(frozen=True)
@@ -111,8 +132,12 @@ class PIDConfig:
         feedback: ``"knee"`` (the human knee angle, read by a knee angle sensor the PID
             declares; the paper's reading) or ``"exo"`` (the exo joint encoder, what a real
             device measures; it differs from the human knee by the strap misalignment).
-        ramp_s: Duration (s) of the setpoint's linear ramp from the first measured angle to
-            the target (0: the paper's step).
+        ramp_s: Duration (s) of the setpoint's ramp from the first measured angle to the
+            target (0: the paper's step).
+        reference: Shape of that ramp, one of
+            :data:`~myoexo.control.reference.REFERENCE_SHAPES`: ``"linear"`` (constant
+            speed) or ``"minjerk"`` (minimum jerk: at rest at both ends). Ignored without a
+            ramp.
     """
 
     gains: PIDGains = field(default_factory=PIDGains)
@@ -122,10 +147,15 @@ class PIDConfig:
     output_limit: float = 1.0
     feedback: str = "knee"
     ramp_s: float = 0.0
+    reference: str = "linear"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.ramp_s) and 0.0 <= self.ramp_s <= 60.0):
             raise ValueError(f"PIDConfig.ramp_s = {self.ramp_s!r} is outside [0, 60] s")
+        if self.reference not in REFERENCE_SHAPES:
+            raise ValueError(
+                f"PIDConfig.reference = {self.reference!r}; accepted: {REFERENCE_SHAPES}"
+            )
         if self.anti_windup not in ANTI_WINDUP_SCHEMES:
             raise ValueError(
                 f"PIDConfig.anti_windup = {self.anti_windup!r}; accepted: {ANTI_WINDUP_SCHEMES}"
@@ -254,15 +284,18 @@ class PID:
 
     def setpoint_rad(self, target_rad: float, measured_rad: float) -> float:
         """The setpoint of this step: the target, or with ``ramp_s`` > 0 the point of the
-        ramp from the first measured angle (the step counter advances by one)."""
+        ramp (of shape ``reference``) from the first measured angle (the step counter
+        advances by one)."""
         ramp = self.config.ramp_s
         self._steps += 1
         if ramp <= 0.0:
             return target_rad
         if self._ramp_start_rad is None:
             self._ramp_start_rad = measured_rad
-        frac = min(1.0, (self._steps - 1) * self.dt_s / ramp)
-        return self._ramp_start_rad + frac * (target_rad - self._ramp_start_rad)
+        elapsed_s = (self._steps - 1) * self.dt_s
+        return reference_point(
+            self.config.reference, self._ramp_start_rad, target_rad, elapsed_s, ramp
+        ).angle
 
     def __repr__(self) -> str:
         g = self.config.gains
@@ -270,5 +303,6 @@ class PID:
             f"PID(kp={g.kp}, ki={g.ki}, kd={g.kd}, dt_s={self.dt_s}, "
             f"feedback={self.config.feedback!r}, anti_windup={self.config.anti_windup!r}, "
             f"derivative_on_measurement={self.config.derivative_on_measurement}, "
-            f"output_limit={self.config.output_limit}, ramp_s={self.config.ramp_s})"
+            f"output_limit={self.config.output_limit}, ramp_s={self.config.ramp_s}, "
+            f"reference={self.config.reference!r})"
         )

@@ -5,6 +5,8 @@
 * :class:`CallableController`: any ``callable(obs) -> action`` (a torch module wrapper, an
   ONNX session wrapper, a hand-written law).
 * :func:`as_controller`: picks the right one.
+* :class:`GentleController`: a policy trained over the gentleness range (the env's
+  ``gentleness=``) at one weight, which it appends to the observation.
 
 All of them act on the observation alone (the sensor record is not read; they declare no
 sensors) and return a float32 array of shape ``(1,)`` clipped to the action bounds [-1, 1];
@@ -101,6 +103,43 @@ class SB3Controller:
             obs = self.obs_normalizer.normalize_obs(obs)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return _to_action(action, self.name)
+
+
+class GentleController:
+    """A policy trained over the gentleness range, run at one weight: the trade-off between
+    speed (0) and interaction torque (1) a clinician sets for a patient.
+
+    The env it was trained on appended the weight to the observation
+    (:class:`~myoexo.envs.knee_exo.MyoExoKneeEnv`'s ``gentleness=``); this wrapper does the
+    same for the env it runs on, which needs no weight of its own.
+
+    Args:
+        controller: The policy (any controller acting on the observation with the weight
+            appended).
+        gentleness: The weight, in :data:`~myoexo.envs.config.GENTLENESS_RANGE`.
+
+    Raises:
+        ValueError: *gentleness* is outside the range.
+    """
+
+    def __init__(self, controller: Controller, gentleness: float) -> None:
+        from myoexo.envs.config import check_gentleness
+
+        self.controller = controller
+        self.gentleness = check_gentleness(gentleness)
+        self._weight = np.float32(self.gentleness)
+        self.sensors: frozenset[str] = frozenset(getattr(controller, "sensors", frozenset()))
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the policy."""
+        self.controller.reset(seed)
+
+    def act(self, obs: np.ndarray, measurements: Measurements) -> np.ndarray:
+        """The policy's command on *obs* with the weight appended."""
+        return self.controller.act(np.append(obs, self._weight), measurements)
+
+    def __repr__(self) -> str:
+        return f"GentleController({self.controller!r}, gentleness={self.gentleness:g})"
 
 
 def as_controller(obj: Any, name: str | None = None) -> Controller:

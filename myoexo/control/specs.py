@@ -17,7 +17,17 @@ spec                               controller
 ``pid:derivative=error``           derivative on the error instead of the measurement
 ``pid:textbook``                   plain parallel PID (derivative on error, no anti-windup)
 ``pid:ramp_s=0.6``                 setpoint ramped to the target over 0.6 s (a gentle start)
+``pid:reference=minjerk``          the ramp's shape (with ``ramp_s``): ``linear`` (default)
+                                   or ``minjerk`` (minimum jerk,
+                                   :mod:`myoexo.control.reference`), e.g.
+                                   ``pid:reference=minjerk,ramp_s=1``
 ``pid:limit=0.6``                  command clipped at 0.6 (60 Nm)
+``impedance``                      :class:`~myoexo.control.impedance.ImpedanceController`:
+                                   a spring-damper (700 Nm/rad, 5 Nm s/rad: the paper's Kp
+                                   and Kd x 100 Nm) on a 1 s minimum-jerk reference
+``impedance:k=350,d=5``            its options: ``k`` (Nm/rad), ``d`` (Nm s/rad),
+                                   ``duration_s``, ``feedback`` (``knee``/``exo``) and
+                                   ``limit``, e.g. ``impedance:duration_s=1.5,limit=0.6``
 ``sac``                            the full-state policy shipped with the package
                                    (:func:`myoexo.load_policy`)
 ``student_exo``                    the deployable controller: the exo's own sensors, a
@@ -29,6 +39,11 @@ spec                               controller
                                    and the torque-aware ``interaction_weight``,
                                    ``peak_weight``, ``ramp_s``; about 65 s of a core per
                                    episode (2 subjects x 4 levels: ~4.5 min on 2 cores)
+``SPEC@W``                          a policy trained over the gentleness range
+                                   (``myoexo policy train --gentleness random``) at weight
+                                   W in [0, 1] (0: fastest, 1: gentlest), e.g.
+                                   ``runs/g/model.zip@0.5``; without ``@W``, the default
+                                   weight its metadata records
 ``guard:SPEC``                      any controller above with the stall guard on top: integral
                                    action once the knee stalls far from the target
                                    (:mod:`myoexo.control.guard`), e.g. ``guard:sac``
@@ -41,12 +56,12 @@ spec                               controller
 =================================  ==========================================================
 
 Options combine with commas: ``pid:feedback=exo,kp=5``. The spec's label (table column
-``controller``) is the spec itself for ``pid``/``sac``/``oracle``, the file stem for a model
-file. Controllers of one *seed group* (the checkpoints ``myoexo policy seeds`` selected in one
-folder, a distillation's seed copies: :attr:`ControllerSpec.seed_group`, table column
-``seed_group``) are one controller of the tables, over seeds and subjects. A controller may
-need its own env (:func:`spec_env_kwargs`: the observation preset a
-policy was trained on).
+``controller``) is the spec itself for ``pid``/``impedance``/``sac``/``oracle``, the file stem
+for a model file. Controllers of one *seed group* (the checkpoints ``myoexo policy seeds``
+selected in one folder, a distillation's seed copies: :attr:`ControllerSpec.seed_group`,
+table column ``seed_group``) are one controller of the tables, over seeds and subjects. A
+controller may need its own env (:func:`spec_env_kwargs`: the observation preset a policy was
+trained on).
 """
 
 from __future__ import annotations
@@ -59,9 +74,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from myoexo.control.impedance import ImpedanceConfig, ImpedanceController
 from myoexo.control.pid import PID, PIDConfig, PIDGains
-from myoexo.control.policy import SB3Controller
+from myoexo.control.policy import GentleController, SB3Controller
 from myoexo.control.protocol import Controller
+from myoexo.envs.config import check_gentleness
 from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
 from myoexo.policies.run_files import (
@@ -72,7 +89,7 @@ from myoexo.policies.run_files import (
     VECNORM_FILE,
     read_state,
 )
-from myoexo.runtime.fields import convert, parse_assignments
+from myoexo.runtime.fields import FieldError, convert, parse_assignments
 
 _PID_KEYS = (
     "kp",
@@ -85,7 +102,22 @@ _PID_KEYS = (
     "ramp_s",
     "limit",
     "tuned",
+    "reference",
 )
+#: Options of the ``impedance`` spec -> :class:`ImpedanceConfig` fields.
+_IMPEDANCE_KEYS: dict[str, str] = {
+    "k": "stiffness_nm_per_rad",
+    "d": "damping_nm_s_per_rad",
+    "duration_s": "duration_s",
+    "feedback": "feedback",
+    "limit": "output_limit",
+}
+#: The spec kinds of the classical (hand-designed, not learned) controllers.
+CLASSICAL_KINDS: tuple[str, ...] = ("pid", "impedance")
+
+
+#: Spec kinds that are learned policies (those that may take a gentleness weight, ``@W``).
+POLICY_KINDS: tuple[str, ...] = ("shipped", "sb3", "actor")
 
 
 class PolicyUnavailableError(RuntimeError):
@@ -97,16 +129,21 @@ class ControllerSpec:
     """A parsed controller spec.
 
     Attributes:
-        kind: ``"pid"``, ``"shipped"`` (``sac``, ``student_exo``), ``"oracle"``, ``"sb3"`` (a
-            model file) or ``"actor"`` (an exported numpy actor, ``.npz`` + ``.json``).
+        kind: ``"pid"``, ``"impedance"``, ``"shipped"`` (``sac``, ``student_exo``),
+            ``"oracle"``, ``"sb3"`` (a model file) or ``"actor"`` (an exported numpy actor,
+            ``.npz`` + ``.json``).
         label: Name in tables and figures.
         text: The spec as given.
         path: Model file (``sb3``) or shipped policy name (``shipped``).
         algorithm: Alias of :data:`~myoexo.policies.algorithms.ALGORITHMS` (``sb3`` only).
-        options: PID options (``pid``), as :class:`PIDConfig` keyword arguments, or
+        options: PID options (``pid``), as :class:`PIDConfig` keyword arguments,
+            :class:`ImpedanceConfig` fields (``impedance``) or
             :class:`~myoexo.control.oracle.OracleConfig` fields (``oracle``).
         guard: The controller runs with the stall guard on top (``guard:SPEC``,
             :class:`~myoexo.control.guard.StallGuard`); ``kind`` and the rest describe SPEC.
+        gentleness: The gentleness weight a policy trained over the weight range runs at
+            (``SPEC@W``; its env appends the weight to the observation), ``None`` for
+            any other controller.
         seed_group: The seed group the controller is one member of: the folder's name for
             a checkpoint of a ``myoexo policy seeds`` folder
             (``<seeds>/seed_<N>/checkpoints/<step>/model.zip``), the ``seed_group`` an
@@ -122,6 +159,7 @@ class ControllerSpec:
     options: dict[str, Any] = field(default_factory=dict)
     guard: bool = False
     seed_group: str | None = None
+    gentleness: float | None = None
 
     @property
     def slug(self) -> str:
@@ -137,6 +175,23 @@ def controller_slug(label: str) -> str:
 def parse_controller_spec(text: str) -> ControllerSpec:
     """Parse one spec (see the module docstring); ``ValueError`` on anything else."""
     text = text.strip()
+    base, at, weight = text.rpartition("@")
+    if at and not any(sep in weight for sep in "/\\:"):  # SPEC@W: a gentleness weight
+        try:
+            gentleness = check_gentleness(weight)
+        except ValueError as exc:
+            raise ValueError(f"controller {text!r}: {exc}") from None
+        inner = parse_controller_spec(base)
+        if inner.kind not in POLICY_KINDS:
+            raise ValueError(
+                f"controller {text!r}: only a policy takes a gentleness weight (@W); "
+                f"{base!r} is a {inner.kind} controller"
+            )
+        group = f"{inner.seed_group}@{weight}" if inner.seed_group else None
+        return dataclasses.replace(
+            inner, label=f"{inner.label}@{weight}", text=text, gentleness=gentleness,
+            seed_group=group,
+        )  # fmt: skip
     head, _, tail = text.partition(":")
     if head.lower() == "guard":
         if not tail.strip():
@@ -150,6 +205,10 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         )
     if head.lower() == "pid":
         return ControllerSpec(kind="pid", label=text, text=text, options=_pid_options(tail))
+    if head.lower() == "impedance":
+        return ControllerSpec(
+            kind="impedance", label=text, text=text, options=_impedance_options(tail)
+        )
     from myoexo.policies import SHIPPED_POLICIES
 
     if text.lower() in SHIPPED_POLICIES:
@@ -175,7 +234,8 @@ def parse_controller_spec(text: str) -> ControllerSpec:
         )
     if path.suffix != ".zip":
         raise ValueError(
-            f"unknown controller {text!r}: expected 'pid[:options]', 'sac', 'student_exo', "
+            f"unknown controller {text!r}: expected 'pid[:options]', 'impedance[:options]', "
+            "'sac', 'student_exo', "
             "'oracle[:options]', the path of a stable-baselines3 model file (.zip) or of an "
             "exported actor (.npz beside its .json)"
         )
@@ -300,6 +360,28 @@ def _pid_options(tail: str) -> dict[str, Any]:
     return options
 
 
+def _impedance_options(tail: str) -> dict[str, Any]:
+    """``"k=700,d=5,duration_s=1,feedback=exo,limit=0.6"`` -> typed
+    :class:`ImpedanceConfig` keyword arguments (validated)."""
+    options: dict[str, Any] = {}
+    for key, value in parse_assignments(tail, f"impedance option in 'impedance:{tail}'").items():
+        name = _IMPEDANCE_KEYS.get(key.lower())
+        if name is None:
+            raise ValueError(
+                f"unknown impedance option {key!r} in 'impedance:{tail}'; accepted: "
+                f"{tuple(_IMPEDANCE_KEYS)}"
+            )
+        options[name] = (
+            value if name == "feedback" else convert(value, float, f"impedance option {key}")
+        )
+    try:
+        ImpedanceConfig(**options)  # validate now, not in a worker
+    except FieldError as exc:
+        option = next(k for k, v in _IMPEDANCE_KEYS.items() if v == exc.field)
+        raise ValueError(f"impedance option {exc.describe(option)}") from None
+    return options
+
+
 def pid_config(options: dict[str, Any]) -> PIDConfig:
     """:class:`PIDConfig` from parsed PID options."""
     opts = dict(options)
@@ -356,13 +438,23 @@ def load_actor_file(path: str) -> Any:
 
 
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
-    """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters."""
+    """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters (a
+    policy trained over the gentleness range: at its weight, :func:`spec_gentleness`)."""
+    if not spec.guard:
+        weight = spec_gentleness(spec)
+        if weight is not None:
+            return GentleController(_build_plain(spec, env), weight)
+    return _build_plain(spec, env)
+
+
+def _build_plain(spec: ControllerSpec, env: Any) -> Controller:
+    """:func:`build_controller` without the gentleness weight."""
     if spec.guard:
         from myoexo.control.guard import StallGuard, StallGuardConfig, exo_guard
 
         inner = build_controller(dataclasses.replace(spec, guard=False), env)
         reads_exo = getattr(inner, "obs_preset", None) == "exo" or (
-            isinstance(inner, PID) and inner.config.feedback == "exo"
+            isinstance(inner, (PID, ImpedanceController)) and inner.config.feedback == "exo"
         )
         config = dataclasses.replace(
             exo_guard() if reads_exo else StallGuardConfig(),
@@ -371,6 +463,8 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
         return StallGuard(inner, config)
     if spec.kind == "pid":
         return PID.from_env(env, pid_config(spec.options))
+    if spec.kind == "impedance":
+        return ImpedanceController.from_env(env, ImpedanceConfig(**spec.options))
     if spec.kind == "shipped":
         return load_shipped_policy(spec.path or "sac")
     if spec.kind == "oracle":
@@ -438,8 +532,43 @@ def _observation_kwargs(twin: TwinOptions | None) -> dict[str, Any]:
 
 def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
     """Env keyword arguments a controller needs: the observation of the twin it was trained
-    on (its ``obs_preset`` or ``obs_keys``; ``{}`` for the full observation)."""
+    on (its ``obs_preset`` or ``obs_keys``; ``{}`` for the full observation). A policy
+    trained over the gentleness range runs on the plain observation: its controller
+    (:class:`~myoexo.control.policy.GentleController`) appends the weight."""
     return _observation_kwargs(policy_twin(spec))
+
+
+def spec_gentleness(spec: ControllerSpec) -> float | None:
+    """The gentleness weight a policy runs at: ``SPEC@W``'s, else, for a policy trained over
+    the gentleness range, the default weight its metadata records (``default_gentleness``);
+    ``None`` for a controller that takes none.
+
+    Raises:
+        ValueError: A weight given to a policy trained without one, or a policy trained over
+            the range that is named without a weight and records no default.
+    """
+    if spec.kind not in POLICY_KINDS:
+        return None
+    twin = policy_twin(spec)
+    trained = twin.gentleness if twin is not None else ""
+    if spec.gentleness is not None:
+        if not trained:
+            raise ValueError(
+                f"controller {spec.text!r}: the policy was not trained with a gentleness "
+                "weight (its twin records none); name it without @W"
+            )
+        return spec.gentleness
+    if not trained:
+        return None
+    default = policy_metadata(spec).get("default_gentleness")
+    if default is None and trained != "random":
+        default = float(trained)
+    if default is None:
+        raise ValueError(
+            f"controller {spec.text!r} was trained over the gentleness range and records no "
+            f"default weight: name a weight, e.g. '{spec.text}@0.5'"
+        )
+    return float(default)
 
 
 def controller_env_kwargs(controller: Any) -> dict[str, Any]:

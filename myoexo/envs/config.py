@@ -67,6 +67,29 @@ class TaskParams:
 TASK_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(TaskParams))
 
 
+#: The gentleness weight's range (the env's ``gentleness=``): 0 prices speed alone (the
+#: study's reward), 1 prices the interaction torque's peak and square in full.
+GENTLENESS_RANGE: tuple[float, float] = (0.0, 1.0)
+
+
+def check_gentleness(value: object) -> float:
+    """A gentleness weight as a float in :data:`GENTLENESS_RANGE`.
+
+    Raises:
+        ValueError: *value* is no number in the range (the message names it and the range).
+    """
+    low, high = GENTLENESS_RANGE
+    try:
+        weight = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        weight = math.nan
+    if not (low <= weight <= high) or isinstance(value, bool):
+        raise ValueError(
+            f"gentleness = {value!r} is outside [{low:g}, {high:g}] (or 'random': drawn per reset)"
+        )
+    return weight
+
+
 @dataclass(frozen=True)
 class RewardParams:
     """Shape of the paper's four reward terms (docs/reference.md section 3).
@@ -81,6 +104,15 @@ class RewardParams:
         torque_threshold_nm: Interaction torque above which the quadratic penalty starts
             (paper: 75 Nm).
         torque_scale_nm: Normalization of the interaction-torque terms (the motor limit).
+        gentle_peak_weight: The ``gentle`` term's price of the episode's peak interaction
+            torque: each step that raises the running peak costs this times the rise over
+            ``torque_scale_nm``, so an episode pays ``gentle_peak_weight x peak / scale``
+            in all. 400 makes the peak of a fast extension (about 100 Nm) cost about what
+            1.2 s of the 83 deg move costs in the ``pose`` term, so the gentleness range
+            spans the study's fast policy (weight 0) to moves slower than a 3-s ramp
+            (weight 1).
+        gentle_torque_weight: The ``gentle`` term's price per step of the squared
+            interaction torque over ``torque_scale_nm`` (the RMS measure).
         weights: ``weighted_reward_keys``: reward key -> weight.
     """
 
@@ -93,6 +125,16 @@ class RewardParams:
     )
     torque_scale_nm: float = option(
         100.0, "normalization of the interaction-torque terms", low=1e-6, high=1e4
+    )
+    gentle_peak_weight: float = option(
+        400.0,
+        "gentleness cost of each rise of the episode's peak interaction torque, per torque "
+        "scale (the rises sum to the peak / torque scale)",
+        low=0.0,
+        high=1e6,
+    )
+    gentle_torque_weight: float = option(
+        0.1, "gentleness cost per step of (interaction torque / torque scale)^2", low=0.0, high=1e6
     )
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_REWARD_WEIGHTS))
 

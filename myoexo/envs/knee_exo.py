@@ -56,7 +56,14 @@ from gymnasium.utils import EzPickle
 from myosuite.envs.gymnasium_env import CpuEnvAccessor, MyoGymnasiumEnv
 from myosuite.envs.muscle_stages import CtrlStage, CtrlStageHost, ResetStage
 
-from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TASK_FIELDS, RewardParams, TaskParams
+from myoexo.envs.config import (
+    DEFAULT_REWARD_WEIGHTS,
+    GENTLENESS_RANGE,
+    TASK_FIELDS,
+    RewardParams,
+    TaskParams,
+    check_gentleness,
+)
 from myoexo.envs.observation import (
     CUFF_OBS_KEYS,
     DEFAULT_OBS_KEYS,
@@ -121,6 +128,13 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             slide friction, motor torque constant) and sensor noise and latency at every
             reset (:class:`~myoexo.envs.robustness.RobustnessParams`; ``True``: the default
             ranges; ``None``/``False``: the nominal twin, exact sensors).
+        gentleness: The trade-off between speed and interaction torque, a weight in [0, 1]
+            (:data:`~myoexo.envs.config.GENTLENESS_RANGE`): the reward's ``gentle`` term
+            (the interaction torque's peak and square) enters ``dense`` times this weight,
+            and the weight is
+            the observation vector's last entry, so one policy learns the whole range and
+            takes the weight as an input. ``"random"``: drawn uniformly per reset (for
+            training). ``None`` (default): the study's reward and observation.
         reward: The reward's shape (:class:`~myoexo.envs.config.RewardParams`; default: the
             study's).
         twin: The human + exo model (:class:`~myoexo.model.TwinParams`; default: today's
@@ -161,6 +175,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         reflex: str | ReflexModel = DEFAULT_REFLEX,
         robustness: RobustnessParams | bool | None = None,
         subject_noise: bool = True,
+        gentleness: float | str | None = None,
         reward: RewardParams | None = None,
         twin: TwinParams | None = None,
         seed: int | None = None,
@@ -185,6 +200,15 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             weights = {**reward.weights, **{k: float(v) for k, v in reward_weights.items()}}
             reward = dataclasses.replace(reward, weights=weights)
         self.reward_params = reward
+        self.gentleness_draw = gentleness == "random"
+        #: The episode's gentleness weight (``None``: the study's reward and observation).
+        self.gentleness: float | None = (
+            None
+            if gentleness is None
+            else GENTLENESS_RANGE[0]
+            if self.gentleness_draw
+            else check_gentleness(gentleness)
+        )
         self.twin_params = twin if twin is not None else TwinParams()
 
         frame_skip = frame_skip_of(self.task.control_period_s, self.twin_params.timestep_s)
@@ -198,6 +222,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             reflex=reflex,
             robustness=robustness,
             subject_noise=subject_noise,
+            gentleness=gentleness,
             reward=reward,
             twin=twin,
             seed=seed,
@@ -271,6 +296,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._prev_command = 0.0
         self._prev_knee_vel = 0.0
         self._prev_tau_knee = 0.0
+        self._peak_tau = math.inf
         self._steps = 0
         self._episode_steps = self.task.episode_steps
         self._subject: dict[str, float] = {}
@@ -344,8 +370,16 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         return layout.split(layout.gather(views, self._command))
 
     def _obs_dict_to_vec(self, obs_dict: dict[str, np.ndarray]) -> np.ndarray:
-        """Flatten the ``obs_keys`` entries, each times its fixed scale (float32)."""
-        return self.obs_layout.dict_to_vec(obs_dict)
+        """Flatten the ``obs_keys`` entries, each times its fixed scale (float32), and the
+        gentleness weight last (an env built with one)."""
+        return self._with_gentleness(self.obs_layout.dict_to_vec(obs_dict))
+
+    def _with_gentleness(self, vec: np.ndarray) -> np.ndarray:
+        """*vec* with the gentleness weight appended (as is without one)."""
+        g = self.gentleness
+        if g is None:
+            return vec
+        return np.append(vec, np.float32(g))
 
     def get_proprioception(self) -> tuple:
         """``(time, vector, dict)`` of what the exo itself senses (encoder, torque, cuffs)."""
@@ -367,6 +401,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             self._prev_tau_knee,
             self.reward_params,
             self.rwd_keys_wt,
+            self.gentleness or 0.0,
+            self._peak_tau,
         )
 
     # ------------------------------------------------------------------ action
@@ -478,7 +514,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             self._prev_tau_knee,
             self.reward_params,
             self.rwd_keys_wt,
+            self.gentleness or 0.0,
+            self._peak_tau,
         )
+        if tau > self._peak_tau:
+            self._peak_tau = tau
         self._prev_knee_vel = knee_vel
         self._prev_tau_knee = tau
         sensed = raw if self._sensor is None else self._sensor.measure(raw, self._robust_rng)
@@ -487,7 +527,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             self.mj_render()
         truncated = unstable or self._steps >= self._episode_steps
         reward = float(rwd_dict["dense"])
-        return layout.to_vec(sensed), reward, bool(rwd_dict["done"]), truncated, info
+        obs = self._with_gentleness(layout.to_vec(sensed))
+        return obs, reward, bool(rwd_dict["done"]), truncated, info
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -512,9 +553,13 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         layout = self.obs_layout
         raw = layout.gather(self._data_views(), self._command)
         sensed = raw if self._sensor is None else self._sensor.reset(raw, self._robust_rng)
-        obs = self._ensure_obs_gymnasium_compliant(layout.to_vec(sensed))
+        if self.gentleness_draw:  # drawn last: subjects and start angles stay the env's
+            self.gentleness = float(self.np_random.uniform(*GENTLENESS_RANGE))
+        obs = self._ensure_obs_gymnasium_compliant(self._with_gentleness(layout.to_vec(sensed)))
         values = raw[: layout.info_len].tolist()
         self._prev_tau_knee = values[layout.at["interaction_torque_nm"]]
+        if self.gentleness is not None:
+            self._peak_tau = self._prev_tau_knee
         info = self._add_info({}, values, False, sensed)
         if self.twin_draw:
             info["twin_draw"] = dict(self.twin_draw)
@@ -587,6 +632,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             shank_cuff_force_n=math.hypot(values[shank], values[shank + 1], values[shank + 2]),
             sc_total=float(stage.last_sc_total),
             level=int(stage.level),
+            gentleness=self.gentleness,
             subject=self._subject,
             unstable=unstable,
         )

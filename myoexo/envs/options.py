@@ -26,7 +26,12 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from myoexo.envs.config import DEFAULT_REWARD_WEIGHTS, TASK_FIELDS, TaskParams
+from myoexo.envs.config import (
+    DEFAULT_REWARD_WEIGHTS,
+    TASK_FIELDS,
+    TaskParams,
+    check_gentleness,
+)
 from myoexo.envs.observation import OBS_PRESETS
 from myoexo.runtime.fields import add_options, convert, option, parse_assignments
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -39,6 +44,7 @@ OPTION_FIELDS: tuple[str, ...] = (
     "obs_keys",
     "reflex",
     "robustness",
+    "gentleness",
 )
 
 #: The options that change the twin's dynamics or task (what a policy is evaluated on);
@@ -70,6 +76,9 @@ class TwinOptions:
         reflex: Registered reflex model (:func:`~myoexo.spasticity.reflex_names`).
         robustness: A perturbed twin per episode (:mod:`myoexo.envs.robustness`: straps,
             masses, friction, motor constant, sensor noise and latency).
+        gentleness: The env's gentleness weight (its ``gentleness=``): ``""`` none (the
+            study's reward and observation), ``"random"`` (drawn per reset: a policy that
+            learns the whole range) or a number in [0, 1].
 
     Raises:
         ValueError: An unknown task field, reward key, observation preset or reflex name
@@ -94,7 +103,18 @@ class TwinOptions:
         "noise, 10 ms latency)",
     )
 
+    gentleness: str = option(
+        "",
+        "gentleness weight of the reward, also observed: a number in [0, 1], or 'random' "
+        "(drawn per episode: one policy for the whole range)",
+        metavar="WEIGHT|random",
+    )
+
     def __post_init__(self) -> None:
+        gentleness = str(self.gentleness).strip().lower()
+        if gentleness not in ("", "random"):
+            gentleness = f"{check_gentleness(gentleness):g}"
+        object.__setattr__(self, "gentleness", gentleness)
         task = _pairs(self.task, "task")
         unknown = sorted({k for k, _ in task} - set(TASK_FIELDS))
         if unknown:
@@ -158,6 +178,10 @@ class TwinOptions:
             kwargs["reflex"] = self.reflex
         if self.robustness:
             kwargs["robustness"] = True
+        if self.gentleness:
+            kwargs["gentleness"] = (
+                "random" if self.gentleness == "random" else float(self.gentleness)
+            )
         return kwargs
 
     def dynamics(self) -> TwinOptions:
@@ -178,6 +202,8 @@ class TwinOptions:
             parts.append(f"reflex={self.reflex}")
         if self.robustness:
             parts.append("robustness=true")
+        if self.gentleness:
+            parts.append(f"gentleness={self.gentleness}")
         return " ".join(parts) or "default twin"
 
     # -- records --------------------------------------------------------------------------
@@ -192,6 +218,7 @@ class TwinOptions:
             "reflex": self.reflex,
             "reflex_parameters": reflex_parameters(self.reflex),
             "robustness": self.robustness,
+            "gentleness": self.gentleness,
         }
 
     @classmethod
@@ -211,6 +238,7 @@ class TwinOptions:
             obs_keys=tuple(data.get("obs_keys", ())),
             reflex=str(data.get("reflex", DEFAULT_REFLEX)),
             robustness=bool(data.get("robustness", False)),
+            gentleness=str(data.get("gentleness", "")),
         )
 
     # -- the command line -----------------------------------------------------------------
@@ -224,8 +252,8 @@ class TwinOptions:
 
         ``NAME`` is a task field (``episode_duration_s=4``; ``none`` resets it),
         ``reward_weights=inter:-0.5,act:-0.2``, ``obs_preset=exo``,
-        ``obs_keys=knee_angle_rad,error_rad``, ``reflex=persistent`` or
-        ``robustness=true``.
+        ``obs_keys=knee_angle_rad,error_rad``, ``reflex=persistent``,
+        ``robustness=true`` or ``gentleness=random``.
 
         Raises:
             ValueError: A malformed override or a bad value (naming the accepted ones).
@@ -275,14 +303,18 @@ def add_twin_arguments(parser: Any, *, observation: bool = False) -> None:
     """The twin options of a command, one per field: each task field
     (``--episode-duration-s 4``; not given: the task's default), ``--reflex NAME`` and
     ``--robustness``; with *observation* (a command that trains a policy), ``--obs-preset``,
-    ``--obs-keys`` and ``--reward-weights`` too (a command that evaluates policies runs each
-    on its own observation, and rewards nothing)."""
+    ``--obs-keys``, ``--gentleness`` and ``--reward-weights`` too (a command that evaluates
+    policies runs each on its own observation, and rewards nothing)."""
     from myoexo.spasticity.registry import add_reflex_argument
 
     group = parser.add_argument_group("twin options")
     add_options(group, TaskParams, given_only=True)
     add_reflex_argument(group, default=DEFAULT_REFLEX)
-    add_options(group, TwinOptions, exclude=() if observation else ("obs_preset", "obs_keys"))
+    add_options(
+        group,
+        TwinOptions,
+        exclude=() if observation else ("obs_preset", "obs_keys", "gentleness"),
+    )
     if observation:
         group.add_argument(
             "--reward-weights",
@@ -312,6 +344,8 @@ def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:
         changes["reflex"] = args.reflex
     if getattr(args, "robustness", False):
         changes["robustness"] = True
+    if getattr(args, "gentleness", ""):
+        changes["gentleness"] = args.gentleness
     for name in ("obs_preset", "obs_keys"):
         if hasattr(args, name) and getattr(args, name) != getattr(TwinOptions(), name):
             changes[name] = tuple(args.obs_keys) if name == "obs_keys" else args.obs_preset

@@ -3,10 +3,13 @@ consecutive states: no MuJoCo, no env.
 
 MyoSuite ``rwd_dict`` convention: penalties are magnitudes that enter with negative weights,
 ``dense`` is the weighted sum of the ``weighted_reward_keys``
-(:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`). Each term is defined once, in
-:data:`REWARD_TERMS` (its formula, in terms of :class:`~myoexo.envs.config.RewardParams`);
-the documentation site's environment page (``docs/envs.md``) shows them as a table with
-their default weights.
+(:data:`~myoexo.envs.config.DEFAULT_REWARD_WEIGHTS`) minus ``gentleness x gentle``: an env
+built with a gentleness weight (``gentleness=`` of the env, in [0, 1]) prices the
+interaction torque's peak and its square by that weight, the trade-off between speed and
+interaction torque a clinician sets per patient (0: the study's reward). Each term is
+defined once, in :data:`REWARD_TERMS` (its formula, in terms of
+:class:`~myoexo.envs.config.RewardParams`); the documentation site's environment page
+(``docs/envs.md``) shows them as a table with their default weights.
 
 The differences are against the previous control step; the first step of an episode
 differences against the reset state (command 0, the reset's torque, knee at rest).
@@ -52,6 +55,12 @@ REWARD_TERMS: tuple[RewardTerm, ...] = (
         "tau > {torque_threshold_nm:g} Nm; tau = |strap torque on the knee| "
         "(the env's interaction_torque_nm)",
     ),
+    RewardTerm(
+        "gentle",
+        "{gentle_peak_weight:g} x max(0, tau - peak) / {torque_scale_nm:g} Nm + "
+        "{gentle_torque_weight:g} x (tau / {torque_scale_nm:g} Nm)^2; peak = the episode's "
+        "largest tau before this step; enters dense as -gentleness x gentle",
+    ),
     RewardTerm("vel", "|d knee vel| (rad/s)"),
     RewardTerm("act", "(d u)^2"),
     RewardTerm("sparse", "-|e|"),
@@ -70,6 +79,8 @@ def reward_dict(
     prev_interaction_torque_nm: float,
     params: RewardParams,
     weights: Mapping[str, float],
+    gentleness: float = 0.0,
+    peak_torque_nm: float = math.inf,
 ) -> dict[str, Any]:
     """The reward terms of one control step and their weighted sum ``"dense"``.
 
@@ -84,10 +95,13 @@ def reward_dict(
         params: Shape of the terms.
         weights: ``weighted_reward_keys``: key of the returned dict -> weight (summed in
             this order).
+        gentleness: Weight of the ``gentle`` term in ``dense`` (0: the study's reward).
+        peak_torque_nm: The episode's largest interaction torque before this step (Nm;
+            the default, infinity, prices no rise).
 
     Returns:
-        ``pose``, ``bonus``, ``inter``, ``vel``, ``act``, ``sparse``, ``solved``, ``done``
-        and ``dense``.
+        ``pose``, ``bonus``, ``inter``, ``gentle``, ``vel``, ``act``, ``sparse``,
+        ``solved``, ``done`` and ``dense``.
     """
     p = params
     e = error_rad
@@ -97,12 +111,17 @@ def reward_dict(
     if tau > p.torque_threshold_nm:
         inter += (tau / p.torque_scale_nm) ** 2
     abs_e = abs(e)
+    scaled = tau / p.torque_scale_nm
+    gentle = p.gentle_torque_weight * scaled * scaled
+    if tau > peak_torque_nm:
+        gentle += p.gentle_peak_weight * (tau - peak_torque_nm) / p.torque_scale_nm
     rwd: dict[str, Any] = {
         "pose": math.exp(-e * e / (2.0 * p.sigma_rad**2)) - abs_e,
         "bonus": p.bonus
         if abs_e < p.bonus_error_rad and abs(knee_vel_rad_s) < p.bonus_vel_rad_s
         else 0.0,
         "inter": inter,
+        "gentle": gentle,
         "vel": abs(knee_vel_rad_s - prev_knee_vel_rad_s),
         "act": (command - prev_command) ** 2,
         "sparse": -abs_e,
@@ -112,5 +131,7 @@ def reward_dict(
     dense = 0.0
     for key, weight in weights.items():
         dense += weight * rwd[key]
+    if gentleness:
+        dense -= gentleness * gentle
     rwd["dense"] = dense
     return rwd

@@ -114,10 +114,13 @@ class EvaluationConfig:
 
     controllers: tuple[str, ...] = option(
         ("pid",),
-        "controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,limit=..,"
-        "tuned=..]' (ramp_s: a ramped setpoint; limit: a clipped command; tuned=exo: gains "
+        "controllers: 'pid[:kp=..,ki=..,kd=..,feedback=exo,anti_windup=..,ramp_s=..,"
+        "reference=..,limit=..,tuned=..]' (ramp_s: a ramped setpoint, reference=minjerk: "
+        "ramped along a minimum-jerk move; limit: a clipped command; tuned=exo: gains "
         "tuned on the exo encoder, tuned=latency: tuned for the perturbed twins' 10 ms "
-        "latency), 'sac' / 'student_exo' (the shipped policies; skipped with a message if "
+        "latency), 'impedance[:k=..,d=..,duration_s=..,feedback=exo,limit=..]' (a "
+        "spring-damper on a minimum-jerk reference; default k=700 Nm/rad, d=5 Nm s/rad, "
+        "duration_s=1), 'sac' / 'student_exo' (the shipped policies; skipped with a message if "
         "absent), 'oracle[:samples=..,horizon_s=..]' (MPC on a copy of the twin: the "
         "achievable bound, about 65 s of a core per episode: 2 subjects x 4 levels take "
         "~4.5 min on 2 cores) or paths of SB3 .zip models",

@@ -1,10 +1,12 @@
 """``myoexo demo`` (what ``make demo`` runs): the shipped controllers against the paper's PID.
 
 The paper's evaluation protocol (:func:`myoexo.evaluation.evaluate`), small: the paper's PID
-(``pid``) and the same PID with its setpoint ramped over 1 s (``pid:ramp_s=1``), the
-full-state learned policy ``sac`` alone and with its stall guard (``guard:sac``,
-:mod:`myoexo.control.guard`), and the deployable ``student_exo`` (the exoskeleton's own
-sensors with memory) alone and with its guard (``guard:student_exo``), on
+(``pid``), the same PID with its setpoint ramped over 1 s (``pid:ramp_s=1``), the impedance
+controller at its defaults (``impedance``: a spring-damper on a 1 s minimum-jerk reference,
+:mod:`myoexo.control.impedance`), the full-state learned policy ``sac`` alone and with its
+stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
+``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
+(``guard:student_exo``), on
 :data:`DEMO_SUBJECTS` subjects per spasticity level 0-3 (the protocol: 1000). Subject *i* of
 a level is the same simulated person for every controller.
 
@@ -12,7 +14,7 @@ Prints one table (per level and controller: mean absolute final error, settled e
 settling time, peak interaction torque and its change from the paper's PID, RMS interaction
 torque to settling) and ends with a paragraph of what the run found, computed from that
 table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. About
-90 s of a core in all (120 episodes): a minute or two on 2 cores. The episodes stay in the
+100 s of a core in all (140 episodes): a minute or two on 2 cores. The episodes stay in the
 output folder (default ``results/demo``; re-running reuses them); ``--report`` also writes
 the figures and the Markdown report (:func:`~myoexo.evaluation.report.write_report`).
 
@@ -44,6 +46,7 @@ DEMO_SUBJECTS = 5
 DEMO_CONTROLLERS = (
     "pid",
     "pid:ramp_s=1",
+    "impedance",
     "sac",
     "guard:sac",
     "student_exo",
@@ -322,7 +325,7 @@ def _notes(messages: Sequence[str]) -> tuple[list[str], list[str]]:
 def run(args: argparse.Namespace) -> int:
     """Run the demo: evaluate, print the table and the findings, write the report; 0 on
     success (a bad option is a ``ValueError``: one line, exit status 2)."""
-    from myoexo.control.specs import parse_controller_spec
+    from myoexo.control.specs import CLASSICAL_KINDS, parse_controller_spec
     from myoexo.evaluation import EvaluationConfig, available_cores, evaluate
     from myoexo.evaluation.engine import TwinMismatchWarning
     from myoexo.evaluation.report import reference_controller, write_report
@@ -371,7 +374,7 @@ def run(args: argparse.Namespace) -> int:
     labels = [s.label for s in specs if s.label in ran]
     reference = reference_controller(labels)
     rows = demo_rows(result.table, labels)
-    learned = [s.label for s in specs if s.kind != "pid" and s.label in ran]
+    learned = [s.label for s in specs if s.kind not in CLASSICAL_KINDS and s.label in ran]
     print()
     for line in notes:
         print(line)

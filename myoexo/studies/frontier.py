@@ -10,14 +10,18 @@ evaluation protocol (:func:`~myoexo.evaluation.runner.evaluate`, resumable, in
 ``OUT/selection``): the
 paper's PID, the device PID on the exo encoder (``pid:feedback=exo``; tuned on the encoder,
 ``pid:tuned=exo``), the *shaped* PIDs a
-reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, a command clipped at
-``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), and whatever ``--controllers``
-adds (the shipped policies, model files), and with ``--oracle`` the torque-aware oracle
-(:mod:`myoexo.control.oracle`: predictive sampling on a copy of the true twin) at the
-settings of :data:`ORACLE_SWEEP`, in its cheap configuration (:data:`CHEAP_ORACLE`). Per
-level and controller: the mean
-settling time, peak interaction torque, RMS interaction torque up to settling and absolute
-final error. A level's **accuracy** is the acceptance bound of the final error
+reviewer asks for first (a setpoint ramped over ``ramp_s`` seconds, linearly over
+:data:`RAMPS_S` or along a minimum-jerk move over :data:`MINJERK_RAMPS_S`, a command clipped at
+``limit`` x 100 Nm: :class:`~myoexo.control.pid.PIDConfig`), the impedance controller (a
+spring-damper on a minimum-jerk reference, :mod:`myoexo.control.impedance`) at the stiffnesses
+of :data:`IMPEDANCE_STIFFNESSES` and the durations of :data:`IMPEDANCE_DURATIONS_S`
+(:func:`classical_specs`: the classical families a learned controller must beat), and
+whatever ``--controllers`` adds (the shipped policies, model files), and with ``--oracle``
+the torque-aware oracle (:mod:`myoexo.control.oracle`: predictive sampling on a copy of the
+true twin) at the settings of :data:`ORACLE_SWEEP`, in its cheap configuration
+(:data:`CHEAP_ORACLE`). Per level and controller: the mean settling time, peak interaction
+torque, RMS interaction torque up to settling and absolute final error. A level's
+**accuracy** is the acceptance bound of the final error
 (:class:`~myoexo.evaluation.criteria.Criteria`: 1 deg at levels 0-2, 11.45 deg at level 3)
 where some controller meets it on these subjects, else ``--accuracy-deg`` (1 deg) above the
 best any of them reaches (the stall that the motor limit sets); a controller is
@@ -56,8 +60,18 @@ from myoexo.evaluation.paper import PAPER_RESULTS
 from myoexo.runtime.fields import Execution, add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
-#: Ramp durations (s) of the ramped-setpoint PIDs.
+#: Ramp durations (s) of the ramped-setpoint PIDs (linear ramps).
 RAMPS_S: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5, 3.0)
+#: Ramp durations (s) of the PIDs whose setpoint follows a minimum-jerk move.
+MINJERK_RAMPS_S: tuple[float, ...] = (0.6, 1.0, 1.5, 2.0, 3.0)
+#: Stiffnesses (Nm/rad) of the impedance controllers: the paper's Kp x 100 Nm and twice it;
+#: each with the damping of the paper's ratio Kd / Kp (:data:`IMPEDANCE_DAMPING_PER_STIFFNESS`;
+#: at 1400 Nm/rad the default 5 Nm s/rad leaves the knee cycling at level 1).
+IMPEDANCE_STIFFNESSES: tuple[float, ...] = (700.0, 1400.0)
+#: Damping per stiffness of the impedance controllers (s): the paper's Kd / Kp = 0.05 / 7.
+IMPEDANCE_DAMPING_PER_STIFFNESS = 0.05 / 7.0
+#: Reference durations (s) of the impedance controllers.
+IMPEDANCE_DURATIONS_S: tuple[float, ...] = (0.6, 1.0, 1.5, 2.0)
 #: Command limits (x 100 Nm) of the clipped PIDs.
 LIMITS: tuple[float, ...] = (0.5, 0.6, 0.8)
 #: The oracle's cheap configuration for the frontier: 8 rollouts per plan, a plan every 4th
@@ -81,13 +95,36 @@ CONFIRMED_METRICS: tuple[str, ...] = (*POINT_METRICS, "settled_share", "episodes
 
 
 def shaped_pid_specs(
-    ramps_s: Sequence[float] = RAMPS_S, limits: Sequence[float] = LIMITS
+    ramps_s: Sequence[float] = RAMPS_S,
+    limits: Sequence[float] = LIMITS,
+    minjerk_ramps_s: Sequence[float] = MINJERK_RAMPS_S,
 ) -> list[str]:
-    """The baseline controller specs: the paper's PID, the device PID, ramped and clipped."""
+    """The baseline PID specs: the paper's PID, the device PID, ramped (linearly and along
+    a minimum-jerk move) and clipped."""
     specs = ["pid", "pid:feedback=exo", "pid:tuned=exo"]
     specs += [f"pid:ramp_s={r:g}" for r in ramps_s]
+    specs += [f"pid:reference=minjerk,ramp_s={r:g}" for r in minjerk_ramps_s]
     specs += [f"pid:limit={lim:g}" for lim in limits]
     return specs
+
+
+def impedance_specs(
+    stiffnesses: Sequence[float] = IMPEDANCE_STIFFNESSES,
+    durations_s: Sequence[float] = IMPEDANCE_DURATIONS_S,
+) -> list[str]:
+    """The impedance controller's specs: each stiffness (with the paper's damping ratio,
+    :data:`IMPEDANCE_DAMPING_PER_STIFFNESS`) at each reference duration."""
+    return [
+        f"impedance:k={k:g},d={k * IMPEDANCE_DAMPING_PER_STIFFNESS:.3g},duration_s={t:g}"
+        for k in stiffnesses
+        for t in durations_s
+    ]
+
+
+def classical_specs() -> list[str]:
+    """Every classical controller of the frontier: :func:`shaped_pid_specs` and
+    :func:`impedance_specs`."""
+    return [*shaped_pid_specs(), *impedance_specs()]
 
 
 def oracle_specs(sweep: Sequence[str] = ORACLE_SWEEP, base: str = CHEAP_ORACLE) -> list[str]:
@@ -248,8 +285,12 @@ def plot_frontier(pts: Any, level: int | None = None) -> Any:
                 color, marker, name = styles[label]
             elif label.startswith("pid:ramp"):
                 color, marker, name = "tab:blue", "o", "ramped PID"
+            elif label.startswith("pid:reference=minjerk"):
+                color, marker, name = "tab:olive", "o", "minimum-jerk PID"
             elif label.startswith("pid:limit"):
                 color, marker, name = "tab:cyan", "s", "clipped PID"
+            elif label.startswith("impedance"):
+                color, marker, name = "tab:brown", "X", "impedance (spring-damper)"
             elif label.startswith("paper"):
                 color, marker, name = "tab:red", "*", "paper SAC (its reductions)"
             elif label.startswith("oracle"):
@@ -336,7 +377,7 @@ def build_frontier(
     from myoexo.evaluation.config import EvaluationConfig
     from myoexo.evaluation.runner import evaluate
 
-    specs = [*shaped_pid_specs(), *controllers, *(oracle_specs() if oracle else [])]
+    specs = [*classical_specs(), *controllers, *(oracle_specs() if oracle else [])]
     for seeds_dir in seeds_dirs:
         specs += seeds_controllers(seeds_dir)
     twin = twin or TwinOptions()
@@ -391,7 +432,7 @@ class FrontierConfig:
     subjects: int = option(
         10,
         "selection subjects per level (the picking); with the default 10, the run takes about "
-        "400 s of a core (~4 min on 2 cores) without --oracle",
+        "900 s of a core (~8 min on 2 cores) without --oracle",
         low=1,
     )
     confirm_subjects: int | None = option(
@@ -449,6 +490,7 @@ def run(args: argparse.Namespace) -> int:
         twin=twin_from_args(args),
         confirm_subjects=config.confirm_subjects,
     )
-    print(markdown(pts[pts.on_frontier | pts.controller.str.startswith(("pid", "paper"))]))
+    classical = pts.controller.str.startswith(("pid", "impedance", "paper"))
+    print(markdown(pts[pts.on_frontier | classical]))
     print(f"wrote {config.out}/frontier.csv, frontier.md, frontier.png, frontier_level*.png")
     return 0

@@ -240,27 +240,57 @@ def load_checkpoint_controller(checkpoint: Path) -> Any:
     return deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
 
 
+def trained_over_gentleness(metadata: dict[str, Any]) -> bool:
+    """Whether a policy's metadata records a twin with a gentleness weight (its last
+    observation entry is the weight)."""
+    twin = metadata.get("twin")
+    return isinstance(twin, dict) and bool(twin.get("gentleness"))
+
+
 def export_onnx(actor: MLPActor, path: str | Path, opset: int = 17) -> Path:
     """Write the actor (normalization, MLP, tanh) as ONNX: input ``obs`` (batch, obs_dim)
-    float32, output ``action`` (batch, action_dim) in [-1, 1]."""
+    float32, output ``action`` (batch, action_dim) in [-1, 1]. A policy trained over the
+    gentleness range takes the weight as an input of its own: ``obs`` (batch, obs_dim - 1)
+    and ``gentleness`` (batch, 1)."""
     import torch
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     module = actor.to_torch().eval()
+    inputs: tuple[Any, ...] = (torch.zeros(1, actor.obs_dim),)
+    names = ["obs"]
+    if trained_over_gentleness(actor.metadata):
+        module = _weight_input(module).eval()
+        inputs = (torch.zeros(1, actor.obs_dim - 1), torch.zeros(1, 1))
+        names = ["obs", "gentleness"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
         torch.onnx.export(
             module,
-            (torch.zeros(1, actor.obs_dim),),
+            inputs,
             str(path),
-            input_names=["obs"],
+            input_names=names,
             output_names=["action"],
-            dynamic_axes={"obs": {0: "batch"}, "action": {0: "batch"}},
+            dynamic_axes={**{n: {0: "batch"} for n in names}, "action": {0: "batch"}},
             opset_version=opset,
             dynamo=False,
         )
     return path
+
+
+def _weight_input(module: Any) -> Any:
+    """*module* with the gentleness weight as a second input, appended to the observation."""
+    import torch
+
+    class WeightInput(torch.nn.Module):
+        def __init__(self, inner: Any) -> None:
+            super().__init__()
+            self.inner = inner
+
+        def forward(self, obs: Any, gentleness: Any) -> Any:
+            return self.inner(torch.cat([obs, gentleness], dim=-1))
+
+    return WeightInput(module)
 
 
 # ---------------------------------------------------------------------------- CLI
@@ -288,6 +318,12 @@ class ExportRun:
         "root seed of the subjects that chose this checkpoint (myoexo policy select's "
         "--root-seed); recorded, and evaluations on that root are refused (default: none)",
     )
+    gentleness_record: str | None = option(
+        None,
+        "a `myoexo policy gentleness` record (gentleness.json or its folder): its default "
+        "weight becomes the policy's (a policy trained with --gentleness random)",
+        metavar="FILE",
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -306,6 +342,20 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("policy export: nothing to do; give --onnx FILE, --out STEM or --ship")
     checkpoint = ck.resolve_checkpoint(options.run, options.checkpoint)
     actor = load_checkpoint_actor(checkpoint, selection_root_seed=options.selection_root_seed)
+    if options.gentleness_record:
+        from myoexo.training.gentleness import read_record
+
+        if not trained_over_gentleness(actor.metadata):
+            raise ValueError(
+                f"{checkpoint} was not trained with a gentleness weight; drop --gentleness-record"
+            )
+        record = read_record(Path(options.gentleness_record))
+        actor.metadata["default_gentleness"] = float(record["default_gentleness"])
+        actor.metadata["gentleness_record"] = record
+        # the weight was chosen on these subjects: evaluations there are refused
+        actor.metadata["selection_root_seed"] = actor.metadata.get("selection_root_seed") or int(
+            record["root_seed"]
+        )
     print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")
     if options.onnx:
         print(f"onnx:  {export_onnx(actor, options.onnx)}")

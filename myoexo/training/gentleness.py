@@ -1,0 +1,283 @@
+"""The gentleness setting of a policy trained over the weight range: its points across the
+range, per level, against the paper's PID, and the default weight chosen on the selection
+root.
+
+    myoexo policy gentleness sbx_sac:runs/g/checkpoints/step_0001500000/model.zip \\
+        --subjects 20 --out results/gentleness
+    myoexo policy gentleness POLICY --frontier results/frontier   # drawn against it
+
+A policy trained with ``--gentleness random`` (:class:`~myoexo.envs.options.TwinOptions`)
+takes a weight in [0, 1] as its last input: 0 prices speed alone (the study's reward), 1
+prices the interaction torque's peak and square in full (the env's ``gentle`` reward term).
+This command runs the policy at each of ``--weights`` (``POLICY@W``,
+:class:`~myoexo.control.policy.GentleController`) and the paper's PID on the same subjects
+of the **selection root** (root seed 1; the evaluation root is refused) through the
+evaluation protocol (resumable, in ``OUT/selection``), and compares each weight with the PID
+per level (:func:`~myoexo.evaluation.criteria.compare_with_pid`: final error, peak and RMS
+interaction torque) and on settling time.
+
+The **default weight** is the one closest to meeting the study's claims against the PID:
+the smallest :func:`~myoexo.evaluation.criteria.shortfall` plus the relative excess of the
+settling time over the PID's, summed over levels; a tie goes to the larger mean peak and RMS
+reductions at levels 1-2 (the study's headline). It is written with its provenance to
+``OUT/gentleness.json``, which ``myoexo policy export --gentleness-record`` copies into the
+exported policy's metadata (``default_gentleness``). Files: ``gentleness.json``,
+``gentleness.md`` (one row per weight and level) and ``gentleness.png`` (settling time
+against peak torque per level: the weights as one curve, the PID, and with ``--frontier``
+the classical controllers of a ``myoexo frontier`` folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
+from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
+from myoexo.runtime.fields import (
+    Execution,
+    add_options,
+    add_positional,
+    check_fields,
+    from_options,
+    option,
+)
+from myoexo.spasticity.levels import VALID_LEVELS
+
+#: The weights a default run compares (the range's ends and three between).
+DEFAULT_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Levels of the study's headline (the mean of its peak and RMS reductions over them).
+HEADLINE_LEVELS: tuple[int, ...] = (1, 2)
+#: Record written by the command (and read by ``myoexo policy export``).
+RECORD_FILE = "gentleness.json"
+
+
+@dataclass(frozen=True)
+class GentlenessConfig:
+    """What ``myoexo policy gentleness`` runs (each field is an option of the command)."""
+
+    policy: str = option("", "spec of a policy trained over the gentleness range", flag="")
+    weights: tuple[float, ...] = option(
+        DEFAULT_WEIGHTS, "weights to compare", low=0.0, high=1.0, metavar="W"
+    )
+    subjects: int = option(20, "selection subjects per level", low=1)
+    levels: tuple[int, ...] = option(
+        VALID_LEVELS, "spasticity levels", choices=VALID_LEVELS, metavar="LEVEL"
+    )
+    root_seed: int = option(
+        SELECTION_ROOT_SEED, "root seed of the subjects (never the evaluation root)", low=0
+    )
+    out: Path = option(Path("results/gentleness"), "output folder", folder=True, metavar="DIR")
+    frontier: Path | None = option(
+        None, "a `myoexo frontier` folder whose classical points the figure shows", metavar="DIR"
+    )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "weights", tuple(sorted({float(w) for w in self.weights})))
+        object.__setattr__(self, "levels", tuple(sorted(set(self.levels))))
+        check_fields(self)
+        check_fit_root(self.root_seed, "the default gentleness weight")
+
+    def spec(self, weight: float) -> str:
+        """The controller spec of the policy at *weight*."""
+        return f"{self.policy}@{weight:g}"
+
+
+def weight_table(table: Any, config: GentlenessConfig) -> Any:
+    """One row per weight and level: the policy's per-level means against the PID's
+    (:func:`~myoexo.evaluation.criteria.compare_with_pid`) and its settling ratio."""
+    import pandas as pd
+
+    from myoexo.control.specs import parse_controller_spec
+    from myoexo.evaluation.criteria import compare_with_pid, level_means
+
+    pid = level_means(table[table.controller == "pid"])
+    rows = []
+    for weight in config.weights:
+        label = parse_controller_spec(config.spec(weight)).label
+        means = level_means(table[table.controller == label])
+        compared = compare_with_pid(means, pid).reset_index()
+        compared.insert(0, "weight", weight)
+        compared["settling_ratio"] = compared.sac_settling_time_s / compared.pid_settling_time_s
+        rows.append(compared)
+    return pd.concat(rows, ignore_index=True)
+
+
+def weight_key(rows: Any) -> tuple[float, float]:
+    """Sort key of one weight's rows (lower is better): the shortfall against the study's
+    claims plus the settling excess over the PID, then minus the headline reductions."""
+    from myoexo.evaluation.criteria import shortfall
+
+    table = rows.set_index("level")
+    excess = float((table.settling_ratio - 1.0).clip(lower=0.0).sum())
+    headline = table[table.index.isin(HEADLINE_LEVELS)]
+    gain = float((headline.peak_reduction_pct + headline.rms_reduction_pct).mean() / 2)
+    return shortfall(table) + excess, -gain if math.isfinite(gain) else math.inf
+
+
+def choose_default(weights: Any) -> float:
+    """The default weight of a :func:`weight_table` (:func:`weight_key`'s best)."""
+    return float(min(weights.groupby("weight"), key=lambda item: weight_key(item[1]))[0])
+
+
+def plot(weights: Any, frontier: Any = None) -> Any:
+    """Settling time against peak interaction torque per level: the policy's weights as a
+    curve (each point labelled with its weight), the paper's PID, and the classical
+    controllers of a frontier table if given."""
+    import matplotlib.pyplot as plt
+
+    levels = sorted(weights.level.unique())
+    fig, axes = plt.subplots(1, len(levels), figsize=(4 * len(levels), 3.6), squeeze=False)
+    for ax, level in zip(axes[0], levels, strict=True):
+        rows = weights[weights.level == level].sort_values("weight")
+        if frontier is not None:
+            classical = frontier[
+                (frontier.level == level) & frontier.controller.str.startswith(("pid", "impedance"))
+            ]
+            ax.scatter(
+                classical.settling_time_s,
+                classical.peak_interaction_torque_nm,
+                s=14,
+                color="0.6",
+                label="classical (frontier)",
+            )
+        ax.plot(rows.sac_settling_time_s, rows.sac_peak_nm, "o-", color="tab:blue", label="policy")
+        for _, r in rows.iterrows():
+            ax.annotate(f"{r.weight:g}", (r.sac_settling_time_s, r.sac_peak_nm), fontsize=7)
+        first = rows.iloc[0]
+        ax.scatter(
+            [first.pid_settling_time_s], [first.pid_peak_nm], marker="s", color="k", label="PID"
+        )
+        ax.set_title(f"level {level}")
+        ax.set_xlabel("settling time (s)")
+        ax.set_ylabel("peak interaction torque (Nm)")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("The gentleness weight's points (selection subjects)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def run_gentleness(
+    config: GentlenessConfig,
+    twin: TwinOptions | None = None,
+    execution: Execution | None = None,
+) -> dict[str, Any]:
+    """Evaluate the weights and the PID, choose the default weight and write the files.
+
+    Returns:
+        The record written to ``OUT/gentleness.json``.
+
+    Raises:
+        ValueError: The policy takes no weight, or the evaluation was stopped.
+    """
+    import pandas as pd
+
+    from myoexo.evaluation.config import EvaluationConfig
+    from myoexo.evaluation.runner import evaluate
+    from myoexo.runtime.files import package_versions
+
+    execution = execution or Execution()
+    specs = ("pid", *(config.spec(w) for w in config.weights))
+    evaluation = EvaluationConfig(
+        controllers=specs,
+        levels=config.levels,
+        subjects=config.subjects,
+        root_seed=config.root_seed,
+        twin=twin or TwinOptions(),
+        selection=True,
+    )
+    run = evaluate(
+        evaluation,
+        config.out / "selection",
+        workers=execution.workers,
+        progress=execution.progress,
+    )
+    if run.table is None:
+        raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
+    weights = weight_table(run.table, config)
+    default = choose_default(weights)
+    out = config.out
+    weights.to_csv(out / "gentleness.csv", index=False)
+    cols = [
+        "weight", "level", "sac_abs_final_error_deg", "sac_settling_time_s",
+        "pid_settling_time_s", "sac_peak_nm", "pid_peak_nm", "peak_reduction_pct",
+        "sac_rms_nm", "pid_rms_nm", "rms_reduction_pct", "pass",
+    ]  # fmt: skip
+    header = (
+        f"Policy `{config.policy}` at each gentleness weight against the paper's PID, "
+        f"{config.subjects} subjects per level of root {config.root_seed} (selection, "
+        f"in-sample). Default weight: **{default:g}**.\n\n"
+    )
+    (out / "gentleness.md").write_text(
+        header + str(weights[cols].round(2).to_markdown(index=False)) + "\n"
+    )
+    frontier = None
+    if config.frontier is not None:
+        frontier = pd.read_csv(Path(config.frontier) / "frontier.csv")
+    plot(weights, frontier).savefig(out / "gentleness.png", dpi=130)
+    record = {
+        "policy": config.policy,
+        "default_gentleness": default,
+        "weights": list(config.weights),
+        "subjects": config.subjects,
+        "levels": list(config.levels),
+        "root_seed": config.root_seed,
+        "rule": "smallest shortfall against the study's claims plus settling excess over the "
+        "PID; ties: largest mean peak and RMS reduction at levels 1-2",
+        "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
+        "versions": package_versions(),
+    }
+    (out / RECORD_FILE).write_text(json.dumps(record, indent=1) + "\n")
+    return record
+
+
+def read_record(path: Path) -> dict[str, Any]:
+    """A ``gentleness.json`` (or the folder holding one).
+
+    Raises:
+        ValueError: The file is missing or holds no ``default_gentleness``.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / RECORD_FILE
+    try:
+        record = json.loads(path.read_text())
+        float(record["default_gentleness"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{str(path)!r} is no gentleness record ({exc})") from None
+    return dict(record)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``myoexo policy gentleness``."""
+    add_positional(parser, GentlenessConfig, "policy")
+    add_options(parser, GentlenessConfig, exclude=("policy",))
+    add_twin_arguments(parser)
+    add_options(parser.add_argument_group("how to run"), Execution)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``myoexo policy gentleness``."""
+    config = from_options(GentlenessConfig, args, policy=args.policy)
+    record = run_gentleness(config, twin_from_args(args), from_options(Execution, args))
+    print((config.out / "gentleness.md").read_text())
+    print(f"default weight {record['default_gentleness']:g}; wrote {config.out}/{RECORD_FILE}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m myoexo.training.gentleness POLICY`` (same as ``myoexo policy gentleness``)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
