@@ -93,7 +93,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "pick the checkpoint of a run that best meets the acceptance criteria",
     ),
     "policy gentleness": (
-        "myoexo.training.gentleness",
+        "myoexo.studies.gentleness",
         "a gentleness-trained policy across its weights against the PID; the default weight",
     ),
     "policy export": ("myoexo.training.export", "export a trained policy (ONNX)"),

@@ -155,10 +155,10 @@ def test_gentleness_study_chooses_and_records_a_default(tmp_path):
     import json
 
     from myoexo.runtime.fields import Execution
-    from myoexo.training.gentleness import (
+    from myoexo.training.export import read_gentleness_record
+    from myoexo.studies.gentleness import (
         GentlenessConfig,
         choose_default,
-        read_record,
         run_gentleness,
         weight_key,
     )
@@ -167,7 +167,12 @@ def test_gentleness_study_chooses_and_records_a_default(tmp_path):
     with pytest.raises(ValueError, match="records no default weight"):
         spec_gentleness(parse_controller_spec(spec))
     config = GentlenessConfig(
-        policy=spec, weights=(0.0, 1.0), subjects=2, levels=(1,), out=tmp_path / "g"
+        policy=spec,
+        weights=(0.0, 1.0),
+        subjects=2,
+        levels=(1,),
+        out=tmp_path / "g",
+        classical=False,
     )
     record = run_gentleness(config, execution=Execution(workers=1, progress=False))
     import pandas as pd
@@ -180,10 +185,44 @@ def test_gentleness_study_chooses_and_records_a_default(tmp_path):
     best = min((weight_key(rows), w) for w, rows in table.groupby("weight"))[1]
     assert record["default_gentleness"] == best
     assert record["root_seed"] == 1 and json.loads((tmp_path / "g" / "gentleness.json").read_text())
-    assert read_record(tmp_path / "g")["default_gentleness"] == record["default_gentleness"]
+    assert read_gentleness_record(tmp_path / "g")["default_gentleness"] == record["default_gentleness"]
     assert (tmp_path / "g" / "gentleness.png").stat().st_size > 0
     with pytest.raises(ValueError, match="evaluation"):
         GentlenessConfig(policy=spec, root_seed=0)
+
+
+def test_dominance_asks_for_every_measure_at_equal_accuracy():
+    import pandas as pd
+
+    from myoexo.studies.gentleness import dominance, level_verdicts
+
+    weights = pd.DataFrame(
+        {
+            "weight": [0.0, 1.0],
+            "level": [1, 1],
+            "sac_abs_final_error_deg": [0.5, 3.0],
+            "sac_settling_time_s": [0.8, 2.0],
+            "sac_peak_nm": [90.0, 50.0],
+            "sac_rms_nm": [40.0, 20.0],
+        }
+    )
+    classical = pd.DataFrame(
+        {
+            "level": [1, 1, 1],
+            "controller": ["fast", "gentle", "accurate_gentle"],
+            "abs_final_error_deg": [0.9, 3.5, 0.2],
+            "settling_time_s": [1.0, 2.5, 2.5],
+            "peak_interaction_torque_nm": [95.0, 60.0, 55.0],
+            "rms_interaction_torque_nm": [45.0, 25.0, 25.0],
+        }
+    )
+    table = dominance(weights, classical).set_index("controller")
+    assert table.loc["fast", "matched_by"] == "0"  # both within the 1-deg bound
+    assert table.loc["gentle", "matched_by"] == "1"  # 3.0 deg beats its 3.5
+    assert table.loc["accurate_gentle", "matched_by"] == ""  # 0 too rough, 1 too inaccurate
+    (verdict,) = level_verdicts(table.reset_index()).to_dict(orient="records")
+    assert verdict["matched"] == 1 and verdict["classical"] == 3 and not verdict["every_one"]
+    assert verdict["matched_by_no_weight"] == "accurate_gentle"
 
 
 def test_onnx_takes_the_weight_as_its_own_input(tmp_path):

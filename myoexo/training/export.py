@@ -240,6 +240,27 @@ def load_checkpoint_controller(checkpoint: Path) -> Any:
     return deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
 
 
+#: The record ``myoexo policy gentleness`` writes (the default weight and its provenance).
+GENTLENESS_RECORD_FILE = "gentleness.json"
+
+
+def read_gentleness_record(path: Path) -> dict[str, Any]:
+    """A ``gentleness.json`` of ``myoexo policy gentleness`` (or the folder holding one).
+
+    Raises:
+        ValueError: The file is missing or holds no ``default_gentleness``.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / GENTLENESS_RECORD_FILE
+    try:
+        record = json.loads(path.read_text())
+        float(record["default_gentleness"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{str(path)!r} is no gentleness record ({exc})") from None
+    return dict(record)
+
+
 def trained_over_gentleness(metadata: dict[str, Any]) -> bool:
     """Whether a policy's metadata records a twin with a gentleness weight (its last
     observation entry is the weight)."""
@@ -349,7 +370,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(
                 f"{checkpoint} was not trained with a gentleness weight; drop --gentleness-record"
             )
-        record = read_record(Path(options.gentleness_record))
+        record = read_gentleness_record(Path(options.gentleness_record))
         actor.metadata["default_gentleness"] = float(record["default_gentleness"])
         actor.metadata["gentleness_record"] = record
         # the weight was chosen on these subjects: evaluations there are refused

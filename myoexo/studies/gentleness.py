@@ -4,7 +4,7 @@ root.
 
     myoexo policy gentleness sbx_sac:runs/g/checkpoints/step_0001500000/model.zip \\
         --subjects 20 --out results/gentleness
-    myoexo policy gentleness POLICY --frontier results/frontier   # drawn against it
+    myoexo policy gentleness POLICY --no-classical   # against the paper's PID alone
 
 A policy trained with ``--gentleness random`` (:class:`~myoexo.envs.options.TwinOptions`)
 takes a weight in [0, 1] as its last input: 0 prices speed alone (the study's reward), 1
@@ -14,7 +14,10 @@ This command runs the policy at each of ``--weights`` (``POLICY@W``,
 of the **selection root** (root seed 1; the evaluation root is refused) through the
 evaluation protocol (resumable, in ``OUT/selection``), and compares each weight with the PID
 per level (:func:`~myoexo.evaluation.criteria.compare_with_pid`: final error, peak and RMS
-interaction torque) and on settling time.
+interaction torque) and on settling time. With the classical controllers (the default: the
+frontier's, :func:`~myoexo.studies.frontier.classical_specs`, on the same subjects) it also
+says, per level, which weight is at least as good as the most of them on peak torque, RMS
+torque and settling time at an equal or better final error (:func:`dominance`).
 
 The **default weight** is the one closest to meeting the study's claims against the PID:
 the smallest :func:`~myoexo.evaluation.criteria.shortfall` plus the relative excess of the
@@ -23,8 +26,8 @@ reductions at levels 1-2 (the study's headline). It is written with its provenan
 ``OUT/gentleness.json``, which ``myoexo policy export --gentleness-record`` copies into the
 exported policy's metadata (``default_gentleness``). Files: ``gentleness.json``,
 ``gentleness.md`` (one row per weight and level) and ``gentleness.png`` (settling time
-against peak torque per level: the weights as one curve, the PID, and with ``--frontier``
-the classical controllers of a ``myoexo frontier`` folder).
+against peak torque per level: the weights as one curve, the PID and the classical
+controllers) and ``dominance.csv``.
 """
 
 from __future__ import annotations
@@ -49,13 +52,20 @@ from myoexo.runtime.fields import (
     option,
 )
 from myoexo.spasticity.levels import VALID_LEVELS
+from myoexo.studies.frontier import classical_specs
+from myoexo.training.export import GENTLENESS_RECORD_FILE as RECORD_FILE
 
 #: The weights a default run compares (the range's ends and three between).
 DEFAULT_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: Levels of the study's headline (the mean of its peak and RMS reductions over them).
 HEADLINE_LEVELS: tuple[int, ...] = (1, 2)
-#: Record written by the command (and read by ``myoexo policy export``).
-RECORD_FILE = "gentleness.json"
+#: The measures a weight must match a classical controller on (means over subjects).
+DOMINANCE_METRICS: tuple[str, ...] = (
+    "abs_final_error_deg",
+    "settling_time_s",
+    "peak_interaction_torque_nm",
+    "rms_interaction_torque_nm",
+)
 
 
 @dataclass(frozen=True)
@@ -74,8 +84,10 @@ class GentlenessConfig:
         SELECTION_ROOT_SEED, "root seed of the subjects (never the evaluation root)", low=0
     )
     out: Path = option(Path("results/gentleness"), "output folder", folder=True, metavar="DIR")
-    frontier: Path | None = option(
-        None, "a `myoexo frontier` folder whose classical points the figure shows", metavar="DIR"
+    classical: bool = option(
+        True,
+        "also run the frontier's classical controllers on the same subjects and say which of "
+        "them some weight matches or beats (--no-classical: the PID alone)",
     )
 
     def __post_init__(self) -> None:
@@ -121,31 +133,96 @@ def weight_key(rows: Any) -> tuple[float, float]:
     return shortfall(table) + excess, -gain if math.isfinite(gain) else math.inf
 
 
+def classical_means(table: Any, specs: Sequence[str]) -> Any:
+    """Per level and classical controller: the means of :data:`DOMINANCE_METRICS`."""
+    from myoexo.control.specs import parse_controller_spec
+
+    labels = [parse_controller_spec(s).label for s in specs]
+    rows = table[table.controller.isin(labels)]
+    return rows.groupby(["level", "controller"])[list(DOMINANCE_METRICS)].mean().reset_index()
+
+
+def dominance(weights: Any, classical: Any) -> Any:
+    """Per level and classical controller: the weights that are at least as good on peak
+    torque, RMS torque and settling time at an equal or better final error (lower or equal,
+    or both within the level's accuracy bound, :class:`~myoexo.evaluation.criteria.Criteria`).
+
+    Returns:
+        One row per level and classical controller: its means and ``matched_by`` (the
+        weights, space-separated; empty: none).
+    """
+    import pandas as pd
+
+    from myoexo.evaluation.criteria import Criteria
+
+    bounds = Criteria().final_error_deg
+    rows = []
+    for _, c in classical.iterrows():
+        mine = weights[weights.level == c.level]
+        bound = bounds[int(c.level)]
+        err = mine.sac_abs_final_error_deg
+        accurate = (err <= c.abs_final_error_deg) | (
+            (err < bound) & (c.abs_final_error_deg < bound)
+        )
+        ok = (
+            accurate
+            & (mine.sac_peak_nm <= c.peak_interaction_torque_nm)
+            & (mine.sac_rms_nm <= c.rms_interaction_torque_nm)
+            & (mine.sac_settling_time_s <= c.settling_time_s)
+        )
+        rows.append({**c.to_dict(), "matched_by": " ".join(f"{w:g}" for w in mine.weight[ok])})
+    return pd.DataFrame(rows)
+
+
+def level_verdicts(table: Any) -> Any:
+    """Per level, from a :func:`dominance` table: the weight that matches or beats the most
+    classical controllers, how many it does of how many, and those no weight does."""
+    import pandas as pd
+
+    rows = []
+    for level, group in table.groupby("level"):
+        counts: dict[str, int] = {}
+        for matched in group.matched_by.fillna(""):
+            for w in str(matched).split():
+                counts[w] = counts.get(w, 0) + 1
+        best = max(counts, key=lambda w: counts[w]) if counts else ""
+        unmatched = group.controller[group.matched_by.fillna("").astype(str).str.len() == 0]
+        rows.append(
+            {
+                "level": int(level),
+                "best_weight": best,
+                "matched": counts.get(best, 0),
+                "classical": len(group),
+                "every_one": counts.get(best, 0) == len(group),
+                "matched_by_no_weight": " ".join(unmatched),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def choose_default(weights: Any) -> float:
     """The default weight of a :func:`weight_table` (:func:`weight_key`'s best)."""
     return float(min(weights.groupby("weight"), key=lambda item: weight_key(item[1]))[0])
 
 
-def plot(weights: Any, frontier: Any = None) -> Any:
+def plot(weights: Any, classical: Any = None) -> Any:
     """Settling time against peak interaction torque per level: the policy's weights as a
     curve (each point labelled with its weight), the paper's PID, and the classical
-    controllers of a frontier table if given."""
+    controllers (a :func:`classical_means` table) if given."""
     import matplotlib.pyplot as plt
 
     levels = sorted(weights.level.unique())
     fig, axes = plt.subplots(1, len(levels), figsize=(4 * len(levels), 3.6), squeeze=False)
     for ax, level in zip(axes[0], levels, strict=True):
         rows = weights[weights.level == level].sort_values("weight")
-        if frontier is not None:
-            classical = frontier[
-                (frontier.level == level) & frontier.controller.str.startswith(("pid", "impedance"))
-            ]
+        if classical is not None:
+            mine = classical[classical.level == level]
             ax.scatter(
-                classical.settling_time_s,
-                classical.peak_interaction_torque_nm,
+                mine.settling_time_s,
+                mine.peak_interaction_torque_nm,
                 s=14,
                 color="0.6",
-                label="classical (frontier)",
+                label="classical",
             )
         ax.plot(rows.sac_settling_time_s, rows.sac_peak_nm, "o-", color="tab:blue", label="policy")
         for _, r in rows.iterrows():
@@ -177,14 +254,14 @@ def run_gentleness(
     Raises:
         ValueError: The policy takes no weight, or the evaluation was stopped.
     """
-    import pandas as pd
 
     from myoexo.evaluation.config import EvaluationConfig
     from myoexo.evaluation.runner import evaluate
     from myoexo.runtime.files import package_versions
 
     execution = execution or Execution()
-    specs = ("pid", *(config.spec(w) for w in config.weights))
+    classical = [s for s in classical_specs() if s != "pid"] if config.classical else []
+    specs = ("pid", *classical, *(config.spec(w) for w in config.weights))
     evaluation = EvaluationConfig(
         controllers=specs,
         levels=config.levels,
@@ -215,13 +292,24 @@ def run_gentleness(
         f"{config.subjects} subjects per level of root {config.root_seed} (selection, "
         f"in-sample). Default weight: **{default:g}**.\n\n"
     )
-    (out / "gentleness.md").write_text(
-        header + str(weights[cols].round(2).to_markdown(index=False)) + "\n"
-    )
-    frontier = None
-    if config.frontier is not None:
-        frontier = pd.read_csv(Path(config.frontier) / "frontier.csv")
-    plot(weights, frontier).savefig(out / "gentleness.png", dpi=130)
+    text = header + str(weights[cols].round(2).to_markdown(index=False)) + "\n"
+    means = None
+    verdicts: list[dict[str, Any]] = []
+    if classical:
+        means = classical_means(run.table, ["pid", *classical])
+        matched = dominance(weights, means)
+        matched.to_csv(out / "dominance.csv", index=False)
+        summary = level_verdicts(matched)
+        verdicts = summary.to_dict(orient="records")
+        text += (
+            "\nAgainst the classical controllers on the same subjects: per level, the weight "
+            "that is at least as good as the most of them on peak torque, RMS torque and "
+            "settling time at an equal or better final error (`dominance.csv`: each one).\n\n"
+            + str(summary.to_markdown(index=False))
+            + "\n"
+        )
+    (out / "gentleness.md").write_text(text)
+    plot(weights, means).savefig(out / "gentleness.png", dpi=130)
     record = {
         "policy": config.policy,
         "default_gentleness": default,
@@ -229,6 +317,7 @@ def run_gentleness(
         "subjects": config.subjects,
         "levels": list(config.levels),
         "root_seed": config.root_seed,
+        "against_classical": verdicts,
         "rule": "smallest shortfall against the study's claims plus settling excess over the "
         "PID; ties: largest mean peak and RMS reduction at levels 1-2",
         "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
@@ -236,23 +325,6 @@ def run_gentleness(
     }
     (out / RECORD_FILE).write_text(json.dumps(record, indent=1) + "\n")
     return record
-
-
-def read_record(path: Path) -> dict[str, Any]:
-    """A ``gentleness.json`` (or the folder holding one).
-
-    Raises:
-        ValueError: The file is missing or holds no ``default_gentleness``.
-    """
-    path = Path(path)
-    if path.is_dir():
-        path = path / RECORD_FILE
-    try:
-        record = json.loads(path.read_text())
-        float(record["default_gentleness"])
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"{str(path)!r} is no gentleness record ({exc})") from None
-    return dict(record)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -273,7 +345,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m myoexo.training.gentleness POLICY`` (same as ``myoexo policy gentleness``)."""
+    """``python -m myoexo.studies.gentleness POLICY`` (same as ``myoexo policy gentleness``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))
