@@ -22,6 +22,9 @@ the code is generated from the code at build time, never typed twice.
   ``cli-reference``
       every command of :func:`myoexo.cli.build_parser` (sub-commands of commands
       included): its ``--help`` (usage, description, options).
+  ``recording-format``
+      the clinical recording format's tables (tests, columns, metadata keys) of
+      :mod:`myoexo.clinical.recording`.
 
 A marker the hooks do not know fails the build.
 """
@@ -285,12 +288,20 @@ def tuned_pid_table() -> str:
     return tuned_pids_markdown()
 
 
+def recording_format() -> str:
+    """The clinical recording format's tables (:mod:`myoexo.clinical.recording`)."""
+    from myoexo.clinical.recording import format_markdown
+
+    return format_markdown()
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "tuned-pid-table": tuned_pid_table,
     "observation-table": observation_table,
     "reward-table": reward_table,
     "env-table": env_table,
     "cli-reference": cli_reference,
+    "recording-format": recording_format,
 }
 
 

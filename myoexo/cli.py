@@ -76,6 +76,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stretch and hold: does the resistance last after a fast stretch?",
     ),
     "clinic plot": ("myoexo.clinical.figures", "draw Fig. 2b and the stretch-test curves"),
+    "clinic record": (
+        "myoexo.clinical.recording",
+        "a synthetic recording of a clinical test on the twin (CSV, the recording format)",
+    ),
+    "clinic check-recording": (
+        "myoexo.clinical.check_recording",
+        "read clinical recordings; one line per file, a bad file refused with what is wrong",
+    ),
     "policy train": (
         "myoexo.training.cli",
         "train a learned controller (SAC, PPO or SBX's learners) on MyoExoKneeRandom-v0",

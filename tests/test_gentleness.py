@@ -155,13 +155,13 @@ def test_gentleness_study_chooses_and_records_a_default(tmp_path):
     import json
 
     from myoexo.runtime.fields import Execution
-    from myoexo.training.export import read_gentleness_record
     from myoexo.studies.gentleness import (
         GentlenessConfig,
         choose_default,
         run_gentleness,
         weight_key,
     )
+    from myoexo.training.export import read_gentleness_record
 
     _, spec = _hand_made_gentle_actor(tmp_path)
     with pytest.raises(ValueError, match="records no default weight"):
@@ -184,8 +184,9 @@ def test_gentleness_study_chooses_and_records_a_default(tmp_path):
     assert record["default_gentleness"] == choose_default(table)
     best = min((weight_key(rows), w) for w, rows in table.groupby("weight"))[1]
     assert record["default_gentleness"] == best
-    assert record["root_seed"] == 1 and json.loads((tmp_path / "g" / "gentleness.json").read_text())
-    assert read_gentleness_record(tmp_path / "g")["default_gentleness"] == record["default_gentleness"]
+    written = json.loads((tmp_path / "g" / "gentleness.json").read_text())
+    assert written["root_seed"] == 1 and written == record
+    assert read_gentleness_record(tmp_path / "g") == record
     assert (tmp_path / "g" / "gentleness.png").stat().st_size > 0
     with pytest.raises(ValueError, match="evaluation"):
         GentlenessConfig(policy=spec, root_seed=0)

@@ -12,6 +12,11 @@ function (a pyplot-free ``matplotlib.figure.Figure``) and a CLI command:
 * :func:`~myoexo.clinical.hold.run_stretch_hold` (``myoexo clinic hold``): a
   fast and a slow stretch, each then held: does the resistance outlast the stretch
   (:mod:`myoexo.clinical.hold`)?
+* :mod:`myoexo.clinical.recording`: a patient's clinical tests as files (one CSV per test):
+  :func:`~myoexo.clinical.recording.read_recording` (refuses a bad file in one line),
+  :func:`~myoexo.clinical.recording.write_recording`, and
+  :func:`~myoexo.clinical.recording.record_from_twin`, a synthetic recording of a test on
+  the twin (``myoexo clinic record``; ``myoexo clinic check-recording`` checks files).
 
 Every function takes ``reflex`` (a preset name, ``"stretch"`` by default, or a
 :class:`~myoexo.spasticity.ReflexModel`) so the reflex models can be compared side by side,
@@ -32,6 +37,8 @@ __all__ = [
     "MASExamResult",
     "PendulumParams",
     "PendulumResult",
+    "Recording",
+    "SensorNoise",
     "StretchHoldParams",
     "StretchHoldResult",
     "TardieuParams",
@@ -39,10 +46,13 @@ __all__ = [
     "plot_mas_exam",
     "plot_pendulum",
     "plot_tardieu",
+    "read_recording",
+    "record_from_twin",
     "run_mas_exam",
     "run_pendulum",
     "run_stretch_hold",
     "run_tardieu",
+    "write_recording",
 ]
 
 _HOMES = {
@@ -61,6 +71,11 @@ _HOMES = {
     "StretchHoldParams": "hold",
     "StretchHoldResult": "hold",
     "run_stretch_hold": "hold",
+    "Recording": "recording",
+    "SensorNoise": "recording",
+    "read_recording": "recording",
+    "record_from_twin": "recording",
+    "write_recording": "recording",
 }
 
 __getattr__, __dir__ = lazy_exports(__name__, _HOMES)

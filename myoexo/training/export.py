@@ -364,8 +364,6 @@ def run(args: argparse.Namespace) -> int:
     checkpoint = ck.resolve_checkpoint(options.run, options.checkpoint)
     actor = load_checkpoint_actor(checkpoint, selection_root_seed=options.selection_root_seed)
     if options.gentleness_record:
-        from myoexo.training.gentleness import read_record
-
         if not trained_over_gentleness(actor.metadata):
             raise ValueError(
                 f"{checkpoint} was not trained with a gentleness weight; drop --gentleness-record"
