@@ -14,7 +14,7 @@ Prints one table (per level and controller: mean absolute final error, settled e
 settling time, peak interaction torque and its change from the paper's PID, RMS interaction
 torque to settling) and ends with a paragraph of what the run found, computed from that
 table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. About
-100 s of a core in all (140 episodes): a minute or two on 2 cores. The episodes stay in the
+120 s of a core in all (160 episodes): a minute or two on 2 cores. The episodes stay in the
 output folder (default ``results/demo``; re-running reuses them); ``--report`` also writes
 the figures and the Markdown report (:func:`~myoexo.evaluation.report.write_report`).
 
@@ -46,6 +46,7 @@ DEMO_SUBJECTS = 5
 DEMO_CONTROLLERS = (
     "pid",
     "pid:ramp_s=1",
+    "pid:reference=minjerk,ramp_s=0.6",
     "impedance",
     "sac",
     "guard:sac",
