@@ -67,6 +67,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "myoexo.studies.strap_lag",
         "fit the knee's lag behind the exo encoder per unit of command (the encoder guard's)",
     ),
+    "twin fit-subject": (
+        "myoexo.studies.fit_subject",
+        "fit a personal twin (its reflex and passive knee) to one patient's clinical "
+        "recordings with CMA-ES; the fit, its uncertainty and what the recordings cannot tell",
+    ),
     "clinic stretch": ("myoexo.clinical.stretch", "simulate the passive Tardieu stretch per level"),
     "clinic tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
     "clinic pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),

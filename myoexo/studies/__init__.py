@@ -6,6 +6,9 @@ training and the evaluation protocol), each a command, on the top floor of the p
   protocol, small: one table and a paragraph of what it found;
 * :mod:`~myoexo.studies.calibrate` (``myoexo twin calibrate``): fits the stretch reflex (or the
   after-discharge) so that the paper's PID behaves as in the study;
+* :mod:`~myoexo.studies.fit_subject` (``myoexo twin fit-subject``): a personal twin fitted
+  to one patient's clinical recordings with CMA-ES, with each parameter's interval and what
+  the recordings cannot identify;
 * :mod:`~myoexo.studies.frontier` (``myoexo frontier``): the trade-off between interaction
   torque and settling per level, shaped PIDs, policies and the oracle;
 * :mod:`~myoexo.studies.distill` (``myoexo policy distill``): DAgger distillation of the full-state
