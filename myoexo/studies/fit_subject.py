@@ -6,7 +6,7 @@ The twin replays each test on a candidate subject and the fit moves the candidat
 replays match the recordings::
 
     myoexo twin fit-subject slow.csv fast.csv pendulum.csv tardieu.csv mas.csv \\
-        --out subject.json [--level L] [--budget 300] [--popsize 10] [--seed 1]
+        --out subject.json [--level L] [--budget 1000] [--popsize 10] [--seed 1]
 
 **What is fitted** (:data:`PARAMETERS`, each with its bounds, unit and meaning). The subject
 record of the reflex, :class:`~myoexo.spasticity.SpasticityParams`, is what varies from one
@@ -255,7 +255,7 @@ class FitSettings:
     )
     reflex: str = option(DEFAULT_REFLEX, "reflex model of the twin", flag="")
     budget: int = option(
-        300, "objective evaluations of CMA-ES (whole generations)", low=1, metavar="N"
+        1000, "objective evaluations of CMA-ES (whole generations)", low=1, metavar="N"
     )
     popsize: int = option(10, "CMA-ES population per generation", low=2, high=1000, metavar="N")
     sigma0: float = option(
