@@ -70,7 +70,9 @@ A parameter's interval is where the objective rises by at most ``rise`` (5 %) of
 there: the half-width ``sqrt(2 rise f H^-1_jj)`` (marginal: the other parameters may
 compensate) and ``sqrt(2 rise f / H_jj)`` (conditional: the others held). The rise is a
 tolerance, not a likelihood: the residuals of a fit are mostly model error and correlated in
-time, so no noise model gives an honest confidence level. The report also gives CMA-ES's
+time, so no noise model gives an honest confidence level (on synthetic subjects the truth
+fell outside several intervals: they say how sharply the recordings constrain a parameter,
+not what they cover). The report also gives CMA-ES's
 own final spread per parameter (``sigma`` x the square root of its covariance's diagonal).
 
 **Identifiability.** A parameter is *not identifiable* from the recordings when its
