@@ -440,11 +440,13 @@ def load_actor_file(path: str) -> Any:
 def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     """The controller a spec names, sampled at ``env.unwrapped.dt`` where that matters (a
     policy trained over the gentleness range: at its weight, :func:`spec_gentleness`)."""
-    if not spec.guard:
-        weight = spec_gentleness(spec)
-        if weight is not None:
-            return GentleController(_build_plain(spec, env), weight)
-    return _build_plain(spec, env)
+    controller = _build_plain(spec, env)
+    if spec.guard or spec.kind not in POLICY_KINDS:
+        return controller
+    # a loaded shipped policy or exported actor carries its metadata: not read twice
+    metadata = getattr(controller, "metadata", None) if spec.kind != "sb3" else None
+    weight = spec_gentleness(spec, metadata if isinstance(metadata, Mapping) else None)
+    return controller if weight is None else GentleController(controller, weight)
 
 
 def _build_plain(spec: ControllerSpec, env: Any) -> Controller:
@@ -538,10 +540,13 @@ def spec_env_kwargs(spec: ControllerSpec) -> dict[str, Any]:
     return _observation_kwargs(policy_twin(spec))
 
 
-def spec_gentleness(spec: ControllerSpec) -> float | None:
+def spec_gentleness(
+    spec: ControllerSpec, metadata: Mapping[str, Any] | None = None
+) -> float | None:
     """The gentleness weight a policy runs at: ``SPEC@W``'s, else, for a policy trained over
     the gentleness range, the default weight its metadata records (``default_gentleness``);
-    ``None`` for a controller that takes none.
+    ``None`` for a controller that takes none. *metadata*: the policy's, where it is already
+    loaded (default: read from its files, :func:`policy_metadata`).
 
     Raises:
         ValueError: A weight given to a policy trained without one, or a policy trained over
@@ -549,7 +554,8 @@ def spec_gentleness(spec: ControllerSpec) -> float | None:
     """
     if spec.kind not in POLICY_KINDS:
         return None
-    twin = policy_twin(spec)
+    meta = policy_metadata(spec) if metadata is None else metadata
+    twin = twin_of_metadata(meta)
     trained = twin.gentleness if twin is not None else ""
     if spec.gentleness is not None:
         if not trained:
@@ -560,7 +566,7 @@ def spec_gentleness(spec: ControllerSpec) -> float | None:
         return spec.gentleness
     if not trained:
         return None
-    default = policy_metadata(spec).get("default_gentleness")
+    default = meta.get("default_gentleness")
     if default is None and trained != "random":
         default = float(trained)
     if default is None:
