@@ -83,9 +83,11 @@ from myoexo.envs.robustness import (
 )
 from myoexo.envs.twin import Twin, frame_skip_of
 from myoexo.model import TwinParams, build_model, pose_twin
+from myoexo.model.passive_knee import PassiveKneeScaler
 from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
+from myoexo.spasticity.personal import PersonalSubject, load_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
-from myoexo.spasticity.registry import ReflexModel
+from myoexo.spasticity.registry import ReflexModel, reflex_label
 from myoexo.spasticity.stage import SpasticityStage
 
 __all__ = [
@@ -116,8 +118,16 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             (:data:`EXO_SENSOR_OBS_KEYS`: what the exoskeleton itself measures). Ignored
             when ``obs_keys`` is given.
         obs_keys: Observation entries (default: those of ``obs_preset``).
-        subject_noise: Draw an individual subject (10 % variability) at every reset;
-            ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning).
+        subject_noise: Draw an individual subject at every reset: from the population (10 %
+            variability) or, with *subject*, from the personal fit's uncertainty.
+            ``False`` keeps Table I's nominal subject of the level (e.g. for PID tuning), or
+            the personal fit's point. ``None`` (default): ``True`` for the population,
+            ``False`` for a personal subject.
+        subject: A personal twin: the report of ``myoexo twin fit-subject`` (a path) or a
+            :class:`~myoexo.spasticity.personal.PersonalSubject`. Its fitted reflex record
+            and passive knee (the scales of the knee's springs and damping) replace the
+            population's subject; the env's level must be the one its fit used, and the
+            reflex model the one it was fitted with. ``None``: the population.
         reflex: Reflex model: a registered name (:func:`~myoexo.spasticity.reflex_names`;
             ``"spindle"``, the default: the calibrated stretch reflex read on each muscle's
             own fibre length and speed, 20 ms delay; ``"stretch"``, the same on the knee
@@ -174,7 +184,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         obs_keys: list[str] | tuple[str, ...] | None = None,
         reflex: str | ReflexModel = DEFAULT_REFLEX,
         robustness: RobustnessParams | bool | None = None,
-        subject_noise: bool = True,
+        subject_noise: bool | None = None,
+        subject: str | PersonalSubject | None = None,
         gentleness: float | str | None = None,
         reward: RewardParams | None = None,
         twin: TwinParams | None = None,
@@ -210,6 +221,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             else check_gentleness(gentleness)
         )
         self.twin_params = twin if twin is not None else TwinParams()
+        self._subject: dict[str, float] = {}
 
         frame_skip = frame_skip_of(self.task.control_period_s, self.twin_params.timestep_s)
         MyoGymnasiumEnv.__init__(self, frame_skip=frame_skip, render_mode=render_mode)
@@ -222,6 +234,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             reflex=reflex,
             robustness=robustness,
             subject_noise=subject_noise,
+            subject=subject,
             gentleness=gentleness,
             reward=reward,
             twin=twin,
@@ -272,8 +285,15 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
                 self._ctrl_dt,
             )
 
+        #: The personal twin (``None``: the population's subjects).
+        self.personal = _personal(subject, spasticity_level, reflex)
+        draws = subject_noise if subject_noise is not None else self.personal is None
+        self._personal_draws = bool(draws) and self.personal is not None
+        self._knee_scaler = None if self.personal is None else PassiveKneeScaler(m)
         self.spasticity = SpasticityStage(
-            level=spasticity_level, subject_noise=subject_noise, reflex=reflex
+            level=spasticity_level,
+            subject_noise=bool(draws) and self.personal is None,
+            reflex=reflex,
         )
         self.add_ctrl_stage("spasticity", self.spasticity.apply, self.spasticity.reset)
         #: The stepping twin (:class:`~myoexo.envs.twin.Twin`): this env's model, data and
@@ -291,6 +311,19 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.observation_space = self._unbounded_obs_space(obs.size)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
+    def _set_personal(self) -> None:
+        """This episode's person: the personal fit's point or a draw from its uncertainty
+        (from ``np_random``, after the spasticity stage's reset, before the start angle)."""
+        personal, scaler = self.personal, self._knee_scaler
+        assert personal is not None and scaler is not None
+        drawn = personal.draw(self.np_random) if self._personal_draws else personal.point()
+        subject, stiffness_scale, damping_scale = drawn
+        self.spasticity.set_subject(subject)
+        scaler.apply(stiffness_scale, damping_scale)
+        record = {k: float(v) for k, v in dataclasses.asdict(subject).items()}
+        record.update(stiffness_scale=stiffness_scale, damping_scale=damping_scale)
+        self._subject = record
+
     def _clear_episode_state(self) -> None:
         self._command = 0.0
         self._prev_command = 0.0
@@ -299,7 +332,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self._peak_tau = math.inf
         self._steps = 0
         self._episode_steps = self.task.episode_steps
-        self._subject: dict[str, float] = {}
+        self._subject = {}
 
     # ------------------------------------------------------------------ properties
     @property
@@ -538,9 +571,12 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         mujoco.mj_resetData(self.model, self.data)
         self._clear_episode_state()
         self._run_reset_stages()  # the spasticity stage draws this episode's subject
-        self._subject = {
-            k: float(v) for k, v in dataclasses.asdict(self.spasticity.subject).items()
-        }
+        if self.personal is not None:
+            self._set_personal()
+        else:
+            self._subject = {
+                k: float(v) for k, v in dataclasses.asdict(self.spasticity.subject).items()
+            }
         noise = self.task.start_angle_noise_deg
         start = self.task.start_angle_deg + float(self.np_random.uniform(-noise, noise))
         if self.robustness is not None and seed is not None:
@@ -648,3 +684,24 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
                 self._muscle_colorizer = MuscleColorizer(self.model)
             self._muscle_colorizer(self.data)
         return super().render(**kwargs)
+
+
+def _personal(
+    subject: str | PersonalSubject | None, level: int | str, reflex: str | ReflexModel
+) -> PersonalSubject | None:
+    """The env's personal subject, checked against its level and reflex model."""
+    if subject is None:
+        return None
+    personal = subject if isinstance(subject, PersonalSubject) else load_subject(subject)
+    if isinstance(level, bool) or level != personal.level:
+        raise ValueError(
+            f"subject {personal.source or '(in memory)'} was fitted with level "
+            f"{personal.level}'s reflex calibration, but the env's level is {level!r}: build "
+            f"it as MyoExoKnee-v{personal.level} (spasticity_level={personal.level})"
+        )
+    if reflex_label(reflex) != personal.reflex:
+        raise ValueError(
+            f"subject {personal.source or '(in memory)'} was fitted with the "
+            f"{personal.reflex!r} reflex, but the env's reflex is {reflex_label(reflex)!r}"
+        )
+    return personal

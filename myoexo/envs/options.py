@@ -34,6 +34,7 @@ from myoexo.envs.config import (
 )
 from myoexo.envs.observation import OBS_PRESETS
 from myoexo.runtime.fields import add_options, convert, option, parse_assignments
+from myoexo.spasticity.personal import PersonalSubject, load_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import get_reflex, reflex_parameters
 
@@ -45,11 +46,12 @@ OPTION_FIELDS: tuple[str, ...] = (
     "reflex",
     "robustness",
     "gentleness",
+    "subject",
 )
 
 #: The options that change the twin's dynamics or task (what a policy is evaluated on);
 #: the reward and the observation only change what a learner sees.
-DYNAMICS_FIELDS: tuple[str, ...] = ("task", "reflex", "robustness")
+DYNAMICS_FIELDS: tuple[str, ...] = ("task", "reflex", "robustness", "subject")
 
 
 def _pairs(value: Any, name: str) -> tuple[tuple[str, float], ...]:
@@ -79,6 +81,9 @@ class TwinOptions:
         gentleness: The env's gentleness weight (its ``gentleness=``): ``""`` none (the
             study's reward and observation), ``"random"`` (drawn per reset: a policy that
             learns the whole range) or a number in [0, 1].
+        subject: A personal twin (the env's ``subject=``): the report of ``myoexo twin
+            fit-subject``, each episode's person drawn from the fit's uncertainty
+            (:mod:`myoexo.spasticity.personal`); ``""``: the population.
 
     Raises:
         ValueError: An unknown task field, reward key, observation preset or reflex name
@@ -108,6 +113,12 @@ class TwinOptions:
         "gentleness weight of the reward, also observed: a number in [0, 1], or 'random' "
         "(drawn per episode: one policy for the whole range)",
         metavar="WEIGHT|random",
+    )
+    subject: str = option(
+        "",
+        "a personal twin: the report of 'myoexo twin fit-subject' (JSON); each episode's "
+        "person is drawn from the fit's uncertainty, at the level the fit used",
+        metavar="FILE",
     )
 
     def __post_init__(self) -> None:
@@ -140,6 +151,19 @@ class TwinOptions:
         get_reflex(self.reflex)  # registered (the error lists the names)
         if not isinstance(self.robustness, bool):
             raise ValueError(f"robustness = {self.robustness!r}: expected True or False")
+        object.__setattr__(self, "subject", str(self.subject))
+        if self.subject:
+            personal = load_subject(self.subject)  # one line naming the file if it is bad
+            if personal.reflex != self.reflex:
+                raise ValueError(
+                    f"subject {self.subject} was fitted with the {personal.reflex!r} reflex, "
+                    f"not {self.reflex!r}"
+                )
+
+    @property
+    def personal(self) -> PersonalSubject | None:
+        """The personal subject of :attr:`subject` (``None``: the population)."""
+        return load_subject(self.subject) if self.subject else None
 
     # -- views ----------------------------------------------------------------------------
     @property
@@ -182,12 +206,17 @@ class TwinOptions:
             kwargs["gentleness"] = (
                 "random" if self.gentleness == "random" else float(self.gentleness)
             )
+        if self.subject:
+            kwargs["subject"] = self.subject
+            kwargs["subject_noise"] = True  # draws from the fit's uncertainty
         return kwargs
 
     def dynamics(self) -> TwinOptions:
         """These options without the reward and the observation: what decides the twin's
         behaviour, and so whether two evaluations are of the same twin."""
-        return TwinOptions(task=self.task, reflex=self.reflex, robustness=self.robustness)
+        return TwinOptions(
+            task=self.task, reflex=self.reflex, robustness=self.robustness, subject=self.subject
+        )
 
     def describe(self) -> str:
         """A one-line description of the non-default options (``"default twin"`` if none)."""
@@ -204,6 +233,8 @@ class TwinOptions:
             parts.append("robustness=true")
         if self.gentleness:
             parts.append(f"gentleness={self.gentleness}")
+        if self.subject:
+            parts.append(f"subject={self.subject}")
         return " ".join(parts) or "default twin"
 
     # -- records --------------------------------------------------------------------------
@@ -219,13 +250,16 @@ class TwinOptions:
             "reflex_parameters": reflex_parameters(self.reflex),
             "robustness": self.robustness,
             "gentleness": self.gentleness,
+            "subject": self.subject,
+            **({"subject_sha256": _sha256(self.subject)} if self.subject else {}),
         }
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TwinOptions:
         """Rebuild the record of :meth:`to_dict` (``reflex_parameters`` is provenance and
         not read back; unknown keys raise)."""
-        data = {k: v for k, v in dict(data).items() if k != "reflex_parameters"}
+        provenance = ("reflex_parameters", "subject_sha256")
+        data = {k: v for k, v in dict(data).items() if k not in provenance}
         unknown = sorted(set(data) - {"task", *OPTION_FIELDS})
         if unknown:
             raise ValueError(
@@ -239,6 +273,7 @@ class TwinOptions:
             reflex=str(data.get("reflex", DEFAULT_REFLEX)),
             robustness=bool(data.get("robustness", False)),
             gentleness=str(data.get("gentleness", "")),
+            subject=str(data.get("subject", "")),
         )
 
     # -- the command line -----------------------------------------------------------------
@@ -346,9 +381,18 @@ def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:
         changes["robustness"] = True
     if getattr(args, "gentleness", ""):
         changes["gentleness"] = args.gentleness
+    if getattr(args, "subject", ""):
+        changes["subject"] = args.subject
     for name in ("obs_preset", "obs_keys"):
         if hasattr(args, name) and getattr(args, name) != getattr(TwinOptions(), name):
             changes[name] = tuple(args.obs_keys) if name == "obs_keys" else args.obs_preset
     if getattr(args, "reward_weights", None):  # merged into the base's
         changes["reward_weights"] = {**dict(options.reward_weights), **args.reward_weights}
     return options.replace(**changes) if changes else options
+
+
+def _sha256(path: str) -> str:
+    import hashlib
+    from pathlib import Path
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

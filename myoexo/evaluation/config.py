@@ -96,7 +96,9 @@ class EvaluationConfig:
         controllers: Controller specs (:mod:`myoexo.control.specs`): ``pid``, ``sac``, a
             model path ...
         levels: Spasticity levels, each in :data:`~myoexo.spasticity.VALID_LEVELS`.
-        subjects: Subjects per level (paper: 1000).
+        subjects: Subjects per level (paper: 1000); with a personal twin
+            (``twin.subject``), draws of that person from the fit's uncertainty, at the
+            fit's level (the default levels become that one).
         root_seed: Root of every subject seed (:func:`subject_seed`).
         trace_stride: Keep every n-th control step in the stored traces.
         chunk_size: Subjects per unit of work (and per resume file).
@@ -148,6 +150,14 @@ class EvaluationConfig:
             check_fit_root(self.root_seed, "a selection run")
         object.__setattr__(self, "controllers", tuple(self.controllers))
         object.__setattr__(self, "levels", tuple(int(v) for v in self.levels))
+        personal = self.twin.personal
+        if personal is not None and self.levels != (personal.level,):
+            if self.levels != VALID_LEVELS:
+                raise ValueError(
+                    f"levels {self.levels}: the personal subject {self.twin.subject} is a "
+                    f"level-{personal.level} twin; run level {personal.level} alone"
+                )
+            object.__setattr__(self, "levels", (personal.level,))
         if not self.controllers:
             raise ValueError("controllers is empty: name at least one (e.g. 'pid')")
         check_fields(self)

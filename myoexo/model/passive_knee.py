@@ -37,6 +37,7 @@ and ``A`` is taken at its neutral 0 deg, where the ankle's share of the moment i
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from dataclasses import dataclass
@@ -49,9 +50,11 @@ __all__ = [
     "KNEE_SPRING_TENDONS",
     "RIENER_EDRICH_1999",
     "KneeSprings",
+    "PassiveKneeScaler",
     "PassiveMomentFit",
     "install_passive_knee",
     "knee_springs",
+    "scale_passive_knee",
 ]
 
 #: The muscles with a knee moment arm in the seated leg (checked against the model's moment
@@ -265,3 +268,58 @@ def install_passive_knee(
         tendon.springlength = np.array(band)
         tendon.wrap_joint(knee_joint, 1.0)
     return springs
+
+
+class PassiveKneeScaler:
+    """Scales one built twin's passive knee in place: every coefficient of the knee springs
+    (the joint's cubic spring and the two one-sided spring tendons) times a stiffness scale,
+    the knee's damping times a damping scale.
+
+    The nominal coefficients are copied once; :meth:`apply` writes nominal x scale, so
+    scalings never accumulate. A personal twin (:mod:`myoexo.spasticity.personal`) scales
+    its passive knee this way at every reset.
+
+    Args:
+        model: A twin built with the passive knee (:func:`install_passive_knee`), modified
+            in place by :meth:`apply`. The knee is the joint its spring tendons wrap.
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self._tendons = np.array([model.tendon(n).id for n in KNEE_SPRING_TENDONS], dtype=np.intp)
+        self._joint = int(model.wrap_objid[model.tendon_adr[self._tendons[0]]])
+        self._dof = int(model.jnt_dofadr[self._joint])
+        self._nominal = {
+            "jnt_stiffness": float(model.jnt_stiffness[self._joint]),
+            "jnt_stiffnesspoly": model.jnt_stiffnesspoly[self._joint].copy(),
+            "tendon_stiffness": model.tendon_stiffness[self._tendons].copy(),
+            "tendon_stiffnesspoly": model.tendon_stiffnesspoly[self._tendons].copy(),
+            "dof_damping": float(model.dof_damping[self._dof]),
+            "dof_dampingpoly": model.dof_dampingpoly[self._dof].copy(),
+        }
+
+    def apply(self, stiffness_scale: float, damping_scale: float) -> None:
+        """Write the nominal passive knee times the scales into the model.
+
+        Raises:
+            ValueError: If a scale is not a finite number > 0.
+        """
+        for name, value in (("stiffness_scale", stiffness_scale), ("damping_scale", damping_scale)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} = {value!r} must be a finite number > 0")
+        m, nom, j, t, dof = self.model, self._nominal, self._joint, self._tendons, self._dof
+        m.jnt_stiffness[j] = nom["jnt_stiffness"] * stiffness_scale
+        m.jnt_stiffnesspoly[j] = nom["jnt_stiffnesspoly"] * stiffness_scale
+        m.tendon_stiffness[t] = nom["tendon_stiffness"] * stiffness_scale
+        m.tendon_stiffnesspoly[t] = nom["tendon_stiffnesspoly"] * stiffness_scale
+        m.dof_damping[dof] = nom["dof_damping"] * damping_scale
+        m.dof_dampingpoly[dof] = nom["dof_dampingpoly"] * damping_scale
+
+
+def scale_passive_knee(
+    model: mujoco.MjModel, stiffness_scale: float, damping_scale: float
+) -> mujoco.MjModel:
+    """A copy of the twin *model* whose passive knee is scaled (:class:`PassiveKneeScaler`)."""
+    m = copy.copy(model)
+    PassiveKneeScaler(m).apply(stiffness_scale, damping_scale)
+    return m

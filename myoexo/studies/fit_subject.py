@@ -102,7 +102,6 @@ the file and the problem, exit status 2, nothing written.
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import hashlib
 import json
@@ -116,8 +115,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from myoexo.model.passive_knee import scale_passive_knee
 from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
+from myoexo.spasticity.personal import PASSIVE_SCALES, from_unit, to_unit
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import add_reflex_argument
 
@@ -181,21 +182,15 @@ class FitParameter:
 
     def normalise(self, value: float) -> float:
         """*value* as its position in [0, 1] inside the bounds (clipped)."""
-        value = min(max(float(value), self.low), self.high)
-        if self.log:
-            return math.log(value / self.low) / math.log(self.high / self.low)
-        return (value - self.low) / (self.high - self.low)
+        return to_unit(value, self.low, self.high, self.log)
 
     def value(self, u: float) -> float:
         """The value at the position *u* in [0, 1] (clipped)."""
-        u = min(max(float(u), 0.0), 1.0)
-        if self.log:
-            return self.low * (self.high / self.low) ** u
-        return self.low + u * (self.high - self.low)
+        return from_unit(u, self.low, self.high, self.log)
 
 
 #: The passive knee's fitted scales.
-PASSIVE_NAMES: tuple[str, ...] = ("stiffness_scale", "damping_scale")
+PASSIVE_NAMES: tuple[str, ...] = tuple(PASSIVE_SCALES)
 
 #: The parameters a fit can move, their bounds (levels 1-3 of Table I with their 10 %
 #: spread, and room), units and meaning.
@@ -400,29 +395,6 @@ def _sha256(path: Path) -> str:
 
 
 # ----------------------------------------------------------------------------- the objective
-def scale_passive_knee(
-    model: mujoco.MjModel, stiffness_scale: float, damping_scale: float
-) -> mujoco.MjModel:
-    """A copy of the twin *model* whose passive knee is scaled: every coefficient of the knee
-    springs (the joint's and the two one-sided tendons', :mod:`myoexo.model.passive_knee`)
-    times *stiffness_scale*, the knee's damping times *damping_scale*."""
-    from myoexo.model.leg import KNEE_JOINT
-    from myoexo.model.passive_knee import KNEE_SPRING_TENDONS
-
-    m = copy.copy(model)
-    joint = m.joint(KNEE_JOINT)
-    j, dof = joint.id, int(joint.dofadr[0])
-    m.jnt_stiffness[j] *= stiffness_scale
-    m.jnt_stiffnesspoly[j] *= stiffness_scale
-    for name in KNEE_SPRING_TENDONS:
-        t = m.tendon(name).id
-        m.tendon_stiffness[t] *= stiffness_scale
-        m.tendon_stiffnesspoly[t] *= stiffness_scale
-    m.dof_damping[dof] *= damping_scale
-    m.dof_dampingpoly[dof] *= damping_scale
-    return m
-
-
 @dataclasses.dataclass(frozen=True)
 class Evaluation:
     """The objective of one candidate and its parts.
