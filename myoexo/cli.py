@@ -72,6 +72,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "fit a personal twin (its reflex and passive knee) to one patient's clinical "
         "recordings with CMA-ES; the fit, its uncertainty and what the recordings cannot tell",
     ),
+    "twin recovery": (
+        "myoexo.studies.recovery",
+        "fit-subject's own test: record and fit simulated people, compare each parameter "
+        "and the controllers' outcome on the fitted twin with the truth",
+    ),
     "clinic stretch": ("myoexo.clinical.stretch", "simulate the passive Tardieu stretch per level"),
     "clinic tardieu": ("myoexo.clinical.tardieu", "Tardieu test: catch angle R1, passive range R2"),
     "clinic pendulum": ("myoexo.clinical.pendulum", "Wartenberg pendulum test: relaxation index"),

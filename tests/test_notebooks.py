@@ -24,6 +24,7 @@ EXPECTED = (
     "02_spasticity.ipynb",
     "03_training.ipynb",
     "04_reproduce_paper.ipynb",
+    "05_personal_twin.ipynb",
 )
 #: Size knob of the notebooks in CI (subjects per level, training steps / 1000, ...).
 CI_SIZE = "1"
@@ -42,7 +43,7 @@ assert sys.prefix == {sys.prefix!r}, (
 
 
 def test_all_notebooks_present() -> None:
-    """The four notebooks exist (a rename would silently drop one from CI)."""
+    """The five notebooks exist (a rename would silently drop one from CI)."""
     names = {p.name for p in NOTEBOOKS}
     assert set(EXPECTED) <= names, f"missing notebooks: {sorted(set(EXPECTED) - names)}"
 

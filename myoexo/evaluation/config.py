@@ -46,6 +46,9 @@ EVALUATION_ROOT_SEED = 0
 SELECTION_ROOT_SEED = 1
 #: Root seed of the subjects the twin is *fitted* on (``myoexo twin calibrate``).
 CALIBRATION_ROOT_SEED = 2
+#: Root seed of the simulated people ``myoexo twin recovery`` records and fits (a personal
+#: twin's own test): nothing else draws from it.
+RECOVERY_ROOT_SEED = 5
 
 #: The three subject streams, by purpose: each root seeds its own
 #: ``SeedSequence(root, spawn_key=(level, subject))`` stream, so the subjects of one purpose
@@ -55,6 +58,7 @@ SUBJECT_ROOTS: Mapping[str, int] = MappingProxyType(
         "evaluation": EVALUATION_ROOT_SEED,
         "selection": SELECTION_ROOT_SEED,
         "calibration": CALIBRATION_ROOT_SEED,
+        "recovery": RECOVERY_ROOT_SEED,
     }
 )
 
