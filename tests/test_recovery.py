@@ -69,6 +69,25 @@ def test_the_tables_come_from_the_rows(run):
     assert summary["provenance"]["command"].startswith("myoexo twin recovery --subjects 2")
 
 
+def test_the_persons_pid_is_compared_with_the_papers_on_the_true_twin(run):
+    settings, _, summary = run
+    personal = json.loads((settings.out / "subjects" / "s001" / "personal.json").read_text())
+    assert personal["generic_spec"] == "pid"
+    for who in ("personal", "tuned_on_truth"):
+        tuned = personal[f"{who}_tuner_failed"] == ""
+        assert personal[f"{who}_spec"].startswith("pid:kp=") == tuned
+        assert personal[f"{who}_peak_torque_nm"] > 0.0
+    # the generic PID on the true twin is the prediction's run on the truth
+    row = json.loads((settings.out / "subjects" / "s001" / "row.json").read_text())
+    assert personal["generic_final_error_deg"] == pytest.approx(row["pid_final_error_deg_truth"])
+    table = pd.read_csv(settings.out / "personalisation.csv")
+    one = table[(table.level == "all") & (table.pid == "personal")]
+    one = one[one.metric == "peak_torque_nm"].iloc[0]
+    assert one["difference"] == pytest.approx(one["personal"] - one["generic"])
+    assert summary["personalisation_subjects"] == 2
+    assert "Personalisation" in (settings.out / "recovery.md").read_text()
+
+
 def test_a_stopped_run_continues_from_its_rows(run, monkeypatch):
     settings, rows, _ = run
 
@@ -76,6 +95,7 @@ def test_a_stopped_run_continues_from_its_rows(run, monkeypatch):
         raise AssertionError("a subject with a row was fitted again")
 
     monkeypatch.setattr("myoexo.studies.fit_subject.fit_subject", refit)
+    monkeypatch.setattr("myoexo.control.ziegler_nichols.tune", refit)
     again = rc.run_recovery(settings)
     assert sorted(r["index"] for r in again) == sorted(r["index"] for r in rows)
 

@@ -99,6 +99,11 @@ class RecoverySettings:
         ("pid", "sac"), "controllers whose outcome the fitted twin predicts", metavar="SPEC"
     )
     workers: int = option(1, "processes (one subject each at a time)", low=1, high=256, metavar="N")
+    personalise: bool = option(
+        True,
+        "also compare, on each true twin, the paper's PID with the PID the project's tuner "
+        "sets on the fitted twin (and on the true one)",
+    )
     summarise_only: bool = option(False, "make the tables from the rows present; run nothing")
 
 
@@ -109,6 +114,8 @@ def _subject_plan(index: int, root: int) -> tuple[int, int]:
 
 
 def _episode(env_id: str, subject: Any, spec: str, seed: int) -> dict[str, float]:
+    """One episode of *spec* on the twin of *subject*: final error, peak and RMS interaction
+    torque, settling time (NaN: not settled)."""
     import gymnasium as gym
 
     from myoexo.control.specs import build_controller, parse_controller_spec
@@ -123,6 +130,8 @@ def _episode(env_id: str, subject: Any, spec: str, seed: int) -> dict[str, float
     return {
         "final_error_deg": float(m.abs_final_error_deg),
         "peak_torque_nm": float(m.peak_interaction_torque_nm),
+        "rms_torque_nm": float(m.rms_interaction_torque_nm),
+        "settling_time_s": float(m.settling_time_s),
     }
 
 
@@ -196,10 +205,66 @@ def report_truth(report: Mapping[str, Any]) -> dict[str, float]:
     return truth
 
 
+def _truth_of(folder: Path, level: int) -> Any:
+    from myoexo.spasticity.levels import SpasticityParams
+    from myoexo.spasticity.personal import PersonalSubject
+
+    report = json.loads((folder / "subject.json").read_text())
+    subject = SpasticityParams(**report_truth(report))
+    return PersonalSubject.of(level, subject, reflex=str(report["reflex"]))
+
+
+def _tuned_spec(env_id: str, subject: Any, level: int, seed: int) -> tuple[str, str]:
+    """The PID spec the project's tuner (Ziegler-Nichols, ``myoexo twin tune-pid``) gives on
+    the twin of *subject*, and why not (``""``: tuned). A twin on which the tuner finds no
+    sustained oscillation keeps the paper's PID."""
+    import gymnasium as gym
+
+    from myoexo.control.ziegler_nichols import ZieglerNicholsSettings, tune
+
+    env = gym.make(env_id, subject=subject)
+    try:
+        g = tune(ZieglerNicholsSettings(level=level, seed=seed), env=env).gains
+    except RuntimeError as exc:
+        return "pid", str(exc)
+    finally:
+        env.close()
+    return f"pid:kp={g.kp:.6g},ki={g.ki:.6g},kd={g.kd:.6g}", ""
+
+
+def personalise_subject(index: int, settings: RecoverySettings) -> dict[str, Any]:
+    """Personalisation on subject *index* (module docstring): the paper's PID (generic)
+    against the PID the project's tuner sets on the fitted twin (personal) and on the true
+    twin (the tuner's own effect, free of the fit's error), each run on the true twin; also
+    written to ``subjects/sNNN/personal.json`` (read back if present)."""
+    folder = settings.out / "subjects" / f"s{index:03d}"
+    path = folder / "personal.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    row = recover_subject(index, settings)
+    level, seed = int(row["level"]), int(row["seed"])
+    env_id = f"MyoExoKnee-v{level}"
+    truth = _truth_of(folder, level)
+    out: dict[str, Any] = {"index": index, "level": level, "seed": seed}
+    specs = {"generic": "pid"}
+    for name, subject in (("personal", str(folder / "subject.json")), ("tuned_on_truth", truth)):
+        specs[name], why = _tuned_spec(env_id, subject, level, seed)
+        out[f"{name}_tuner_failed"] = why
+    for name, spec in specs.items():
+        out[f"{name}_spec"] = spec
+        for key, value in _episode(env_id, truth, spec, seed).items():
+            out[f"{name}_{key}"] = value
+    path.write_text(json.dumps(out, indent=1))
+    return out
+
+
 # ----------------------------------------------------------------------------- the run
 def _work(args: tuple[int, RecoverySettings]) -> dict[str, Any]:
     index, settings = args
-    return recover_subject(index, settings)
+    row = recover_subject(index, settings)
+    if settings.personalise:
+        personalise_subject(index, settings)
+    return row
 
 
 def run_recovery(settings: RecoverySettings) -> list[dict[str, Any]]:
@@ -208,7 +273,7 @@ def run_recovery(settings: RecoverySettings) -> list[dict[str, Any]]:
     # the spastic subjects' fits are the long ones: start them first
     indices.sort(key=lambda i: _subject_plan(i, settings.root_seed)[0] == 0)
     if settings.workers == 1:
-        return [recover_subject(i, settings) for i in indices]
+        return [_work((i, settings)) for i in indices]
     import multiprocessing as mp
 
     from tqdm import tqdm
@@ -222,8 +287,42 @@ def run_recovery(settings: RecoverySettings) -> list[dict[str, Any]]:
     return rows
 
 
-def _rows_present(out: Path) -> list[dict[str, Any]]:
-    return [json.loads(p.read_text()) for p in sorted((out / "subjects").glob("s*/row.json"))]
+def _rows_present(out: Path, name: str = "row.json") -> list[dict[str, Any]]:
+    return [json.loads(p.read_text()) for p in sorted((out / "subjects").glob(f"s*/{name}"))]
+
+
+#: The metrics compared in the personalisation table, and whether lower is better.
+_PERSONAL_METRICS: Mapping[str, str] = {
+    "final_error_deg": "deg",
+    "peak_torque_nm": "Nm",
+    "rms_torque_nm": "Nm",
+    "settling_time_s": "s",
+}
+
+
+def personalisation_table(rows: Sequence[Mapping[str, Any]]) -> Any:
+    """Per level and over all: each metric of the generic PID, of the personal PIDs, and the
+    personal minus generic difference (negative: the person's PID is lower) with its 95 %
+    interval over subjects; settling over the subjects where both settled."""
+    import pandas as pd
+
+    df = pd.DataFrame(list(rows))
+    out = []
+    for level, g in [*df.groupby("level"), ("all", df)]:
+        for who in ("personal", "tuned_on_truth"):
+            for metric, unit in _PERSONAL_METRICS.items():
+                a, b = g[f"generic_{metric}"].to_numpy(float), g[f"{who}_{metric}"].to_numpy(float)
+                both = np.isfinite(a) & np.isfinite(b)
+                d = b[both] - a[both]
+                mean, lo, hi = _ci(d) if d.size else [math.nan] * 3
+                out.append({
+                    "level": level, "pid": who, "metric": metric, "unit": unit,
+                    "subjects": int(both.sum()), "generic": float(np.mean(a[both])),
+                    "personal": float(np.mean(b[both])), "difference": mean,
+                    "ci_low": lo, "ci_high": hi,
+                    "tuner_failed": int((g[f"{who}_tuner_failed"] != "").sum()),
+                })  # fmt: skip
+    return pd.DataFrame(out)
 
 
 def _ci(x: np.ndarray) -> list[float]:
@@ -321,12 +420,19 @@ def summarise(rows: Sequence[Mapping[str, Any]], settings: RecoverySettings) -> 
         "fit_minutes_per_subject": _ci(df["fit_s"].to_numpy(float) / 60.0),
         "provenance": provenance(_command(settings), TWIN_VERSION),
     }
+    personal_rows = _rows_present(out, "personal.json")
+    personal = personalisation_table(personal_rows) if personal_rows else None
+    if personal is not None:
+        personal.to_csv(out / "personalisation.csv", index=False)
+        summary["personalisation_subjects"] = len(personal_rows)
     (out / "recovery.json").write_text(json.dumps(summary, indent=1, default=str))
-    (out / "recovery.md").write_text(format_summary(summary, params, preds))
+    (out / "recovery.md").write_text(format_summary(summary, params, preds, personal))
     return summary
 
 
-def format_summary(summary: Mapping[str, Any], params: Any, preds: Any) -> str:
+def format_summary(
+    summary: Mapping[str, Any], params: Any, preds: Any, personal: Any = None
+) -> str:
     """The Markdown page of a recovery run."""
     t = summary["prediction_target"]
     lines = [
@@ -359,6 +465,19 @@ def format_summary(summary: Mapping[str, Any], params: Any, preds: Any) -> str:
     lines.append(preds.to_markdown(index=False, floatfmt=".3g"))
     lines += ["", "## Recovery error of each parameter (fit - truth)", ""]
     lines.append(params.to_markdown(index=False, floatfmt=".3g"))
+    if personal is not None:
+        lines += [
+            "",
+            "## Personalisation: the person's PID against the paper's, on the true twin",
+            "",
+            "`personal`: the PID the project's tuner (Ziegler-Nichols, `myoexo twin tune-pid`) "
+            "sets on the fitted twin; `tuned_on_truth`: the same tuner on the true twin. "
+            "`difference` = personal - generic (negative: lower), mean over subjects with "
+            "its 95 % interval; `tuner_failed`: subjects on which the tuner found no "
+            "sustained oscillation and the paper's PID was kept.",
+            "",
+            personal.to_markdown(index=False, floatfmt=".3g"),
+        ]
     lines.append("")
     return "\n".join(lines)
 
