@@ -56,7 +56,7 @@ test: $(DEV_STAMP)
 	$(VENV)/bin/mkdocs build --strict --site-dir $(SITE_DIR)
 	$(PY) tools/render_tables.py --check
 	PY=$(CURDIR)/$(PY) bash .ci/check_dist.sh
-	$(PY) -m pytest -q $(PYTEST_WORKERS) tests
+	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS) tests
 
 docs: $(DEV_STAMP)
 	$(VENV)/bin/mkdocs serve

@@ -27,6 +27,10 @@ def run(tmp_path_factory):
 def test_the_recovery_root_is_its_own():
     assert list(SUBJECT_ROOTS.values()).count(rc.RecoverySettings().root_seed) == 1
     assert SUBJECT_ROOTS["recovery"] == rc.RecoverySettings().root_seed
+    with pytest.raises(ValueError, match="evaluation root"):
+        rc.RecoverySettings(root_seed=0)
+    with pytest.raises(ValueError, match="subjects"):
+        rc.RecoverySettings(subjects=0)
 
 
 def test_each_subject_is_recorded_fitted_and_predicted(run):

@@ -52,8 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.evaluation.config import RECOVERY_ROOT_SEED, subject_seed
-from myoexo.runtime.fields import add_options, from_options, option
+from myoexo.evaluation.config import RECOVERY_ROOT_SEED, check_fit_root, subject_seed
+from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
 __all__ = [
@@ -105,6 +105,13 @@ class RecoverySettings:
         "sets on the fitted twin (and on the true one)",
     )
     summarise_only: bool = option(False, "make the tables from the rows present; run nothing")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        check_fit_root(self.root_seed, "a recovery run (it fits its subjects)")
+        object.__setattr__(self, "controllers", tuple(self.controllers))
+        if not self.controllers:
+            raise FieldError(type(self).__name__, "controllers", (), "is empty: name one")
 
 
 # ----------------------------------------------------------------------------- one subject
