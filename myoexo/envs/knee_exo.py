@@ -46,7 +46,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import mujoco
@@ -101,6 +101,23 @@ __all__ = [
 
 #: The exo-sensed entries of :meth:`MyoExoKneeEnv.get_proprioception`.
 _PROPRIOCEPTION_KEYS = ("exo_angle_rad", "exo_vel_rad_s", "exo_torque_nm", *CUFF_OBS_KEYS)
+
+
+class _InfoAt(NamedTuple):
+    """Positions in the raw observation buffer of the entries a step and its info read."""
+
+    time: int
+    knee_angle_rad: int
+    knee_vel_rad_s: int
+    exo_angle_rad: int
+    exo_vel_rad_s: int
+    error_rad: int
+    exo_torque_nm: int
+    muscle_knee_torque_nm: int
+    interaction_torque_nm: int
+    cuff_knee_torque_nm: int
+    thigh_cuff_force_n: int
+    shank_cuff_force_n: int
 
 
 class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
@@ -261,6 +278,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             episode_duration_s=self.task.episode_duration_s,
         )
         self.coupling_joints = self.obs_layout.coupling_joints
+        #: Positions of the raw entries the step and its info read, looked up once.
+        self._info_at = _InfoAt(*(self.obs_layout.at[k] for k in _InfoAt._fields))
         self._views: DataViews | None = None  # see _data_views
 
         # action: the exo motor's ctrl entry (the twin's); the muscles get the ctrl stages'
@@ -534,11 +553,11 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
         raw = layout.gather(views, u, forces_knee_rad)
         values = raw[: layout.info_len].tolist()  # python floats: cheapest for scalar math
-        at = layout.at
-        knee_vel = values[at["knee_vel_rad_s"]]
-        tau = values[at["interaction_torque_nm"]]
+        at = self._info_at
+        knee_vel = values[at.knee_vel_rad_s]
+        tau = values[at.interaction_torque_nm]
         rwd_dict = reward_dict(
-            values[at["error_rad"]],
+            values[at.error_rad],
             knee_vel,
             tau,
             u,
@@ -593,7 +612,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             self.gentleness = float(self.np_random.uniform(*GENTLENESS_RANGE))
         obs = self._ensure_obs_gymnasium_compliant(self._with_gentleness(layout.to_vec(sensed)))
         values = raw[: layout.info_len].tolist()
-        self._prev_tau_knee = values[layout.at["interaction_torque_nm"]]
+        self._prev_tau_knee = values[self._info_at.interaction_torque_nm]
         if self.gentleness is not None:
             self._peak_tau = self._prev_tau_knee
         info = self._add_info({}, values, False, sensed)
@@ -633,35 +652,35 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
                 ``robustness`` adds noise and latency): ``measured_*`` entries, what
                 :func:`~myoexo.envs.sensors.read_sensors` gives a controller.
         """
-        at = self.obs_layout.at
-        knee_deg = math.degrees(values[at["knee_angle_rad"]])
-        exo_deg = math.degrees(values[at["exo_angle_rad"]])
+        at = self._info_at
+        knee_deg = math.degrees(values[at.knee_angle_rad])
+        exo_deg = math.degrees(values[at.exo_angle_rad])
         # the sensed entries read one by one (a perturbed twin's buffer is the whole state)
         read = values.__getitem__ if self._sensor is None else sensed.item
-        measured_knee_deg = math.degrees(read(at["knee_angle_rad"]))
-        measured_exo_deg = math.degrees(read(at["exo_angle_rad"]))
+        measured_knee_deg = math.degrees(read(at.knee_angle_rad))
+        measured_exo_deg = math.degrees(read(at.exo_angle_rad))
         target_deg = self.task.target_angle_deg
-        thigh, shank = at["thigh_cuff_force_n"], at["shank_cuff_force_n"]
-        exo_nm, muscle_nm = values[at["exo_torque_nm"]], values[at["muscle_knee_torque_nm"]]
+        thigh, shank = at.thigh_cuff_force_n, at.shank_cuff_force_n
+        exo_nm, muscle_nm = values[at.exo_torque_nm], values[at.muscle_knee_torque_nm]
         stage = self.spasticity
         info.update(
-            time_s=values[at["time"]],
+            time_s=values[at.time],
             knee_angle_deg=knee_deg,
-            knee_vel_rad_s=values[at["knee_vel_rad_s"]],
+            knee_vel_rad_s=values[at.knee_vel_rad_s],
             exo_angle_deg=exo_deg,
             misalignment_deg=knee_deg - exo_deg,
             measured_knee_angle_deg=measured_knee_deg,
             measured_exo_angle_deg=measured_exo_deg,
-            measured_knee_velocity_deg_s=math.degrees(read(at["knee_vel_rad_s"])),
-            measured_exo_velocity_deg_s=math.degrees(read(at["exo_vel_rad_s"])),
-            measured_exo_torque_nm=read(at["exo_torque_nm"]),
+            measured_knee_velocity_deg_s=math.degrees(read(at.knee_vel_rad_s)),
+            measured_exo_velocity_deg_s=math.degrees(read(at.exo_vel_rad_s)),
+            measured_exo_torque_nm=read(at.exo_torque_nm),
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,
             exo_torque_nm=exo_nm,
             muscle_knee_torque_nm=muscle_nm,
-            interaction_torque_nm=values[at["interaction_torque_nm"]],
-            cuff_knee_torque_nm=values[at["cuff_knee_torque_nm"]],
+            interaction_torque_nm=values[at.interaction_torque_nm],
+            cuff_knee_torque_nm=values[at.cuff_knee_torque_nm],
             torque_abs_sum_nm=abs(exo_nm) + abs(muscle_nm),
             torque_signed_sum_nm=exo_nm + muscle_nm,
             thigh_cuff_force_n=math.hypot(values[thigh], values[thigh + 1], values[thigh + 2]),

@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model import COUPLING_JOINTS, CUFF_SENSORS, EXO_JOINT, KNEE_JOINT, strap_knee_torque
+from myoexo.model.data_buffer import buffer_gather
 from myoexo.model.joint_torque import CoupledJointTorque, EqualityJointTorque
 from myoexo.spasticity.levels import SPASTIC_MUSCLES
 
@@ -189,12 +190,8 @@ class DataViews(NamedTuple):
 
     ``qpos``, ``qvel``, ``ctrl``, ``qfrc_actuator`` are the data's arrays (views of its
     memory, valid as long as ``data``). ``buffer[gather_index]`` gathers every ``MjData``
-    entry of the raw buffer (:attr:`ObsLayout.gathered`) in one numpy call instead of one
-    call per array and a concatenation: MuJoCo allocates every per-model array of an
-    ``mjData`` from one main buffer (``mjData.buffer``, ``nbuffer`` bytes, "all pointers
-    point in it"), so a strided float64 view starting at the lowest of the arrays spans them
-    all. ``buffer`` is read-only, its base is one of ``data``'s own arrays (it keeps ``data``
-    alive), and only the gathered entries, which lie inside their arrays, are ever read.
+    entry of the raw buffer (:attr:`ObsLayout.gathered`) in one numpy call
+    (:func:`~myoexo.model.data_buffer.buffer_gather`).
     """
 
     data: mujoco.MjData
@@ -215,27 +212,7 @@ class DataViews(NamedTuple):
         Raises:
             RuntimeError: If the arrays do not lie in one buffer of ``data.nbuffer`` bytes.
         """
-        fields = [f for f, _ in gathered if f is not None]
-        arrays = {f: getattr(data, f) for f in fields}
-        addrs = {f: a.__array_interface__["data"][0] for f, a in arrays.items()}
-        lowest = min(fields, key=addrs.__getitem__)
-        start = addrs[lowest]
-        end = max(addrs[f] + a.nbytes for f, a in arrays.items())
-        in_one_buffer = end - start <= data.nbuffer and all(
-            a.dtype == np.float64 and a.ndim == 1 and (addrs[f] - start) % 8 == 0
-            for f, a in arrays.items()
-        )
-        if not in_one_buffer:
-            raise RuntimeError(f"MjData arrays {fields} are not in one buffer")
-        buffer = np.lib.stride_tricks.as_strided(
-            arrays[lowest], shape=((end - start) // 8,), strides=(8,), writeable=False
-        )
-        gather_index = np.concatenate(
-            [
-                np.zeros(len(idx), dtype=np.intp) if f is None else (addrs[f] - start) // 8 + idx
-                for f, idx in gathered
-            ]
-        ).astype(np.intp)
+        buffer, gather_index = buffer_gather(data, gathered)
         return cls(data, data.qpos, data.qvel, data.ctrl, data.qfrc_actuator, buffer, gather_index)
 
 

@@ -92,8 +92,9 @@ class EqualityJointTorque:
 
     MuJoCo orders the constraint rows with the equalities first, by equality id (a joint
     equality one row, a connect three, a weld six), so the equality's rows are a fixed slice
-    while every equality is active; :meth:`__call__` checks that slice's id and falls back to
-    a search when it does not match.
+    while every equality is active; :meth:`__call__` checks that (``data.ne``, the equality
+    rows, is the rows of all equalities; in a model with an equality of another type: the
+    slice's first row is this equality's) and falls back to a search when it does not hold.
 
     Args:
         model: The compiled model (dense constraint Jacobian: ``mj_isSparse`` false).
@@ -124,31 +125,54 @@ class EqualityJointTorque:
         if self._rows == 0:
             raise ValueError(f"equality {equality!r} has an unsupported type")
         self._start = sum(self._ROWS.get(int(model.eq_type[e]), 0) for e in range(eid))
+        eq_rows = [self._ROWS.get(int(model.eq_type[e]), 0) for e in range(model.neq)]
+        # the equality rows of a step with every equality active (None: an equality type of
+        # unknown row count, so the slice's first row is checked instead)
+        self._all_rows: int | None = sum(eq_rows) if all(eq_rows) else None
+        self._stop = self._start + self._rows
         self._dofs = joint.dofs
+        # the Jacobian entries of the fixed rows at the joint's DOFs, as indices into the
+        # flat ``efc_J`` (row-major ``nefc x nv``), DOF by DOF: one 1-D index, whose
+        # ``reshape(dofs, rows).T`` is the column-major block a 2-D index gives (the same
+        # layout, so the same BLAS kernel sums it in the same order)
+        rows = np.arange(self._start, self._stop, dtype=np.intp)
+        self._jac_index = (self._dofs[:, None] + rows * self._nv).ravel()
+        self._jac_shape = (len(self._dofs), self._rows)
         # a plain int: comparing a numpy value with MuJoCo's enum costs ~9 us per call
         self._equality_type = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
 
     def rows(self, data: mujoco.MjData) -> slice:
         """The equality's constraint rows in *data* (an empty slice if it is inactive)."""
-        start, stop = self._start, self._start + self._rows
-        if (
-            stop <= data.nefc
-            and data.efc_id.item(start) == self.equality_id
-            and data.efc_type.item(start) == self._equality_type
-        ):
-            return slice(start, stop)
+        if self._at_fixed_rows(data):
+            return slice(self._start, self._stop)
         n = data.nefc
         found = np.flatnonzero(
             (data.efc_type[:n] == self._equality_type) & (data.efc_id[:n] == self.equality_id)
         )
         return slice(int(found[0]), int(found[-1]) + 1) if found.size else slice(0, 0)
 
+    def _at_fixed_rows(self, data: mujoco.MjData) -> bool:
+        """Whether the equality's rows in *data* are the fixed slice ``[start, stop)``."""
+        if self._all_rows is not None:
+            return data.ne == self._all_rows
+        start = self._start
+        return (
+            self._stop <= data.nefc
+            and data.efc_id.item(start) == self.equality_id
+            and data.efc_type.item(start) == self._equality_type
+        )
+
     def __call__(self, data: mujoco.MjData, theta: float) -> float:
         """Torque (Nm, positive along the joint) the equality applies along the joint, from
         *data*'s last computed constraint forces, at joint value *theta* (the angle those
         forces were computed at)."""
-        rows = self.rows(data)
-        if rows.stop == rows.start:
-            return 0.0
-        jac = data.efc_J.reshape(-1, self._nv)[rows, self._dofs]
-        return self.joint.torque_of_dofs(theta, data.efc_force[rows] @ jac)
+        if self._at_fixed_rows(data):
+            jac = data.efc_J[self._jac_index].reshape(self._jac_shape).T
+            force = data.efc_force[self._start : self._stop]
+        else:
+            rows = self.rows(data)
+            if rows.stop == rows.start:
+                return 0.0
+            jac = data.efc_J.reshape(-1, self._nv)[rows, self._dofs]
+            force = data.efc_force[rows]
+        return self.joint.torque_of_dofs(theta, force.dot(jac))

@@ -81,16 +81,48 @@ class MuscleSensors:
         self.optimal_length_m = span / (norm_range[:, 1] - norm_range[:, 0])
         self._inv_l0 = 1.0 / self.optimal_length_m
         self._offset = norm_range[:, 0] - lengthrange[:, 0] * self._inv_l0
+        # entries: actuator length, velocity and force of each muscle, in that order;
+        # record = entries * scale, the lengths plus offset
+        n = len(ids)
+        self._gathered = (
+            ("actuator_length", ids),
+            ("actuator_velocity", ids),
+            ("actuator_force", ids),
+        )
+        self._scale = np.concatenate([self._inv_l0, self._inv_l0, np.full(n, -1.0)])
+        self._slices = (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n))
+
+    def views(self, data: Any) -> tuple[np.ndarray, np.ndarray]:
+        """``(view, index)``: ``view[index]`` are the entries :meth:`record` takes, read from
+        *data* as it stands in one numpy call (:func:`~myoexo.model.data_buffer.buffer_gather`;
+        set up once per ``MjData``)."""
+        from myoexo.model.data_buffer import buffer_gather
+
+        return buffer_gather(data, self._gathered)
+
+    def record(
+        self, entries: np.ndarray, knee_angle_deg: float, knee_vel_rad_s: float
+    ) -> SensoryRecord:
+        """The record of the muscles' actuator lengths, velocities and forces *entries* (one
+        fresh float64 array, ``view[index]`` of :meth:`views`; normalised in place, the
+        record's arrays are views of it), with the given knee state."""
+        entries *= self._scale
+        length, speed, force = self._slices
+        fibre_length = entries[length]
+        fibre_length += self._offset
+        return SensoryRecord(
+            knee_angle_deg,
+            knee_vel_rad_s,
+            fibre_length,
+            entries[speed],
+            entries[force],
+            self.n_flexors,
+        )
 
     def read(self, data: Any, knee_angle_deg: float, knee_vel_rad_s: float) -> SensoryRecord:
         """The record of *data* as it stands, with the given knee state."""
         ids = self.ids
-        inv_l0 = self._inv_l0
-        return SensoryRecord(
-            knee_angle_deg,
-            knee_vel_rad_s,
-            data.actuator_length[ids] * inv_l0 + self._offset,
-            data.actuator_velocity[ids] * inv_l0,
-            -data.actuator_force[ids],
-            self.n_flexors,
+        entries = np.concatenate(
+            (data.actuator_length[ids], data.actuator_velocity[ids], data.actuator_force[ids])
         )
+        return self.record(entries, knee_angle_deg, knee_vel_rad_s)

@@ -201,12 +201,14 @@ class SpindleConstants(NamedTuple):
     ``+1`` for one that flexion lengthens (the extensor term's ``above``), each term is
     ``weight_i (1 + tanh(x_i))`` with ``x_i = slope_i * sensed_i + offset_i``: the first
     half of each array is the angle term on the fibre length, the second the velocity term on
-    the lengthening speed."""
+    the lengthening speed. ``ones``: ones of the arrays' size (adding an array of ones costs
+    numpy less than adding the scalar 1)."""
 
     slope: np.ndarray
     offset: np.ndarray
     weight: np.ndarray
     n_muscles: int
+    ones: np.ndarray
 
 
 def spindle_constants(stretch: StretchConstants, geometry: SpindleGeometry) -> SpindleConstants:
@@ -237,6 +239,7 @@ def spindle_constants(stretch: StretchConstants, geometry: SpindleGeometry) -> S
             ]
         ),
         n_muscles=len(slope),
+        ones=np.ones(2 * len(slope)),
     )
 
 
@@ -270,7 +273,7 @@ class SpindleReflex(StretchReflex):
         x *= c.slope
         x += c.offset
         np.tanh(x, out=x)
-        x += 1.0
+        x += c.ones
         x *= c.weight
         n = c.n_muscles
         return x[:n] + x[n:], memory

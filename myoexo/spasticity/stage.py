@@ -235,7 +235,8 @@ class SpasticityStage:
         self._zeros = np.zeros(len(ids))
         period = float(control_period_s or model.opt.timestep)
         self._delay = DelayLine(round(self.reflex.delay_s / period))
-        self._data_views: tuple | None = None  # (data, qpos, qvel) last seen by apply
+        # (data, qpos, qvel, muscle view, muscle index) of the data apply last read
+        self._data_views: tuple | None = None
         self._model = model
         if period != self._period_s:  # the model's per-step rates follow the period
             self._period_s = period
@@ -335,11 +336,14 @@ class SpasticityStage:
             raise ValueError(f"ctrl has {ctrl.shape[0]} entries, the model {self._nu} actuators.")
         data = env.data
         views = self._data_views
-        if views is None or views[0] is not data:  # its qpos/qvel views, looked up once
-            views = self._data_views = (data, data.qpos, data.qvel)
+        if views is None or views[0] is not data:  # what it reads of the data, set up once
+            views = self._data_views = (data, data.qpos, data.qvel, *self._sensors.views(data))
+        _, qpos, qvel, sensed, sensed_index = views
         record = self._delay.push(
-            self._sensors.read(
-                data, views[1].item(self._qpos_adr) * _RAD_TO_DEG, views[2].item(self._dof_adr)
+            self._sensors.record(
+                sensed[sensed_index],
+                qpos.item(self._qpos_adr) * _RAD_TO_DEG,
+                qvel.item(self._dof_adr),
             )
         )
         theta_deg, vel_rad_s = record.knee_angle_deg, record.knee_vel_rad_s
