@@ -74,19 +74,20 @@ def test_a_selection_run_may_not_use_the_evaluation_root_and_makes_no_result_set
 
 
 # ------------------------------------------------------------- fitting and choosing refused
-def test_the_three_subject_roots_are_distinct_and_their_streams_disjoint():
+def test_the_subject_roots_are_distinct_and_their_streams_disjoint():
+    import itertools
+
     from myoexo.evaluation.config import SUBJECT_ROOTS, subject_seed
 
-    assert sorted(SUBJECT_ROOTS) == ["calibration", "evaluation", "selection"]
-    assert len(set(SUBJECT_ROOTS.values())) == 3
+    assert sorted(SUBJECT_ROOTS) == ["calibration", "evaluation", "recovery", "selection"]
+    assert len(set(SUBJECT_ROOTS.values())) == len(SUBJECT_ROOTS)
     seeds = {
         name: {subject_seed(level, i, root) for level in range(4) for i in range(300)}
         for name, root in SUBJECT_ROOTS.items()
     }
     assert all(len(s) == 1200 for s in seeds.values())
-    assert not (seeds["evaluation"] & seeds["selection"])
-    assert not (seeds["evaluation"] & seeds["calibration"])
-    assert not (seeds["selection"] & seeds["calibration"])
+    for a, b in itertools.combinations(seeds, 2):
+        assert not (seeds[a] & seeds[b]), (a, b)
 
 
 @pytest.mark.parametrize(
