@@ -22,6 +22,10 @@ The method's own test, on subjects of a root nothing else uses (:data:`RECOVERY_
    shipped learned controller) on the subject's true twin and on the fitted twin (the point
    fit, :class:`~myoexo.spasticity.personal.PersonalSubject`), from the same episode seed
    (the same start angle): the final error and the peak interaction torque on each.
+5. *Personalisation* (``--personalise``): on the true twin, the paper's PID against the PID
+   the project's tuner (Ziegler-Nichols, ``myoexo twin tune-pid``) sets on the fitted twin,
+   and, as a control, on the true twin (where the tuner finds no sustained oscillation, the
+   paper's PID is kept).
 
 **Targets** (:data:`TARGETS`): the fitted twin predicts the paper's PID's final error within
 1.5 deg and its peak interaction torque within 10 % for at least 90 % of the subjects; the
@@ -31,10 +35,11 @@ fit's RMS angle error on the stretches is at most van der Krogt et al. 2016's 1.
 **Output** (``--out``): ``subjects.csv`` (one row per subject: truth, fit, errors, the RMS of
 each trace, the predictions), ``parameters.csv`` (each parameter's recovery error by level),
 ``predictions.csv`` (each controller's prediction errors and pass rates by level),
-``recovery.json`` (the summary, the targets and the provenance) and ``recovery.md``. Each
-subject's recordings, fit report and row are kept under ``subjects/`` and a row found there
-is not recomputed, so a stopped run continues where it stopped; the tables are made from the
-rows present (``--summarise-only`` makes them without running anything).
+``personalisation.csv`` (the person's PID against the paper's), ``recovery.json`` (the
+summary, the targets and the provenance) and ``recovery.md``. Each subject's recordings, fit
+report, row and personalisation are kept under ``subjects/`` and what is found there is not
+recomputed, so a stopped run continues where it stopped; the tables are made from the rows
+present (``--summarise-only`` makes them without running anything).
 """
 
 from __future__ import annotations
@@ -407,7 +412,7 @@ def summarise(rows: Sequence[Mapping[str, Any]], settings: RecoverySettings) -> 
                 "van_der_krogt_2016_rms_deg": VAN_DER_KROGT_2016_RMS_DEG[speed],
                 "met": bool(np.all(x <= VAN_DER_KROGT_2016_RMS_DEG[speed])),
             }
-    pid = settings.controllers[0]
+    pid = "pid" if "pid" in settings.controllers else settings.controllers[0]
     share = float(df[f"{pid}_both_within"].mean())
     summary = {
         "subjects": len(df),
