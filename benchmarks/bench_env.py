@@ -36,6 +36,7 @@ import mujoco
 import numpy as np
 
 import myoexo  # noqa: F401  (registers the ids)
+from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import reflex_argument
 
 
@@ -46,7 +47,7 @@ def _snapshot(env) -> mujoco.MjData:
 
 
 def bench(
-    env_id: str, steps: int, repeats: int = 7, block: int = 1, reflex: str = "stretch"
+    env_id: str, steps: int, repeats: int = 7, block: int = 1, reflex: str = DEFAULT_REFLEX
 ) -> dict[str, float]:
     env = gym.make(env_id, reflex=reflex).unwrapped  # the bare env: what a VecEnv worker steps
     model, fs = env.model, env.frame_skip
@@ -144,7 +145,10 @@ def main() -> None:
     parser.add_argument("--block", type=int, default=1, help="steps per timed block")
     parser.add_argument("--env", default="MyoExoKnee-v2")
     parser.add_argument(
-        "--reflex", default="stretch", type=reflex_argument, help="a registered reflex model"
+        "--reflex",
+        default=DEFAULT_REFLEX,
+        type=reflex_argument,
+        help="a registered reflex model (default: the twin's)",
     )
     args = parser.parse_args()
     r = bench(args.env, args.steps, args.repeats, args.block, args.reflex)
