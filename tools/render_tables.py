@@ -119,10 +119,12 @@ class GoalsBlock:
 
 #: Every generated block outside the result sets' own ``tables.md``.
 BLOCKS: tuple[Block | GoalsBlock, ...] = (
+    Block("myoexo/policies/MODEL_CARD.md", "eval_1000_twin3", ("sac",)),
     Block("myoexo/policies/MODEL_CARD.md", "eval_1000", ("guard:sac",)),
     Block("myoexo/policies/MODEL_CARD.md", "eval_1000_perturbed", ("guard:sac",)),
     Block("myoexo/policies/MODEL_CARD.md", "eval_500", ("sac",)),
     Block("myoexo/policies/MODEL_CARD.md", "eval_seeds_100", ("sac_5seeds",)),
+    Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000_twin3", ("student_exo",)),
     Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000", ("student_exo",)),
     Block("myoexo/policies/MODEL_CARD_student_exo.md", "eval_1000_perturbed", ("student_exo",)),
     Block(
