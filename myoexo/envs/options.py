@@ -34,6 +34,7 @@ from myoexo.envs.config import (
 )
 from myoexo.envs.observation import OBS_PRESETS
 from myoexo.runtime.fields import add_options, convert, option, parse_assignments
+from myoexo.runtime.files import file_sha256
 from myoexo.spasticity.personal import PersonalSubject, load_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import get_reflex, reflex_parameters
@@ -251,7 +252,7 @@ class TwinOptions:
             "robustness": self.robustness,
             "gentleness": self.gentleness,
             "subject": self.subject,
-            **({"subject_sha256": _sha256(self.subject)} if self.subject else {}),
+            **({"subject_sha256": file_sha256(self.subject)} if self.subject else {}),
         }
 
     @classmethod
@@ -389,10 +390,3 @@ def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:
     if getattr(args, "reward_weights", None):  # merged into the base's
         changes["reward_weights"] = {**dict(options.reward_weights), **args.reward_weights}
     return options.replace(**changes) if changes else options
-
-
-def _sha256(path: str) -> str:
-    import hashlib
-    from pathlib import Path
-
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

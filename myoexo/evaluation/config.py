@@ -31,7 +31,7 @@ import numpy as np
 from myoexo.control.specs import ControllerSpec, policy_twin, spec_env_kwargs
 from myoexo.envs.options import TwinOptions
 from myoexo.runtime.fields import check_fields, option
-from myoexo.runtime.files import package_versions, write_json_atomic
+from myoexo.runtime.files import file_sha256, package_versions, write_json_atomic
 from myoexo.spasticity.levels import VALID_LEVELS
 
 CONFIG_FILE = "config.json"
@@ -259,14 +259,6 @@ def subject_seed(level: int, index: int, root_seed: int = 0) -> int:
     return int(ss.generate_state(1, dtype=np.uint64)[0])
 
 
-def _file_sha256(path: str) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def write_config(
     out_dir: Path, config: EvaluationConfig, specs: Sequence[ControllerSpec]
 ) -> dict[str, Any]:
@@ -284,11 +276,11 @@ def write_config(
     for spec in specs:
         entry: dict[str, Any] = {"spec": spec.text, "label": spec.label, "kind": spec.kind}
         if spec.kind in ("sb3", "actor") and spec.path:
-            entry["sha256"] = _file_sha256(spec.path)
+            entry["sha256"] = file_sha256(spec.path)
         elif spec.kind == "shipped":  # a re-exported policy is another controller
             from myoexo.policies import shipped_path
 
-            entry["sha256"] = _file_sha256(str(shipped_path(spec.path or "sac")) + ".npz")
+            entry["sha256"] = file_sha256(str(shipped_path(spec.path or "sac")) + ".npz")
         # the twin this controller runs on (the run's, with the controller's observation)
         # and, for a policy, the one it was trained on
         observation = spec_env_kwargs(spec)

@@ -117,6 +117,7 @@ import numpy as np
 
 from myoexo.model.passive_knee import scale_passive_knee
 from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.runtime.files import file_sha256
 from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
 from myoexo.spasticity.personal import PASSIVE_SCALES, from_unit, to_unit
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -388,10 +389,6 @@ def _level_of(targets: Sequence[Target], level: int | None) -> int:
         "no level: give --level L (the recordings carry no synthetic_level and no MAS grade "
         "of 0-3); the level picks the calibration of the reflex the subject is fitted under"
     )
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 # ----------------------------------------------------------------------------- the objective
@@ -720,7 +717,7 @@ def fit_subject(
     targets = read_targets(files)  # a bad file stops here, before anything is written
     level = _level_of(targets, settings.level)
     reflex = reflex_label(settings.reflex)
-    shas = [_sha256(p) for p in files]
+    shas = [file_sha256(p) for p in files]
     names = list(settings.parameters)
     objective = SubjectObjective(targets, level, settings.reflex, settings)
     start_values = objective.start()
