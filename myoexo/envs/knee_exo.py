@@ -330,18 +330,17 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         self.observation_space = self._unbounded_obs_space(obs.size)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
-    def _set_personal(self) -> None:
-        """This episode's person: the personal fit's point or a draw from its uncertainty
-        (from ``np_random``, after the spasticity stage's reset, before the start angle)."""
+    def _set_personal(self) -> dict[str, float]:
+        """Set this episode's person: the personal fit's point or a draw from its uncertainty
+        (from ``np_random``, after the spasticity stage's reset, before the start angle).
+        Returns the passive knee's scales."""
         personal, scaler = self.personal, self._knee_scaler
         assert personal is not None and scaler is not None
         drawn = personal.draw(self.np_random) if self._personal_draws else personal.point()
         subject, stiffness_scale, damping_scale = drawn
         self.spasticity.set_subject(subject)
         scaler.apply(stiffness_scale, damping_scale)
-        record = {k: float(v) for k, v in dataclasses.asdict(subject).items()}
-        record.update(stiffness_scale=stiffness_scale, damping_scale=damping_scale)
-        self._subject = record
+        return {"stiffness_scale": stiffness_scale, "damping_scale": damping_scale}
 
     def _clear_episode_state(self) -> None:
         self._command = 0.0
@@ -590,12 +589,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         mujoco.mj_resetData(self.model, self.data)
         self._clear_episode_state()
         self._run_reset_stages()  # the spasticity stage draws this episode's subject
-        if self.personal is not None:
-            self._set_personal()
-        else:
-            self._subject = {
-                k: float(v) for k, v in dataclasses.asdict(self.spasticity.subject).items()
-            }
+        scales = self._set_personal() if self.personal is not None else {}
+        subject = dataclasses.asdict(self.spasticity.subject)
+        self._subject = {**{k: float(v) for k, v in subject.items()}, **scales}
         noise = self.task.start_angle_noise_deg
         start = self.task.start_angle_deg + float(self.np_random.uniform(-noise, noise))
         if self.robustness is not None and seed is not None:
