@@ -78,6 +78,7 @@ from myoexo.control.impedance import ImpedanceConfig, ImpedanceController
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.policy import GentleController, SB3Controller
 from myoexo.control.protocol import Controller
+from myoexo.control.residual import ResidualConfig, ResidualController
 from myoexo.envs.config import check_gentleness
 from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
@@ -444,9 +445,37 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     if spec.guard or spec.kind not in POLICY_KINDS:
         return controller
     # a loaded shipped policy or exported actor carries its metadata: not read twice
-    metadata = getattr(controller, "metadata", None) if spec.kind != "sb3" else None
-    weight = spec_gentleness(spec, metadata if isinstance(metadata, Mapping) else None)
+    loaded = getattr(controller, "metadata", None) if spec.kind != "sb3" else None
+    metadata = loaded if isinstance(loaded, Mapping) else policy_metadata(spec)
+    controller = with_residual_base(controller, metadata, env)
+    weight = spec_gentleness(spec, metadata)
     return controller if weight is None else GentleController(controller, weight)
+
+
+def with_residual_base(controller: Controller, metadata: Mapping[str, Any], env: Any) -> Controller:
+    """*controller* as it runs: with the base controller its metadata's ``residual`` record
+    names (:class:`~myoexo.control.residual.ResidualController`, built on *env*), or as it
+    is for a policy that commands the exo on its own."""
+    residual = ResidualConfig.from_metadata(metadata)
+    if residual is None:
+        return controller
+    base = build_controller(parse_classical_spec(residual.base, "residual base"), env)
+    return ResidualController(controller, base, residual.scale)
+
+
+def parse_classical_spec(text: str, role: str) -> ControllerSpec:
+    """A classical controller spec (:data:`CLASSICAL_KINDS`) for *role*.
+
+    Raises:
+        ValueError: *text* is no spec, or names a learned policy or the oracle.
+    """
+    spec = parse_controller_spec(text)
+    if spec.kind not in CLASSICAL_KINDS or spec.guard:
+        raise ValueError(
+            f"{role} {text!r} is a {'guarded ' if spec.guard else ''}{spec.kind} controller; "
+            f"accepted: a classical controller spec ({', '.join(CLASSICAL_KINDS)}[:options])"
+        )
+    return spec
 
 
 def _build_plain(spec: ControllerSpec, env: Any) -> Controller:

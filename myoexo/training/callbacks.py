@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from myoexo.control.residual import ResidualConfig
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
@@ -117,12 +118,15 @@ class SmallEvalSpec:
             envs draw their subjects from the training seed, not from these).
         twin: The twin of the evaluation (:class:`~myoexo.envs.options.TwinOptions`: the
             run's own, on the nominal twin: its observation, task and reflex model).
+        residual: The classical controller a residual policy corrects
+            (:class:`~myoexo.control.residual.ResidualConfig`; ``None``: the policy alone).
     """
 
     levels: tuple[int, ...] = VALID_LEVELS
     subjects: int = 2
     root_seed: int = SELECTION_ROOT_SEED
     twin: TwinOptions = field(default_factory=TwinOptions)
+    residual: ResidualConfig | None = None
 
     def __post_init__(self) -> None:
         check_fit_root(self.root_seed, "the periodic evaluation (it scores checkpoints)")
@@ -240,14 +244,19 @@ class PaperMetricsEvalCallback(BaseCallback):
         Raises:
             EvaluationAborted: Training is stopping (the evaluation was given up).
         """
+        from myoexo.control.specs import with_residual_base
         from myoexo.training.export import deterministic_controller
 
         actor = deterministic_controller(self.model)
+        record = {"residual": self.spec.residual.to_dict()} if self.spec.residual else {}
         t0 = time.perf_counter()
         sac = {
-            lv: _level_means(actor, lv, self.spec, self._env(lv), self.stop)
+            lv: _level_means(
+                with_residual_base(actor, record, self._env(lv)), lv, self.spec, self._env(lv),
+                self.stop,
+            )
             for lv in self.spec.levels
-        }
+        }  # fmt: skip
         score = criteria.ranking_score(
             criteria.compare_with_pid(sac, {lv: self._pid[lv] for lv in sac})
         )

@@ -65,6 +65,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.control.residual import ResidualConfig
 from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, get_algorithm
 from myoexo.runtime.fields import FieldError, FieldSpec, check_fields, convert, option
@@ -231,6 +232,16 @@ class TrainConfig:
         0.0, "training wall-time budget, all sessions together (0: none)",
         low=0.0, high=1e7, unit="s",
     )  # fmt: skip
+    residual_base: str = option(
+        "",
+        "residual learning: the classical controller spec the policy corrects, e.g. "
+        "pid:reference=minjerk,ramp_s=0.6 (empty: the policy commands the exo on its own)",
+        metavar="SPEC",
+    )
+    residual_scale: float = option(
+        0.5, "residual learning: largest correction, a fraction of the 100 Nm motor",
+        low=0.0, high=2.0, above=True,
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
@@ -257,6 +268,16 @@ class TrainConfig:
         kwargs = {str(k): typed_kwarg(str(k), v) for k, v in self.algorithm_kwargs.items()}
         object.__setattr__(self, "algorithm_kwargs", kwargs)
         check_fields(self)
+        if self.residual_base:
+            from myoexo.control.specs import parse_classical_spec
+
+            try:
+                parse_classical_spec(self.residual_base, "residual base")
+            except ValueError as exc:
+                raise FieldError(
+                    "TrainConfig", "residual_base", self.residual_base,
+                    f"is not a classical controller spec ({exc})",
+                ) from None  # fmt: skip
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):
                 raise FieldError("TrainConfig", name, (), "is empty")
@@ -372,6 +393,14 @@ class TrainConfig:
             rollout = int(kw["n_steps"]) * self.n_envs
             return int(kw["n_epochs"]) * math.ceil(rollout / int(kw["batch_size"])) / rollout
         return float(kw["gradient_steps"]) / (int(kw["train_freq"]) * self.n_envs)
+
+    @property
+    def residual(self) -> ResidualConfig | None:
+        """The residual record of a policy that corrects a classical controller
+        (:class:`~myoexo.control.residual.ResidualConfig`), ``None`` without one."""
+        if not self.residual_base:
+            return None
+        return ResidualConfig(base=self.residual_base, scale=self.residual_scale)
 
     # -- records ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

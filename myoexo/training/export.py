@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from myoexo.control.residual import RESIDUAL_KEY, ResidualConfig
 from myoexo.envs.options import TwinOptions
 from myoexo.model import recorded_twin_version
 from myoexo.policies.actor import MLPActor, save_actor
@@ -211,6 +212,8 @@ def _checkpoint_parts(
         "checkpoint": f"{run_dir.name}/{ck.CHECKPOINTS_DIR}/{checkpoint.name}",
         "versions": config.get("versions"),
     }
+    if state.get(RESIDUAL_KEY):  # a residual policy: the classical controller it corrects
+        meta[RESIDUAL_KEY] = dict(state[RESIDUAL_KEY])
     return model, vn, meta
 
 
@@ -237,7 +240,18 @@ def load_checkpoint_controller(checkpoint: Path) -> Any:
     """A checkpoint's deterministic policy as a controller with an ``obs_preset``
     (:func:`deterministic_controller`)."""
     model, vn, meta = _checkpoint_parts(checkpoint)
-    return deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
+    controller = deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
+    if ResidualConfig.from_metadata(meta) is None:
+        return controller
+    from myoexo.control.specs import with_residual_base
+    from myoexo.envs import make_env
+
+    twin = TwinOptions.from_dict(meta["twin"])
+    env = make_env(0, **twin.env_kwargs())  # the base controller samples at its period
+    try:
+        return with_residual_base(controller, meta, env)
+    finally:
+        env.close()
 
 
 #: The record ``myoexo policy gentleness`` writes (the default weight and its provenance).

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from myoexo.control.residual import ResidualConfig
 from myoexo.envs.options import TwinOptions
 from myoexo.model import TWIN_VERSION
 from myoexo.policies.algorithms import algorithm_class, get_algorithm
@@ -100,6 +101,7 @@ class _EnvFactory:
     rank: int
     twin: TwinOptions
     in_worker: bool = False  # called in a SubprocVecEnv worker
+    residual: ResidualConfig | None = None  # the classical controller the policy corrects
 
     def __call__(self) -> Any:
         from stable_baselines3.common.monitor import Monitor
@@ -119,7 +121,19 @@ class _EnvFactory:
                 f"env {self.env_id!r} does not take the twin options "
                 f"[{self.twin.describe()}] ({exc})"
             ) from exc
+        if self.residual is not None:
+            env = residual_env(env, self.residual)
         return Monitor(env)
+
+
+def residual_env(env: Any, residual: ResidualConfig) -> Any:
+    """*env* behind :class:`~myoexo.control.residual.ResidualWrapper`: its action corrects
+    the command of the base controller *residual* names (built on *env*)."""
+    from myoexo.control.residual import ResidualWrapper
+    from myoexo.control.specs import build_controller, parse_classical_spec
+
+    base = build_controller(parse_classical_spec(residual.base, "residual base"), env)
+    return ResidualWrapper(env, base, residual.scale)
 
 
 def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
@@ -130,7 +144,8 @@ def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
 
     subproc = config.vec_env == "subproc"
     fns: list[Callable[[], Any]] = [
-        _EnvFactory(config.env_id, i, config.twin, in_worker=subproc) for i in range(config.n_envs)
+        _EnvFactory(config.env_id, i, config.twin, in_worker=subproc, residual=config.residual)
+        for i in range(config.n_envs)
     ]
     venv: Any = DummyVecEnv(fns) if config.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(config.seed if seed is None else seed)
@@ -273,6 +288,7 @@ def _run_callbacks(
             levels=config.eval_levels,
             subjects=config.eval_subjects,
             twin=config.twin.replace(robustness=False),  # on the nominal twin
+            residual=config.residual,
         )
         evaluator = PaperMetricsEvalCallback(
             run_dir, config.eval_every_steps, spec, verbose, stop=stop
@@ -293,6 +309,7 @@ def _run_callbacks(
             "twin_version": TWIN_VERSION,
             "env_id": config.env_id,
             "algorithm": config.algorithm,
+            **({"residual": config.residual.to_dict()} if config.residual else {}),
         },
     )
     return evaluator, checkpointer

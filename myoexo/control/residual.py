@@ -1,0 +1,173 @@
+"""Residual learning on a classical controller: a policy that corrects a PID instead of
+replacing it.
+
+The exo command is the classical controller's plus a learned correction::
+
+    u = clip(u_base + scale x a, -1, 1)
+
+where ``u_base`` is the base controller's command at this step (any classical controller
+spec, e.g. the PID on a 0.6-s minimum-jerk reference, ``pid:reference=minjerk,ramp_s=0.6``)
+and ``a`` in [-1, 1] the policy's action. The policy observes the env's observation (with
+the gentleness weight last, for a policy trained over the gentleness range) followed by
+``u_base``, so it knows what it corrects. An untrained policy (``a`` = 0) is the base
+controller itself: learning starts from a controller that already settles every subject,
+and the correction is bounded by ``scale`` (Johannink et al., "Residual reinforcement
+learning for robot control", ICRA 2019; Silver et al., "Residual policy learning", 2018).
+
+Two halves of one definition, used in training and at run time:
+
+* :class:`ResidualWrapper`: the training env (a gymnasium wrapper around a MyoExoKnee env);
+* :class:`ResidualController`: the same law as a :class:`~myoexo.control.protocol.Controller`
+  around the trained policy, built by :func:`~myoexo.control.specs.build_controller` from the
+  ``residual`` record a policy's metadata carries (:class:`ResidualConfig`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from myoexo.control.protocol import Controller, declared_sensors
+from myoexo.envs.sensors import Measurements, read_sensors
+
+#: Key of the residual record in a policy's metadata (checkpoint state, exported actor).
+RESIDUAL_KEY = "residual"
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """A residual policy's base controller and the reach of its correction.
+
+    Attributes:
+        base: The classical controller spec the policy corrects (``pid[:options]`` or
+            ``impedance[:options]``, :mod:`myoexo.control.specs`).
+        scale: Largest correction, as a fraction of the motor's 100 Nm (the policy's action
+            ``a`` in [-1, 1] adds ``scale x a``), in (0, 2].
+    """
+
+    base: str
+    scale: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.base, str) or not self.base.strip():
+            raise ValueError(f"ResidualConfig.base = {self.base!r} must name a controller spec")
+        if not (math.isfinite(self.scale) and 0.0 < self.scale <= 2.0):
+            raise ValueError(f"ResidualConfig.scale = {self.scale!r} is outside (0, 2]")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The metadata record (:data:`RESIDUAL_KEY`)."""
+        return {"base": self.base, "scale": self.scale}
+
+    @classmethod
+    def from_metadata(cls, metadata: Mapping[str, Any] | None) -> ResidualConfig | None:
+        """The record a policy's metadata carries under :data:`RESIDUAL_KEY` (``None``: a
+        policy that commands the exo on its own)."""
+        record = (metadata or {}).get(RESIDUAL_KEY)
+        if not record:
+            return None
+        return cls(base=str(record["base"]), scale=float(record["scale"]))
+
+
+def residual_command(base_command: float, action: float, scale: float) -> float:
+    """The exo command: ``clip(base_command + scale x action, -1, 1)``."""
+    return min(1.0, max(-1.0, base_command + scale * action))
+
+
+def _base_command(base: Controller, obs: np.ndarray, measurements: Measurements) -> float:
+    return float(np.asarray(base.act(obs, measurements), dtype=np.float64).reshape(-1)[0])
+
+
+class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """A MyoExoKnee env whose action is a correction of *base*'s command.
+
+    The observation gains one last entry, the base controller's command for this step; the
+    action ``a`` in [-1, 1] becomes the exo command ``clip(u_base + scale x a, -1, 1)``. The
+    base controller reads its sensors from the env's ``info`` (:func:`read_sensors`), as
+    :func:`~myoexo.control.rollout.rollout` gives them, and is reset with the env.
+    ``info["base_command"]`` is the base's command of the step just taken.
+
+    Args:
+        env: The env.
+        base: A classical controller (reset with every episode).
+        scale: Reach of the correction (:attr:`ResidualConfig.scale`).
+    """
+
+    def __init__(self, env: gym.Env, base: Controller, scale: float) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, base=base, scale=scale)
+        gym.Wrapper.__init__(self, env)
+        ResidualConfig(base="checked", scale=scale)
+        self.base = base
+        self.scale = float(scale)
+        self._sensors = declared_sensors(base)
+        space = env.observation_space
+        if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
+            raise ValueError(f"ResidualWrapper needs a flat Box observation, got {space}")
+        low = np.append(space.low, -1.0).astype(np.float32)
+        high = np.append(space.high, 1.0).astype(np.float32)
+        self.observation_space = gym.spaces.Box(low=low, high=high, dtype=np.float32)
+        self._base_u = 0.0
+
+    def _observe(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        self._base_u = _base_command(self.base, obs, read_sensors(info, self._sensors))
+        return np.append(obs, self._base_u).astype(np.float32)
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self.base.reset(kwargs.get("seed"))
+        return self._observe(obs, info), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
+        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+        base_u = self._base_u
+        u = np.array([residual_command(base_u, a, self.scale)], dtype=np.float32)
+        obs, reward, terminated, truncated, info = self.env.step(u)
+        info["base_command"] = base_u
+        return self._observe(obs, info), reward, terminated, truncated, info
+
+
+class ResidualController:
+    """A trained residual policy with its base controller: a
+    :class:`~myoexo.control.protocol.Controller` that commands
+    ``clip(u_base + scale x a, -1, 1)``, ``a`` the policy's action on the observation with
+    ``u_base`` appended (what :class:`ResidualWrapper` trained it on).
+
+    Args:
+        controller: The policy (a controller acting on the observation + base command).
+        base: The base controller (the spec its metadata names, built on the same env).
+        scale: Reach of the correction.
+    """
+
+    def __init__(self, controller: Controller, base: Controller, scale: float) -> None:
+        ResidualConfig(base="checked", scale=scale)
+        self.controller = controller
+        self.base = base
+        self.scale = float(scale)
+        #: The sensors the base declares (the policy reads the observation only).
+        self.sensors: frozenset[str] = frozenset(declared_sensors(base)) | frozenset(
+            getattr(controller, "sensors", frozenset())
+        )
+
+    @property
+    def metadata(self) -> Any:
+        """The policy's metadata (its provenance and ``residual`` record)."""
+        return getattr(self.controller, "metadata", None)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the base and the policy."""
+        self.base.reset(seed)
+        self.controller.reset(seed)
+
+    def act(self, obs: np.ndarray, measurements: Measurements) -> np.ndarray:
+        """The base's command plus the policy's bounded correction."""
+        base_u = _base_command(self.base, obs, measurements)
+        a = self.controller.act(np.append(obs, np.float32(base_u)), measurements)
+        a0 = float(np.asarray(a, dtype=np.float64).reshape(-1)[0])
+        return np.array([residual_command(base_u, a0, self.scale)], dtype=np.float32)
+
+    def __repr__(self) -> str:
+        return f"ResidualController({self.controller!r}, base={self.base!r}, scale={self.scale:g})"
