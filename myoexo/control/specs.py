@@ -61,7 +61,9 @@ for a model file. Controllers of one *seed group* (the checkpoints ``myoexo poli
 selected in one folder, a distillation's seed copies: :attr:`ControllerSpec.seed_group`,
 table column ``seed_group``) are one controller of the tables, over seeds and subjects. A
 controller may need its own env (:func:`spec_env_kwargs`: the observation preset a policy was
-trained on).
+trained on). A policy trained to correct a classical controller (``myoexo policy train
+--residual-base SPEC``) runs on top of the base its metadata names
+(:func:`with_residual_base`, :mod:`myoexo.control.residual`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,161 @@
+"""Residual learning on a classical controller: the training wrapper and the run-time
+controller give the same commands, a zero correction is the base controller itself, the
+correction is bounded, and a trained run's record brings its base back at evaluation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from myoexo.control import read_sensors
+from myoexo.control.policy import CallableController, GentleController
+from myoexo.control.residual import (
+    ResidualConfig,
+    ResidualController,
+    ResidualWrapper,
+    residual_command,
+)
+from myoexo.control.specs import build_controller, parse_controller_spec, with_residual_base
+from myoexo.envs import make_env
+from myoexo.runtime.fields import FieldError
+from myoexo.training import get_preset
+
+BASE = "pid:reference=minjerk,ramp_s=0.6"
+
+
+def _base(env):
+    return build_controller(parse_controller_spec(BASE), env)
+
+
+def _knee_trace(env, act, steps=120, seed=4):
+    obs, info = env.reset(seed=seed)
+    knees = []
+    for _ in range(steps):
+        obs, _, _, _, info = env.step(act(obs, info))
+        knees.append(info["knee_angle_deg"])
+    return np.array(knees)
+
+
+def test_zero_correction_is_the_base_controller():
+    """The wrapper with a zero action runs the base PID's trajectory exactly."""
+    env = make_env(2)
+    pid = _base(env)
+    pid.reset(4)
+    plain = _knee_trace(env, lambda obs, info: pid.act(obs, read_sensors(info, pid.sensors)))
+    wrapped_env = ResidualWrapper(make_env(2), _base(env), scale=0.5)
+    zero = np.zeros(1, np.float32)
+    wrapped = _knee_trace(wrapped_env, lambda obs, info: zero)
+    np.testing.assert_array_equal(plain, wrapped)
+
+
+def test_wrapper_observes_the_base_command_and_bounds_the_correction():
+    env = ResidualWrapper(make_env(1, gentleness="random"), _base(make_env(1)), scale=0.3)
+    inner = env.env.observation_space.shape[0]
+    assert env.observation_space.shape == (inner + 1,)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == env.observation_space.shape and obs.dtype == np.float32
+    for _ in range(40):
+        base_u = float(obs[-1])
+        obs, _, _, _, info = env.step(np.ones(1, np.float32))
+        assert info["base_command"] == pytest.approx(base_u)
+        assert info["command"] == pytest.approx(min(1.0, base_u + 0.3), abs=1e-6)
+
+
+def test_controller_and_wrapper_give_the_same_commands():
+    """A policy run through ResidualController commands what the wrapper trained it on: same
+    knee trace for a policy that reads the appended base command."""
+
+    def policy(obs):  # halves the base command, from the last observation entry
+        return np.array([-0.5 * obs[-1] / 0.4], np.float32).clip(-1, 1)
+
+    env = make_env(1)
+    controller = ResidualController(CallableController(policy), _base(env), 0.4)
+    controller.reset(7)
+    run = _knee_trace(env, lambda o, i: controller.act(o, read_sensors(i, controller.sensors)))
+    wrapped_env = ResidualWrapper(make_env(1), _base(env), 0.4)
+    trained = _knee_trace(wrapped_env, lambda o, i: policy(o))
+    np.testing.assert_allclose(run, trained, atol=1e-9)
+
+
+def test_metadata_record_wraps_the_policy_with_its_base():
+    env = make_env(0)
+    zero = CallableController(lambda obs: np.zeros(1))
+    assert with_residual_base(zero, {}, env) is zero
+    wrapped = with_residual_base(zero, {"residual": {"base": BASE, "scale": 0.5}}, env)
+    assert isinstance(wrapped, ResidualController) and wrapped.scale == 0.5
+    assert wrapped.sensors == _base(env).sensors  # the base's knee angle sensor
+    gentle = GentleController(wrapped, 0.25)  # the weight before the base command
+    gentle.reset(0)
+    obs, info = env.reset(seed=0)
+    seen = []
+    wrapped.controller = CallableController(lambda o: seen.append(o.copy()) or np.zeros(1))
+    gentle.act(obs, read_sensors(info, gentle.sensors))
+    assert seen[0].shape == (obs.size + 2,) and seen[0][-2] == np.float32(0.25)
+
+
+def test_residual_command_and_config_bounds():
+    assert residual_command(0.9, 1.0, 0.5) == 1.0
+    assert residual_command(-0.2, -0.5, 0.4) == pytest.approx(-0.4)
+    with pytest.raises(ValueError, match="scale"):
+        ResidualConfig(base=BASE, scale=0.0)
+    assert ResidualConfig.from_metadata({"residual": {"base": BASE, "scale": 0.5}}) == (
+        ResidualConfig(BASE, 0.5)
+    )
+    assert ResidualConfig.from_metadata({"twin": {}}) is None
+
+
+@pytest.mark.parametrize(
+    ("base", "match"),
+    [("sac", "shipped"), ("guard:pid", "guarded"), ("pid:kq=3", "unknown PID option")],
+)
+def test_train_config_refuses_a_base_that_is_not_classical(base, match):
+    with pytest.raises(FieldError, match=match):
+        get_preset("cpu", residual_base=base)
+
+
+def test_train_config_records_the_residual():
+    config = get_preset("cpu", residual_base=BASE, residual_scale=0.25)
+    assert config.residual == ResidualConfig(BASE, 0.25)
+    assert get_preset("cpu").residual is None
+    assert config.to_dict()["residual_base"] == BASE
+
+
+@pytest.mark.slow
+def test_a_residual_run_records_its_base_and_evaluates_with_it(tmp_path):
+    """A short residual run: its checkpoint records the base; the checkpoint's controller
+    and the evaluation spec of its model file both run the policy on top of that base."""
+    from myoexo.training import checkpoints as ck
+    from myoexo.training import train
+    from myoexo.training.export import load_checkpoint_controller
+
+    config = get_preset(
+        "cpu",
+        env_id="MyoExoKneeRandom-v0",
+        episode_duration_s=0.5,
+        total_timesteps=300,
+        n_envs=2,
+        checkpoint_every_s=0.0,
+        checkpoint_every_steps=300,
+        eval_every_steps=300,
+        eval_subjects=1,
+        eval_levels=(1,),
+        gentleness="random",
+        residual_base=BASE,
+        residual_scale=0.5,
+        algorithm_kwargs={"buffer_size": 2_000, "batch_size": 32, "learning_starts": 100},
+    )
+    run_dir = tmp_path / "res"
+    train(config, run_dir, verbose=0)
+    checkpoint = ck.list_checkpoints(run_dir)[-1]
+    assert ck.read_state(checkpoint)["residual"] == {"base": BASE, "scale": 0.5}
+    controller = load_checkpoint_controller(checkpoint)
+    assert isinstance(controller, ResidualController)
+    env = make_env(1, episode_duration_s=0.5)
+    spec = parse_controller_spec(f"{checkpoint / ck.MODEL_FILE}@0.5")
+    built = build_controller(spec, env)
+    assert isinstance(built, GentleController)
+    assert isinstance(built.controller, ResidualController)
+    obs, info = env.reset(seed=1)
+    built.reset(1)
+    action = built.act(obs, read_sensors(info, built.sensors))
+    assert action.shape == (1,) and np.isfinite(action).all()
