@@ -302,11 +302,17 @@ def test_export_policy_cli(tiny_run, tmp_path):
             str(tmp_path / "p.onnx"),
             "--out",
             str(tmp_path / "p"),
+            "--seed-group",
+            "tiny_seeds",
         ]
     )
     assert rc == 0 and (tmp_path / "p.onnx").stat().st_size > 1000
     actor = load_actor(tmp_path / "p")
     assert actor.metadata["num_timesteps"] == 200
+    from myoexo.control import parse_controller_spec
+
+    # the group makes the actor one seed of a controller of the tables
+    assert parse_controller_spec(str(tmp_path / "p.npz")).seed_group == "tiny_seeds"
     assert actor.check_reference() < 1e-5
     with pytest.raises(ValueError, match="no checkpoint at step"):
         ck.resolve_checkpoint(run_dir, "123")

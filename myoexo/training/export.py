@@ -359,6 +359,13 @@ class ExportRun:
         "weight becomes the policy's (a policy trained with --gentleness random)",
         metavar="FILE",
     )
+    seed_group: str | None = option(
+        None,
+        "the seed group the actor is one member of (the training configuration's name): "
+        "the actors of one group, evaluated together, are one controller of the tables, "
+        "with intervals over seeds and subjects",
+        metavar="NAME",
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -389,6 +396,8 @@ def run(args: argparse.Namespace) -> int:
         actor.metadata["selection_root_seed"] = actor.metadata.get("selection_root_seed") or int(
             record["root_seed"]
         )
+    if options.seed_group:
+        actor.metadata["seed_group"] = options.seed_group
     print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")
     if options.onnx:
         print(f"onnx:  {export_onnx(actor, options.onnx)}")
