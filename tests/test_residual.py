@@ -80,8 +80,9 @@ def test_controller_and_wrapper_give_the_same_commands():
 def test_metadata_record_wraps_the_policy_with_its_base():
     env = make_env(0)
     zero = CallableController(lambda obs: np.zeros(1))
-    assert with_residual_base(zero, {}, env) is zero
-    wrapped = with_residual_base(zero, {"residual": {"base": BASE, "scale": 0.5}}, env)
+    assert with_residual_base(zero, ResidualConfig.from_metadata({}), env) is zero
+    record = {"residual": {"base": BASE, "scale": 0.5}}
+    wrapped = with_residual_base(zero, ResidualConfig.from_metadata(record), env)
     assert isinstance(wrapped, ResidualController) and wrapped.scale == 0.5
     assert wrapped.sensors == _base(env).sensors  # the base's knee angle sensor
     gentle = GentleController(wrapped, 0.25)  # the weight before the base command

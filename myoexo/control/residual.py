@@ -38,6 +38,21 @@ from myoexo.envs.sensors import Measurements, read_sensors
 #: Key of the residual record in a policy's metadata (checkpoint state, exported actor).
 RESIDUAL_KEY = "residual"
 
+#: Accepted reach of the correction, ``(low, high]`` as a fraction of the 100 Nm motor.
+RESIDUAL_SCALE_RANGE: tuple[float, float] = (0.0, 2.0)
+
+
+def check_residual_scale(scale: float) -> float:
+    """*scale* as a float in :data:`RESIDUAL_SCALE_RANGE` (``low`` excluded).
+
+    Raises:
+        ValueError: It is not (the message names the value and the range).
+    """
+    low, high = RESIDUAL_SCALE_RANGE
+    if not (math.isfinite(scale) and low < scale <= high):
+        raise ValueError(f"residual scale = {scale!r} is outside ({low:g}, {high:g}]")
+    return float(scale)
+
 
 @dataclass(frozen=True)
 class ResidualConfig:
@@ -56,8 +71,7 @@ class ResidualConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.base, str) or not self.base.strip():
             raise ValueError(f"ResidualConfig.base = {self.base!r} must name a controller spec")
-        if not (math.isfinite(self.scale) and 0.0 < self.scale <= 2.0):
-            raise ValueError(f"ResidualConfig.scale = {self.scale!r} is outside (0, 2]")
+        check_residual_scale(self.scale)
 
     def to_dict(self) -> dict[str, Any]:
         """The metadata record (:data:`RESIDUAL_KEY`)."""
@@ -100,9 +114,8 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, base: Controller, scale: float) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, base=base, scale=scale)
         gym.Wrapper.__init__(self, env)
-        ResidualConfig(base="checked", scale=scale)
         self.base = base
-        self.scale = float(scale)
+        self.scale = check_residual_scale(scale)
         self._sensors = declared_sensors(base)
         space = env.observation_space
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
@@ -143,14 +156,11 @@ class ResidualController:
     """
 
     def __init__(self, controller: Controller, base: Controller, scale: float) -> None:
-        ResidualConfig(base="checked", scale=scale)
         self.controller = controller
         self.base = base
-        self.scale = float(scale)
+        self.scale = check_residual_scale(scale)
         #: The sensors the base declares (the policy reads the observation only).
-        self.sensors: frozenset[str] = frozenset(declared_sensors(base)) | frozenset(
-            getattr(controller, "sensors", frozenset())
-        )
+        self.sensors: frozenset[str] = declared_sensors(base) | declared_sensors(controller)
 
     @property
     def metadata(self) -> Any:

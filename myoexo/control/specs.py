@@ -449,16 +449,18 @@ def build_controller(spec: ControllerSpec, env: Any) -> Controller:
     # a loaded shipped policy or exported actor carries its metadata: not read twice
     loaded = getattr(controller, "metadata", None) if spec.kind != "sb3" else None
     metadata = loaded if isinstance(loaded, Mapping) else policy_metadata(spec)
-    controller = with_residual_base(controller, metadata, env)
+    controller = with_residual_base(controller, ResidualConfig.from_metadata(metadata), env)
     weight = spec_gentleness(spec, metadata)
     return controller if weight is None else GentleController(controller, weight)
 
 
-def with_residual_base(controller: Controller, metadata: Mapping[str, Any], env: Any) -> Controller:
-    """*controller* as it runs: with the base controller its metadata's ``residual`` record
-    names (:class:`~myoexo.control.residual.ResidualController`, built on *env*), or as it
-    is for a policy that commands the exo on its own."""
-    residual = ResidualConfig.from_metadata(metadata)
+def with_residual_base(
+    controller: Controller, residual: ResidualConfig | None, env: Any
+) -> Controller:
+    """*controller* as it runs: on the base controller *residual* names
+    (:class:`~myoexo.control.residual.ResidualController`, the base built on *env*), or as
+    it is without one (``None``: a policy that commands the exo on its own; a policy's record
+    is :meth:`ResidualConfig.from_metadata`)."""
     if residual is None:
         return controller
     base = build_controller(parse_classical_spec(residual.base, "residual base"), env)

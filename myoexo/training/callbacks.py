@@ -248,15 +248,12 @@ class PaperMetricsEvalCallback(BaseCallback):
         from myoexo.training.export import deterministic_controller
 
         actor = deterministic_controller(self.model)
-        record = {"residual": self.spec.residual.to_dict()} if self.spec.residual else {}
         t0 = time.perf_counter()
-        sac = {
-            lv: _level_means(
-                with_residual_base(actor, record, self._env(lv)), lv, self.spec, self._env(lv),
-                self.stop,
-            )
-            for lv in self.spec.levels
-        }  # fmt: skip
+        sac = {}
+        for lv in self.spec.levels:
+            env = self._env(lv)
+            controller = with_residual_base(actor, self.spec.residual, env)
+            sac[lv] = _level_means(controller, lv, self.spec, env, self.stop)
         score = criteria.ranking_score(
             criteria.compare_with_pid(sac, {lv: self._pid[lv] for lv in sac})
         )

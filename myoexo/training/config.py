@@ -65,7 +65,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.control.residual import ResidualConfig
+from myoexo.control.residual import RESIDUAL_SCALE_RANGE, ResidualConfig
 from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, get_algorithm
 from myoexo.runtime.fields import FieldError, FieldSpec, check_fields, convert, option
@@ -240,7 +240,7 @@ class TrainConfig:
     )
     residual_scale: float = option(
         0.5, "residual learning: largest correction, a fraction of the 100 Nm motor",
-        low=0.0, high=2.0, above=True,
+        low=RESIDUAL_SCALE_RANGE[0], high=RESIDUAL_SCALE_RANGE[1], above=True,
     )  # fmt: skip
 
     def __post_init__(self) -> None:

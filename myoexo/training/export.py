@@ -241,7 +241,8 @@ def load_checkpoint_controller(checkpoint: Path) -> Any:
     (:func:`deterministic_controller`)."""
     model, vn, meta = _checkpoint_parts(checkpoint)
     controller = deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
-    if ResidualConfig.from_metadata(meta) is None:
+    residual = ResidualConfig.from_metadata(meta)
+    if residual is None:
         return controller
     from myoexo.control.specs import with_residual_base
     from myoexo.envs import make_env
@@ -249,7 +250,7 @@ def load_checkpoint_controller(checkpoint: Path) -> Any:
     twin = TwinOptions.from_dict(meta["twin"])
     env = make_env(0, **twin.env_kwargs())  # the base controller samples at its period
     try:
-        return with_residual_base(controller, meta, env)
+        return with_residual_base(controller, residual, env)
     finally:
         env.close()
 
