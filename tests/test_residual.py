@@ -94,6 +94,23 @@ def test_metadata_record_wraps_the_policy_with_its_base():
     assert seen[0].shape == (obs.size + 2,) and seen[0][-2] == np.float32(0.25)
 
 
+def test_the_penalty_prices_the_correction_and_leaves_the_trajectory():
+    """With a penalty, the same actions give the same trajectory and a reward lower by
+    ``penalty x a^2`` at every step (reported in ``info``)."""
+    actions = np.random.default_rng(3).uniform(-1, 1, size=(60, 1)).astype(np.float32)
+    runs = []
+    for penalty in (0.0, 2.0):
+        env = ResidualWrapper(make_env(1), _base(make_env(1)), 0.5, penalty=penalty)
+        env.reset(seed=5)
+        steps = [env.step(a) for a in actions]
+        runs.append(steps)
+    for a, plain, priced in zip(actions, *runs, strict=True):
+        np.testing.assert_array_equal(plain[0], priced[0])
+        assert priced[4]["residual_penalty"] == pytest.approx(2.0 * float(a[0]) ** 2)
+        assert plain[1] - priced[1] == pytest.approx(2.0 * float(a[0]) ** 2)
+        assert plain[4]["residual_penalty"] == 0.0
+
+
 def test_residual_command_and_config_bounds():
     assert residual_command(0.9, 1.0, 0.5) == 1.0
     assert residual_command(-0.2, -0.5, 0.4) == pytest.approx(-0.4)
@@ -103,6 +120,11 @@ def test_residual_command_and_config_bounds():
         ResidualConfig(BASE, 0.5)
     )
     assert ResidualConfig.from_metadata({"twin": {}}) is None
+    with pytest.raises(ValueError, match=r"penalty = -1.0 is outside \[0, 100\]"):
+        ResidualConfig(base=BASE, penalty=-1.0)
+    priced = ResidualConfig(BASE, 0.5, penalty=0.5)
+    assert ResidualConfig.from_metadata({"residual": priced.to_dict()}) == priced
+    assert "penalty" not in ResidualConfig(BASE, 0.5).to_dict()  # older records unchanged
 
 
 @pytest.mark.parametrize(
@@ -112,6 +134,13 @@ def test_residual_command_and_config_bounds():
 def test_train_config_refuses_a_base_that_is_not_classical(base, match):
     with pytest.raises(FieldError, match=match):
         get_preset("cpu", residual_base=base)
+
+
+def test_train_config_refuses_a_penalty_without_a_base():
+    with pytest.raises(FieldError, match="no residual_base"):
+        get_preset("cpu", residual_penalty=0.5)
+    config = get_preset("cpu", residual_base=BASE, residual_penalty=0.5)
+    assert config.residual == ResidualConfig(BASE, 0.5, penalty=0.5)
 
 
 def test_train_config_records_the_residual():
@@ -149,8 +178,11 @@ def test_a_residual_run_records_its_base_and_evaluates_with_it(tmp_path):
     train(config, run_dir, verbose=0)
     checkpoint = ck.list_checkpoints(run_dir)[-1]
     assert ck.read_state(checkpoint)["residual"] == {"base": BASE, "scale": 0.5}
-    controller = load_checkpoint_controller(checkpoint)
-    assert isinstance(controller, ResidualController)
+    with pytest.raises(ValueError, match="gentleness range: give the weight"):
+        load_checkpoint_controller(checkpoint)  # trained over the weights: one must be given
+    controller = load_checkpoint_controller(checkpoint, gentleness=0.5)
+    assert isinstance(controller, GentleController) and controller.gentleness == 0.5
+    assert isinstance(controller.controller, ResidualController)
     env = make_env(1, episode_duration_s=0.5)
     spec = parse_controller_spec(f"{checkpoint / ck.MODEL_FILE}@0.5")
     built = build_controller(spec, env)
@@ -160,3 +192,8 @@ def test_a_residual_run_records_its_base_and_evaluates_with_it(tmp_path):
     built.reset(1)
     action = built.act(obs, read_sensors(info, built.sensors))
     assert action.shape == (1,) and np.isfinite(action).all()
+    # the checkpoint's controller at the same weight gives the spec's command (its numpy
+    # actor against the model file's network: equal to float32 rounding)
+    controller.reset(1)
+    command = controller.act(obs, read_sensors(info, built.sensors))
+    np.testing.assert_allclose(command, action, rtol=1e-5, atol=1e-6)

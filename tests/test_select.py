@@ -18,12 +18,16 @@ from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.criteria import Criteria, compare_with_pid, level_means, shortfall
 from myoexo.training import checkpoints as ck
 from myoexo.training.select import (
+    catastrophic_per_level,
+    checkpoint_episodes,
     compare_evaluation,
     evaluate_checkpoint,
     evaluate_pid,
     markdown_table,
     paper_checks,
+    pid_episodes,
     select_checkpoint,
+    selection_key,
 )
 
 METRICS = (
@@ -218,7 +222,7 @@ def crafted_run(tmp_path_factory):
 
 
 def _printed_candidates(text: str) -> list[str]:
-    return re.findall(r"^(step_\d+): shortfall", text, flags=re.MULTILINE)
+    return re.findall(r"^(step_\d+): catastrophic", text, flags=re.MULTILINE)
 
 
 def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_shortfall(
@@ -230,10 +234,11 @@ def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_s
     assert chosen == crafted_run / ck.CHECKPOINTS_DIR / "step_0000000100"
     assert table.index.tolist() == [0]
     assert {"final_error_ok", "peak_ok", "rms_ok", "pass", "peak_reduction_pct"} <= set(table)
+    assert table.catastrophic.tolist() == [0]
     # the table is the comparison of the chosen checkpoint with the PID on the same subject
     pid = evaluate_pid(1, (0,))
     expected = compare_with_pid(evaluate_checkpoint(chosen, 1, (0,)), pid)
-    pd.testing.assert_frame_equal(table, expected)
+    pd.testing.assert_frame_equal(table.drop(columns="catastrophic"), expected)
     idle = compare_with_pid(
         evaluate_checkpoint(crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300", 1, (0,)), pid
     )
@@ -241,6 +246,28 @@ def test_selection_takes_the_newest_and_the_best_scored_and_picks_the_smallest_s
     # a knee left hanging is far from the target: the final-error criterion fails
     assert idle.loc[0, "sac_abs_final_error_deg"] > 30.0
     assert not idle.loc[0, "final_error_ok"] and not idle.loc[0, "pass"]
+    # ... and beyond the catastrophic bound (20 deg, or the PID's worst subject)
+    hanging = checkpoint_episodes(crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300", 1, (0,))
+    assert catastrophic_per_level(hanging, pid_episodes(1, (0,))).tolist() == [1]
+
+
+def test_a_catastrophic_subject_outranks_any_shortfall():
+    """The selection prefers a checkpoint with fewer catastrophic subjects, whatever its
+    shortfall; among equals, the smaller shortfall, then the larger peak reduction."""
+    pid = _means({0: (0.0, 50.0, 100.0), 3: (9.0, 50.0, 100.0)})
+    gentle = compare_with_pid(_means({0: (0.0, 40.0, 80.0), 3: (9.0, 40.0, 80.0)}), pid)
+    rough = compare_with_pid(_means({0: (0.5, 60.0, 120.0), 3: (9.0, 60.0, 120.0)}), pid)
+    assert shortfall(gentle) < shortfall(rough)
+    keys = {
+        "gentle, one catastrophe": selection_key(gentle.assign(catastrophic=[0, 1])),
+        "rough, none": selection_key(rough.assign(catastrophic=[0, 0])),
+        "gentle, none": selection_key(gentle.assign(catastrophic=[0, 0])),
+    }
+    assert sorted(keys, key=keys.__getitem__) == [
+        "gentle, none",
+        "rough, none",
+        "gentle, one catastrophe",
+    ]
 
 
 def test_select_cli_writes_the_chosen_checkpoint_and_its_table(crafted_run, tmp_path, capsys):

@@ -395,6 +395,8 @@ def _assert_newest_checkpoint_acts(run_dir):
     obs, info = env.reset(seed=0)
     action = controller.act(obs, read_sensors(info))
     assert action.shape == (1,) and abs(float(action[0])) <= 1.0
+    with pytest.raises(ValueError, match="not trained with a gentleness weight"):
+        load_checkpoint_controller(ck.list_checkpoints(run_dir)[-1], gentleness=0.5)
 
 
 @pytest.mark.slow

@@ -13,6 +13,9 @@ the gentleness weight last, for a policy trained over the gentleness range) foll
 controller itself: learning starts from a controller that already settles every subject,
 and the correction is bounded by ``scale`` (Johannink et al., "Residual reinforcement
 learning for robot control", ICRA 2019; Silver et al., "Residual policy learning", 2018).
+In training, a ``penalty`` prices the correction itself: the wrapper's reward is the env's
+minus ``penalty x a^2``, so the policy departs from its base only where that pays on the
+task's own terms (0: the env's reward unchanged).
 
 Two halves of one definition, used in training and at run time:
 
@@ -41,6 +44,9 @@ RESIDUAL_KEY = "residual"
 #: Accepted reach of the correction, ``(low, high]`` as a fraction of the 100 Nm motor.
 RESIDUAL_SCALE_RANGE: tuple[float, float] = (0.0, 2.0)
 
+#: Accepted weight of the training penalty on the squared correction, ``[low, high]``.
+RESIDUAL_PENALTY_RANGE: tuple[float, float] = (0.0, 100.0)
+
 
 def check_residual_scale(scale: float) -> float:
     """*scale* as a float in :data:`RESIDUAL_SCALE_RANGE` (``low`` excluded).
@@ -54,6 +60,18 @@ def check_residual_scale(scale: float) -> float:
     return float(scale)
 
 
+def check_residual_penalty(penalty: float) -> float:
+    """*penalty* as a float in :data:`RESIDUAL_PENALTY_RANGE`.
+
+    Raises:
+        ValueError: It is not (the message names the value and the range).
+    """
+    low, high = RESIDUAL_PENALTY_RANGE
+    if not (math.isfinite(penalty) and low <= penalty <= high):
+        raise ValueError(f"residual penalty = {penalty!r} is outside [{low:g}, {high:g}]")
+    return float(penalty)
+
+
 @dataclass(frozen=True)
 class ResidualConfig:
     """A residual policy's base controller and the reach of its correction.
@@ -63,19 +81,26 @@ class ResidualConfig:
             ``impedance[:options]``, :mod:`myoexo.control.specs`).
         scale: Largest correction, as a fraction of the motor's 100 Nm (the policy's action
             ``a`` in [-1, 1] adds ``scale x a``), in (0, 2].
+        penalty: Training only: weight of ``a^2`` subtracted from the reward, in [0, 100]
+            (recorded with the policy as its provenance; the run-time law ignores it).
     """
 
     base: str
     scale: float = 0.5
+    penalty: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, str) or not self.base.strip():
             raise ValueError(f"ResidualConfig.base = {self.base!r} must name a controller spec")
         check_residual_scale(self.scale)
+        check_residual_penalty(self.penalty)
 
     def to_dict(self) -> dict[str, Any]:
-        """The metadata record (:data:`RESIDUAL_KEY`)."""
-        return {"base": self.base, "scale": self.scale}
+        """The metadata record (:data:`RESIDUAL_KEY`; ``penalty`` only when it is not 0)."""
+        record: dict[str, Any] = {"base": self.base, "scale": self.scale}
+        if self.penalty:
+            record["penalty"] = self.penalty
+        return record
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any] | None) -> ResidualConfig | None:
@@ -84,7 +109,11 @@ class ResidualConfig:
         record = (metadata or {}).get(RESIDUAL_KEY)
         if not record:
             return None
-        return cls(base=str(record["base"]), scale=float(record["scale"]))
+        return cls(
+            base=str(record["base"]),
+            scale=float(record["scale"]),
+            penalty=float(record.get("penalty", 0.0)),
+        )
 
 
 def residual_command(base_command: float, action: float, scale: float) -> float:
@@ -102,20 +131,25 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     The observation gains one last entry, the base controller's command for this step; the
     action ``a`` in [-1, 1] becomes the exo command ``clip(u_base + scale x a, -1, 1)``. The
     base controller reads its sensors from the env's ``info`` (:func:`read_sensors`), as
-    :func:`~myoexo.control.rollout.rollout` gives them, and is reset with the env.
-    ``info["base_command"]`` is the base's command of the step just taken.
+    :func:`~myoexo.control.rollout.rollout` gives them, and is reset with the env. The
+    reward is the env's minus ``penalty x a^2``. ``info["base_command"]`` is the base's
+    command of the step just taken, ``info["residual_penalty"]`` the ``penalty x a^2`` the
+    step's reward paid.
 
     Args:
         env: The env.
         base: A classical controller (reset with every episode).
         scale: Reach of the correction (:attr:`ResidualConfig.scale`).
+        penalty: Weight of the squared correction in the reward
+            (:attr:`ResidualConfig.penalty`).
     """
 
-    def __init__(self, env: gym.Env, base: Controller, scale: float) -> None:
-        gym.utils.RecordConstructorArgs.__init__(self, base=base, scale=scale)
+    def __init__(self, env: gym.Env, base: Controller, scale: float, penalty: float = 0.0) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, base=base, scale=scale, penalty=penalty)
         gym.Wrapper.__init__(self, env)
         self.base = base
         self.scale = check_residual_scale(scale)
+        self.penalty = check_residual_penalty(penalty)
         self._sensors = declared_sensors(base)
         space = env.observation_space
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
@@ -140,7 +174,9 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         u = np.array([residual_command(base_u, a, self.scale)], dtype=np.float32)
         obs, reward, terminated, truncated, info = self.env.step(u)
         info["base_command"] = base_u
-        return self._observe(obs, info), reward, terminated, truncated, info
+        paid = self.penalty * a * a
+        info["residual_penalty"] = paid
+        return self._observe(obs, info), float(reward) - paid, terminated, truncated, info
 
 
 class ResidualController:

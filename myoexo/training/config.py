@@ -65,7 +65,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.control.residual import RESIDUAL_SCALE_RANGE, ResidualConfig
+from myoexo.control.residual import RESIDUAL_PENALTY_RANGE, RESIDUAL_SCALE_RANGE, ResidualConfig
 from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, get_algorithm
 from myoexo.runtime.fields import FieldError, FieldSpec, check_fields, convert, option
@@ -242,6 +242,10 @@ class TrainConfig:
         0.5, "residual learning: largest correction, a fraction of the 100 Nm motor",
         low=RESIDUAL_SCALE_RANGE[0], high=RESIDUAL_SCALE_RANGE[1], above=True,
     )  # fmt: skip
+    residual_penalty: float = option(
+        0.0, "residual learning: weight of the squared correction subtracted from the reward",
+        low=RESIDUAL_PENALTY_RANGE[0], high=RESIDUAL_PENALTY_RANGE[1],
+    )  # fmt: skip
 
     def __post_init__(self) -> None:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
@@ -278,6 +282,11 @@ class TrainConfig:
                     "TrainConfig", "residual_base", self.residual_base,
                     f"is not a classical controller spec ({exc})",
                 ) from None  # fmt: skip
+        elif self.residual_penalty:
+            raise FieldError(
+                "TrainConfig", "residual_penalty", self.residual_penalty,
+                "prices a correction, but no residual_base names what it corrects",
+            )  # fmt: skip
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):
                 raise FieldError("TrainConfig", name, (), "is empty")
@@ -400,7 +409,9 @@ class TrainConfig:
         (:class:`~myoexo.control.residual.ResidualConfig`), ``None`` without one."""
         if not self.residual_base:
             return None
-        return ResidualConfig(base=self.residual_base, scale=self.residual_scale)
+        return ResidualConfig(
+            base=self.residual_base, scale=self.residual_scale, penalty=self.residual_penalty
+        )
 
     # -- records ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

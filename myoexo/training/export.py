@@ -236,23 +236,44 @@ def load_checkpoint_actor(
     return actor
 
 
-def load_checkpoint_controller(checkpoint: Path) -> Any:
+def load_checkpoint_controller(checkpoint: Path, gentleness: float | None = None) -> Any:
     """A checkpoint's deterministic policy as a controller with an ``obs_preset``
-    (:func:`deterministic_controller`)."""
+    (:func:`deterministic_controller`), on its residual base if it was trained on one and,
+    if it was trained over the gentleness range, run at weight *gentleness* (the layout of
+    training: ``GentleController(ResidualController(policy))``).
+
+    Raises:
+        ValueError: The policy was trained over the gentleness range and *gentleness* is
+            ``None``, or it was not and *gentleness* is given.
+    """
     model, vn, meta = _checkpoint_parts(checkpoint)
+    gentle = trained_over_gentleness(meta)
+    if gentle and gentleness is None:
+        raise ValueError(
+            f"{checkpoint} was trained over the gentleness range: give the weight it runs at "
+            "(gentleness in [0, 1])"
+        )
+    if not gentle and gentleness is not None:
+        raise ValueError(
+            f"{checkpoint} was not trained with a gentleness weight; got gentleness={gentleness!r}"
+        )
     controller = deterministic_controller(model, vn, meta, name=Path(checkpoint).name)
     residual = ResidualConfig.from_metadata(meta)
-    if residual is None:
-        return controller
-    from myoexo.control.specs import with_residual_base
-    from myoexo.envs import make_env
+    if residual is not None:
+        from myoexo.control.specs import with_residual_base
+        from myoexo.envs import make_env
 
-    twin = TwinOptions.from_dict(meta["twin"])
-    env = make_env(0, **twin.env_kwargs())  # the base controller samples at its period
-    try:
-        return with_residual_base(controller, residual, env)
-    finally:
-        env.close()
+        twin = TwinOptions.from_dict(meta["twin"])
+        env = make_env(0, **twin.env_kwargs())  # the base controller samples at its period
+        try:
+            controller = with_residual_base(controller, residual, env)
+        finally:
+            env.close()
+    if gentleness is None:
+        return controller
+    from myoexo.control.policy import GentleController
+
+    return GentleController(controller, gentleness)
 
 
 #: The record ``myoexo policy gentleness`` writes (the default weight and its provenance).

@@ -212,11 +212,17 @@ def closest_seed(per_seed: Any, metrics: Sequence[str] = tuple(AGGREGATED)) -> i
 
 
 def per_seed_table(
-    out: Path, subjects: int, last: int, top: int, root_seed: int = SELECTION_ROOT_SEED
+    out: Path,
+    subjects: int,
+    last: int,
+    top: int,
+    root_seed: int = SELECTION_ROOT_SEED,
+    gentleness: float | None = None,
 ) -> tuple[Any, dict[int, str]]:
     """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`) and
     its comparison with the PID, one row per seed and level (the evaluation root is refused:
-    the seed shipped from this table is chosen on these subjects)."""
+    the seed shipped from this table is chosen on these subjects). Seeds trained over the
+    gentleness range are selected at weight *gentleness*."""
     import pandas as pd
 
     root_seed = check_fit_root(root_seed, "seed selection")
@@ -234,7 +240,13 @@ def per_seed_table(
     for seed in seeds:
         run_dir = seed_dir(out, seed)
         checkpoint, table = select_checkpoint(
-            run_dir, subjects=subjects, last=last, top=top, root_seed=root_seed, verbose=False
+            run_dir,
+            subjects=subjects,
+            last=last,
+            top=top,
+            root_seed=root_seed,
+            verbose=False,
+            gentleness=gentleness,
         )
         chosen[seed] = str(checkpoint)
         frame = table.reset_index()
@@ -311,7 +323,9 @@ def plot_spread(per_seed: Any, summary: Any) -> Any:
 def aggregate_seeds(args: argparse.Namespace) -> int:
     """``myoexo policy seeds aggregate``."""
     out = Path(args.out)
-    per_seed, chosen = per_seed_table(out, args.subjects, args.last, args.top)
+    per_seed, chosen = per_seed_table(
+        out, args.subjects, args.last, args.top, gentleness=args.gentleness
+    )
     summary = summarize_seeds(per_seed, AGGREGATED)
     ship = closest_seed(per_seed)
     per_seed.to_csv(out / "aggregate_seeds.csv", index=False)

@@ -1,7 +1,10 @@
 """Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
-harness and check the acceptance criteria (:mod:`myoexo.evaluation.criteria`).
+harness on the selection subjects; the fewest catastrophic subjects first, then the
+acceptance criteria (:mod:`myoexo.evaluation.criteria`), then the peak reduction
+(:func:`selection_key`).
 
     myoexo policy select runs/cpu_main --subjects 10 --last 2 --top 4
+    myoexo policy select runs/res/seed_0 --subjects 50 --last 4 --top 4 --gentleness 0
     myoexo policy select results/eval --table    # after `myoexo evaluate`
 """
 
@@ -44,6 +47,14 @@ class SelectionConfig:
         "root seed of the selection subjects (the reported evaluation uses another)",
         low=0,
     )
+    gentleness: float | None = option(
+        None,
+        "the weight a policy trained over the gentleness range is selected at (its default "
+        "weight, from `myoexo policy gentleness`); required for such a policy",
+        low=0.0,
+        high=1.0,
+        metavar="WEIGHT",
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", tuple(sorted(set(self.levels))))
@@ -55,10 +66,11 @@ class SelectionConfig:
         check_fit_root(self.root_seed, "checkpoint selection")
 
 
-def evaluate_pid(
+def pid_episodes(
     subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = SELECTION_ROOT_SEED
 ) -> Any:
-    """Per-level means of the paper's PID on subjects ``0..subjects-1``."""
+    """Episode table (controller ``"pid"``) of the paper's PID on subjects
+    ``0..subjects-1``."""
     import pandas as pd
 
     from myoexo.control import PID
@@ -67,7 +79,38 @@ def evaluate_pid(
 
     pid = PID(dt_s=TaskParams().control_period_s)  # the paper's gains
     tables = [evaluate_controller(pid, lv, subjects, root_seed, label="pid")[0] for lv in levels]
-    return level_means(pd.concat(tables))
+    return pd.concat(tables, ignore_index=True)
+
+
+def evaluate_pid(
+    subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = SELECTION_ROOT_SEED
+) -> Any:
+    """Per-level means of the paper's PID on subjects ``0..subjects-1``."""
+    return level_means(pid_episodes(subjects, levels, root_seed))
+
+
+def checkpoint_episodes(
+    checkpoint: Path,
+    subjects: int,
+    levels: Sequence[int] = VALID_LEVELS,
+    root_seed: int = SELECTION_ROOT_SEED,
+    gentleness: float | None = None,
+) -> Any:
+    """Episode table (controller: the checkpoint's folder name) of a checkpoint's
+    deterministic actor on subjects ``0..subjects-1``; a policy trained over the gentleness
+    range runs at weight *gentleness*
+    (:func:`~myoexo.training.export.load_checkpoint_controller`)."""
+    import pandas as pd
+
+    from myoexo.evaluation import evaluate_controller
+    from myoexo.training.export import load_checkpoint_controller
+
+    controller = load_checkpoint_controller(checkpoint, gentleness)
+    tables = [
+        evaluate_controller(controller, lv, subjects, root_seed, label=checkpoint.name)[0]
+        for lv in levels
+    ]
+    return pd.concat(tables, ignore_index=True)
 
 
 def evaluate_checkpoint(
@@ -75,19 +118,34 @@ def evaluate_checkpoint(
     subjects: int,
     levels: Sequence[int] = VALID_LEVELS,
     root_seed: int = SELECTION_ROOT_SEED,
+    gentleness: float | None = None,
 ) -> Any:
-    """Per-level means of a checkpoint's deterministic actor on subjects ``0..subjects-1``."""
+    """Per-level means of :func:`checkpoint_episodes`."""
+    return level_means(checkpoint_episodes(checkpoint, subjects, levels, root_seed, gentleness))
+
+
+def catastrophic_per_level(episodes: Any, pid: Any) -> Any:
+    """Per level (a pandas Series), the subjects of *episodes* (one controller) that end
+    beyond the catastrophic bound (:func:`~myoexo.evaluation.stats.tail_risk`: 20 deg, or
+    the paper's PID's worst subject at the level in *pid*'s episodes, whichever is
+    larger)."""
     import pandas as pd
 
-    from myoexo.evaluation import evaluate_controller
-    from myoexo.training.export import load_checkpoint_controller
+    from myoexo.evaluation.stats import tail_risk
 
-    controller = load_checkpoint_controller(checkpoint)
-    tables = [
-        evaluate_controller(controller, lv, subjects, root_seed, label=checkpoint.name)[0]
-        for lv in levels
-    ]
-    return level_means(pd.concat(tables))
+    risk = tail_risk(pd.concat([pid, episodes], ignore_index=True), reference="pid")
+    return risk[risk.controller != "pid"].set_index("level").catastrophic
+
+
+def selection_key(table: Any) -> tuple[int, float, float]:
+    """The order of :func:`select_checkpoint` on a :func:`compare_with_pid` table with a
+    ``catastrophic`` column (smaller is better): catastrophic subjects summed over levels,
+    then :func:`shortfall`, then minus the mean peak torque reduction."""
+    return (
+        int(table.catastrophic.sum()),
+        shortfall(table),
+        -float(table.peak_reduction_pct.mean()),
+    )
 
 
 def select_checkpoint(
@@ -98,11 +156,14 @@ def select_checkpoint(
     root_seed: int = SELECTION_ROOT_SEED,
     verbose: bool = True,
     levels: Sequence[int] = VALID_LEVELS,
+    gentleness: float | None = None,
 ) -> tuple[Path, Any]:
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
     score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
-    with the smallest :func:`shortfall` (ties: the largest mean peak torque reduction) with
-    its comparison table.
+    with the fewest catastrophic subjects (:func:`catastrophic_subjects`), then the smallest
+    :func:`shortfall`, then the largest mean peak torque reduction, with its comparison
+    table (its ``catastrophic`` column: the count per level). A policy trained over the
+    gentleness range is selected at weight *gentleness*.
 
     Raises:
         ValueError: *run_dir* holds no checkpoint, or *root_seed* is the evaluation root.
@@ -122,16 +183,20 @@ def select_checkpoint(
             (c for c in ckpts if ck.step_of(c) in scores), key=lambda c: -scores[ck.step_of(c)]
         )
         candidates += [c for c in scored[:top] if c not in candidates]
-    pid = evaluate_pid(subjects, levels, root_seed=root_seed)
+    pid_runs = pid_episodes(subjects, levels, root_seed=root_seed)
+    pid = level_means(pid_runs)
     results = []
     for c in candidates:
-        table = compare_with_pid(evaluate_checkpoint(c, subjects, levels, root_seed=root_seed), pid)
-        key = (shortfall(table), -table.peak_reduction_pct.mean())
+        episodes = checkpoint_episodes(c, subjects, levels, root_seed, gentleness)
+        table = compare_with_pid(level_means(episodes), pid)
+        per_level = catastrophic_per_level(episodes, pid_runs)
+        table["catastrophic"] = per_level.reindex(table.index).fillna(0).astype(int)
+        key = selection_key(table)
         results.append((key, c, table))
         if verbose:
             print(
-                f"{c.name}: shortfall {key[0]:.3f}, mean peak reduction "
-                f"{-key[1]:+.1f} %, |final err| "
+                f"{c.name}: catastrophic {key[0]}, shortfall {key[1]:.3f}, mean peak "
+                f"reduction {-key[2]:+.1f} %, |final err| "
                 + " ".join(f"{v:.2f}" for v in table.sac_abs_final_error_deg),
                 flush=True,
             )
@@ -309,6 +374,7 @@ def run(args: argparse.Namespace) -> int:
             config.top,
             config.root_seed,
             levels=config.levels,
+            gentleness=config.gentleness,
         )
         print(f"chosen: {chosen}")
         print(table.round(2).to_string())

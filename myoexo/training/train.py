@@ -133,7 +133,7 @@ def residual_env(env: Any, residual: ResidualConfig) -> Any:
     from myoexo.control.specs import build_controller, parse_classical_spec
 
     base = build_controller(parse_classical_spec(residual.base, "residual base"), env)
-    return ResidualWrapper(env, base, residual.scale)
+    return ResidualWrapper(env, base, residual.scale, residual.penalty)
 
 
 def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
