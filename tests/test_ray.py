@@ -41,7 +41,10 @@ ORPHAN_TIMEOUT_S = 5.0
 #: Seconds allowed for a run to reach the state where it is killed.
 START_TIMEOUT_S = 120.0
 #: A protocol long enough to be killed half-way (80 PID episodes of 0.5 s).
-LONG_ARGS = ["--controllers", "pid", "--levels", "0", "3", "--subjects", "40"]
+# A run the tests stop early: 800 one-episode chunks, far more than a loaded machine finishes
+# between the first stored chunk and the signal (with 80, a graceful stop that came late met
+# a run already complete, whose table is then written).
+LONG_ARGS = ["--controllers", "pid", "--levels", "0", "3", "--subjects", "400"]
 LONG_ARGS += ["--episode-duration-s", "0.5", "--chunk-size", "1", "--no-progress"]
 ON_PROC = Path("/proc/self/stat").exists()
 ON_LINUX = pytest.mark.skipif(not ON_PROC, reason="needs /proc")
