@@ -463,8 +463,14 @@ def with_residual_base(
     is :meth:`ResidualConfig.from_metadata`)."""
     if residual is None:
         return controller
-    base = build_controller(parse_classical_spec(residual.base, "residual base"), env)
-    return ResidualController(controller, base, residual.scale)
+    return ResidualController(controller, residual_base(residual, env), residual.scale)
+
+
+def residual_base(residual: ResidualConfig, env: Any) -> Controller:
+    """The base controller *residual* names, built on *env* (what
+    :class:`~myoexo.control.residual.ResidualWrapper` trains on and
+    :class:`~myoexo.control.residual.ResidualController` runs on)."""
+    return build_controller(parse_classical_spec(residual.base, "residual base"), env)
 
 
 def parse_classical_spec(text: str, role: str) -> ControllerSpec:

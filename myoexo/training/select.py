@@ -66,20 +66,31 @@ class SelectionConfig:
         check_fit_root(self.root_seed, "checkpoint selection")
 
 
+def _episodes(
+    controller: Any, label: str, subjects: int, levels: Sequence[int], root_seed: int
+) -> Any:
+    """Episode table of *controller* (column ``controller`` = *label*) on subjects
+    ``0..subjects-1`` of each level."""
+    import pandas as pd
+
+    from myoexo.evaluation import evaluate_controller
+
+    tables = [
+        evaluate_controller(controller, lv, subjects, root_seed, label=label)[0] for lv in levels
+    ]
+    return pd.concat(tables, ignore_index=True)
+
+
 def pid_episodes(
     subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = SELECTION_ROOT_SEED
 ) -> Any:
     """Episode table (controller ``"pid"``) of the paper's PID on subjects
     ``0..subjects-1``."""
-    import pandas as pd
-
     from myoexo.control import PID
     from myoexo.envs import TaskParams
-    from myoexo.evaluation import evaluate_controller
 
     pid = PID(dt_s=TaskParams().control_period_s)  # the paper's gains
-    tables = [evaluate_controller(pid, lv, subjects, root_seed, label="pid")[0] for lv in levels]
-    return pd.concat(tables, ignore_index=True)
+    return _episodes(pid, "pid", subjects, levels, root_seed)
 
 
 def evaluate_pid(
@@ -100,17 +111,10 @@ def checkpoint_episodes(
     deterministic actor on subjects ``0..subjects-1``; a policy trained over the gentleness
     range runs at weight *gentleness*
     (:func:`~myoexo.training.export.load_checkpoint_controller`)."""
-    import pandas as pd
-
-    from myoexo.evaluation import evaluate_controller
     from myoexo.training.export import load_checkpoint_controller
 
     controller = load_checkpoint_controller(checkpoint, gentleness)
-    tables = [
-        evaluate_controller(controller, lv, subjects, root_seed, label=checkpoint.name)[0]
-        for lv in levels
-    ]
-    return pd.concat(tables, ignore_index=True)
+    return _episodes(controller, checkpoint.name, subjects, levels, root_seed)
 
 
 def evaluate_checkpoint(
@@ -160,7 +164,7 @@ def select_checkpoint(
 ) -> tuple[Path, Any]:
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
     score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
-    with the fewest catastrophic subjects (:func:`catastrophic_subjects`), then the smallest
+    with the fewest catastrophic subjects (:func:`catastrophic_per_level`), then the smallest
     :func:`shortfall`, then the largest mean peak torque reduction, with its comparison
     table (its ``catastrophic`` column: the count per level). A policy trained over the
     gentleness range is selected at weight *gentleness*.

@@ -130,10 +130,9 @@ def residual_env(env: Any, residual: ResidualConfig) -> Any:
     """*env* behind :class:`~myoexo.control.residual.ResidualWrapper`: its action corrects
     the command of the base controller *residual* names (built on *env*)."""
     from myoexo.control.residual import ResidualWrapper
-    from myoexo.control.specs import build_controller, parse_classical_spec
+    from myoexo.control.specs import residual_base
 
-    base = build_controller(parse_classical_spec(residual.base, "residual base"), env)
-    return ResidualWrapper(env, base, residual.scale, residual.penalty)
+    return ResidualWrapper(env, residual_base(residual, env), residual.scale, residual.penalty)
 
 
 def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
