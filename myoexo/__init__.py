@@ -20,11 +20,12 @@ command line, :mod:`myoexo.cli`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from myoexo.envs.registration import ENV_LEVELS, make_env, register_envs
 
 if TYPE_CHECKING:
+    from myoexo.control import Controller
     from myoexo.policies.actor import MLPActor
     from myoexo.policies.student import StudentController
 
@@ -34,21 +35,43 @@ __all__ = ["ENV_LEVELS", "__version__", "load_policy", "make_env", "register_env
 register_envs()
 
 
-def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentController:
+def load_policy(
+    name: str = "sac", env: Any = None, check: bool = True
+) -> MLPActor | StudentController | Controller:
     """A policy shipped with the package, by name: ``"sac"`` (the twin's full state,
-    default) or ``"student_exo"`` (the exoskeleton's own sensors with memory: deployable).
+    default), ``"student_exo"`` (the exoskeleton's own sensors with memory: deployable) or
+    ``"residual"`` (a correction on the minimum-jerk PID, trained on the current twin, with a
+    gentleness weight).
+
+    With *env*, the controller as it runs there (what ``myoexo evaluate --controllers NAME``
+    runs): a residual policy on its base controller built on *env*, a policy trained over the
+    gentleness range at its default weight (``"residual@0.5"``: at 0.5). Without, the stored
+    actor; a residual policy is refused there, since its actor alone is only the correction.
 
     Args:
         name: A name of :data:`myoexo.policies.SHIPPED_POLICIES` (or a file stem inside
-            ``myoexo/policies/``).
+            ``myoexo/policies/``); with *env*, any ``myoexo evaluate`` controller spec.
+        env: The env the controller will run on (its base controller is built on it).
         check: Replay the reference (observation, action) pairs stored at export time and
             raise ``ValueError`` if the loaded actor disagrees.
 
     Raises:
         FileNotFoundError: No such shipped policy (the message lists the names).
+        ValueError: A residual policy named without *env*.
 
     See :func:`myoexo.policies.load_policy` and the model cards in ``myoexo/policies/``.
     """
+    if env is not None:
+        from myoexo.control import build_controller, parse_controller_spec
+
+        return build_controller(parse_controller_spec(name), env)
     from myoexo.policies import load_policy as _load
 
-    return _load(name, check=check)
+    policy = _load(name, check=check)
+    base = (getattr(policy, "metadata", None) or {}).get("residual")
+    if base:
+        raise ValueError(
+            f"the policy {name!r} is a correction on the controller {base['base']!r}: pass the "
+            f"env it runs on, myoexo.load_policy({name!r}, env), for the controller as it runs"
+        )
+    return policy

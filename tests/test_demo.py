@@ -20,6 +20,7 @@ def test_the_default_demo_runs_the_shipped_controllers_against_the_papers_pid():
         "pid",
         "pid:ramp_s=1",
         "impedance",
+        "residual",
         "sac",
         "guard:sac",
         "student_exo",

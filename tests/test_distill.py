@@ -466,3 +466,126 @@ def test_ship_students_picks_a_typical_seed_and_groups_the_copies(tmp_path):
     copies = sorted((tmp_path / "copies").glob("*.npz"))
     assert [p.stem for p in copies] == [f"student_3seeds-seed_{s}-round_00" for s in (0, 1, 2)]
     assert {parse_controller_spec(str(p)).seed_group for p in copies} == {"student_3seeds"}
+
+
+def test_a_residual_teacher_labels_what_it_commands_on_its_base():
+    """`--teacher residual`: the expert runs the shipped residual policy on its base (the
+    minimum-jerk PID, reading its sensors from the step's info) at its default weight, so its
+    labels along an episode it drives are the commands `myoexo.load_policy("residual", env)`
+    gives on the same episode."""
+    import myoexo
+    from myoexo.control.rollout import rollout
+    from myoexo.envs import make_env
+    from myoexo.studies.distill import Expert, collect_episode, load_teacher, teacher_controller
+
+    env = make_env(1, episode_duration_s=0.5)
+    try:
+        actor = load_teacher("residual")
+        assert teacher_controller("sac", load_teacher("sac"), env) is None  # a plain actor
+        expert = Expert(actor, controller=teacher_controller("residual", actor, env))
+        rng = np.random.default_rng(0)
+        _, labels, _ = collect_episode(env, expert, None, 7, 1.0, rng)
+        commands = rollout(env, myoexo.load_policy("residual", env), seed=7).signals["command"]
+    finally:
+        env.close()
+    assert labels.size == 50
+    applied = np.asarray(commands, np.float32)[1:]  # the signals start with the reset's record
+    np.testing.assert_allclose(labels, applied[: labels.size], atol=1e-6)
+    with pytest.raises(ValueError, match="needs the step's info"):
+        expert(np.zeros(actor.obs_dim - 1))
+
+
+def _weighted_student(n_frames: int = 4, stride: int = 2, seed: int = 0) -> StudentController:
+    """A random student that takes the gentleness weight as its last input."""
+    rng = np.random.default_rng(seed)
+    dims = [n_frames * FRAME_DIM + 1, 16, 16, 1]
+    weights = [
+        (rng.normal(0, 1 / math.sqrt(i), (o, i)), rng.normal(0, 0.1, o))
+        for i, o in itertools.pairwise(dims)
+    ]
+    weights[0][0][:, -1] = 3.0  # the weight moves the command
+    actor = MLPActor(
+        weights, activation="elu", obs_mean=np.zeros(dims[0]), obs_var=np.ones(dims[0])
+    )
+    return StudentController(actor, n_frames=n_frames, stride=stride, gentleness_input=True)
+
+
+def test_a_student_reads_its_gentleness_weight_last_and_keeps_it_through_its_files(
+    tmp_path, env_exo
+):
+    student = _weighted_student()
+    obs = _episode_obs(env_exo, seed=0, steps=3)
+    actions = {}
+    for w in (0.0, 1.0):
+        student.reset()
+        actions[w] = [float(student.act(np.append(o, w))[0]) for o in obs]
+    assert actions[0.0] != actions[1.0]
+    with pytest.raises(ValueError, match="observation of size 18"):
+        student.act(obs[0])  # the weight is missing
+    save_student(student, tmp_path / "w")
+    assert json.loads((tmp_path / "w.json").read_text())["student"]["gentleness_input"] is True
+    loaded = load_student(tmp_path / "w")
+    assert loaded.gentleness_input
+    loaded.reset()
+    assert [float(loaded.act(np.append(o, 1.0))[0]) for o in obs] == pytest.approx(
+        actions[1.0], abs=1e-5
+    )
+
+
+def test_onnx_parity_with_the_gentleness_weight_as_an_input(tmp_path, env_exo):
+    ort = pytest.importorskip("onnxruntime")
+    student = _weighted_student()
+    export_student_onnx(student, tmp_path / "w.onnx")
+    sess = ort.InferenceSession(str(tmp_path / "w.onnx"), providers=["CPUExecutionProvider"])
+    assert [i.name for i in sess.get_inputs()] == ["frame", "memory", "gentleness"]
+    worst = 0.0
+    for w in (0.0, 0.4, 1.0):
+        student.reset()
+        memory = None
+        for obs in _episode_obs(env_exo, seed=1, steps=12):
+            frame = student.frame(np.append(obs, w)).astype(np.float32)
+            if memory is None:
+                memory = student.initial_memory(frame)[None]
+            weight = np.array([[w]], np.float32)
+            action, memory = sess.run(
+                None, {"frame": frame[None], "memory": memory, "gentleness": weight}
+            )
+            worst = max(worst, float(np.max(np.abs(action[0] - student.act(np.append(obs, w))))))
+    assert worst <= 1e-5
+
+
+def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_path):
+    """`--teacher residual --gentleness-input`: each episode's weight is drawn and stored
+    with its steps; the student records the teacher's default weight and runs, as any
+    gentleness-trained policy, behind a GentleController (`STUDENT.npz@W`)."""
+    from myoexo.control.policy import GentleController
+    from myoexo.control.specs import build_controller, parse_controller_spec
+    from myoexo.envs import make_env
+    from myoexo.envs.options import TwinOptions
+    from myoexo.studies.distill import DistillConfig, Episodes, distill
+
+    short = TwinOptions().replace(episode_duration_s=0.2)
+    tiny = dict(rounds=2, episodes_per_round=3, levels=(1,), n_frames=3, stride=1, hidden=(8,))
+    tiny.update(epochs_first=1, epochs=1, selection_subjects=1, twin=short)
+    with pytest.raises(ValueError, match="not trained over the gentleness range"):
+        distill(DistillConfig(gentleness_input=True, **tiny), tmp_path / "sac", log=print)
+    cfg = DistillConfig(teacher="residual", gentleness_input=True, **tiny)
+    distill(cfg, tmp_path / "run", log=lambda m: None)
+    data = Episodes.load(tmp_path / "run" / "dataset.npz")
+    per_episode = data.step_weights[data.starts]
+    assert len(set(per_episode.tolist())) == per_episode.size  # one draw per episode
+    assert np.all((per_episode >= 0.0) & (per_episode <= 1.0))
+    student = load_student(tmp_path / "run" / "student")
+    assert student.gentleness_input and student.metadata["default_gentleness"] == 0.0
+    env = make_env(1, obs_preset="exo")
+    try:
+        at_default = build_controller(
+            parse_controller_spec(str(tmp_path / "run" / "student.npz")), env
+        )
+        at_half = build_controller(
+            parse_controller_spec(str(tmp_path / "run" / "student.npz") + "@0.5"), env
+        )
+    finally:
+        env.close()
+    assert isinstance(at_default, GentleController) and at_default.gentleness == 0.0
+    assert isinstance(at_half, GentleController) and at_half.gentleness == 0.5

@@ -197,3 +197,62 @@ def test_a_residual_run_records_its_base_and_evaluates_with_it(tmp_path):
     controller.reset(1)
     command = controller.act(obs, read_sensors(info, built.sensors))
     np.testing.assert_allclose(command, action, rtol=1e-5, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------- shipped
+def test_the_shipped_residual_policy_is_refused_without_the_env_it_runs_on():
+    import myoexo
+
+    with pytest.raises(ValueError, match=r"pid:reference=minjerk,ramp_s=0\.6.*load_policy"):
+        myoexo.load_policy("residual")
+
+
+def test_the_shipped_residual_policy_records_how_it_was_chosen():
+    from myoexo.model import TWIN_VERSION
+    from myoexo.policies import load_policy
+
+    actor = load_policy("residual")
+    meta = actor.metadata
+    assert meta["residual"] == {"base": "pid:reference=minjerk,ramp_s=0.6", "scale": 0.5}
+    assert meta["ship_seed"] in meta["training_seeds"] and len(meta["training_seeds"]) == 5
+    assert "closest_seed" in meta["ship_rule"]
+    assert meta["default_gentleness"] == 0.0
+    assert meta["twin_version"] == TWIN_VERSION  # trained on the default twin
+    assert meta["selection_root_seed"] == 1
+    assert actor.check_reference() < 1e-5
+
+
+def test_the_shipped_residual_policy_runs_on_its_base_at_its_weight():
+    import myoexo
+
+    env = make_env(1)
+    try:
+        controller = myoexo.load_policy("residual", env)
+        gentle = myoexo.load_policy("residual@0.5", env)
+    finally:
+        env.close()
+    assert isinstance(controller, GentleController) and controller.gentleness == 0.0
+    assert isinstance(gentle, GentleController) and gentle.gentleness == 0.5
+    inner = controller.controller
+    assert isinstance(inner, ResidualController) and inner.scale == 0.5
+    assert inner.base.config.reference == "minjerk" and inner.base.config.ramp_s == 0.6
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_the_shipped_residual_policy_reaches_the_target_at_levels_0_and_1(level):
+    """Its card: within 1 deg at levels 0-1 (0.01-0.02 deg over 1000 subjects); two subjects
+    (env seeds 3 and 4), full 8-s episodes from 90 deg."""
+    import myoexo
+    from myoexo.control.rollout import rollout
+
+    env = make_env(level)
+    try:
+        controller = myoexo.load_policy("residual", env)
+        for seed in (3, 4):
+            episode = rollout(env, controller, seed=seed)
+            assert not episode.unstable
+            error_deg = episode.signals["error_deg"]
+            assert abs(error_deg[0]) > 75.0
+            assert abs(error_deg[-1]) < 1.0, (level, seed, error_deg[-1])
+    finally:
+        env.close()

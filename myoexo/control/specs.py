@@ -33,6 +33,9 @@ spec                               controller
 ``student_exo``                    the deployable controller: the exo's own sensors, a
                                    memory of 10 frames, no clock (``load_policy
                                    ("student_exo")``, env ``obs_preset="exo"``)
+``residual``                       the shipped correction on the minimum-jerk PID, trained
+                                   on the current twin over the gentleness range (its
+                                   default weight; ``residual@0.5`` at another)
 ``oracle``                         sampling-based MPC on a copy of the twin (true state):
                                    the achievable bound (:mod:`myoexo.control.oracle`);
                                    options ``samples``, ``horizon_s``, ``replan``, ``iters``
@@ -396,11 +399,13 @@ def pid_config(options: dict[str, Any]) -> PIDConfig:
 
 
 def load_shipped_policy(name: str = "sac") -> Any:
-    """``myoexo.load_policy(name)``, or :class:`PolicyUnavailableError` saying why not."""
+    """The shipped policy *name* as stored (:func:`myoexo.policies.load_policy`: a residual
+    policy's correction alone, which :func:`build_controller` puts on its base), or
+    :class:`PolicyUnavailableError` saying why not."""
     try:
-        import myoexo
+        from myoexo.policies import load_policy
 
-        return myoexo.load_policy(name)
+        return load_policy(name)
     except (ImportError, FileNotFoundError, OSError, AttributeError) as exc:
         raise PolicyUnavailableError(
             f"the shipped policy {name!r} is not available ({type(exc).__name__}: {exc})"

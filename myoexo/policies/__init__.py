@@ -12,6 +12,12 @@ name             files (``<stem>.npz/json``)  observation
                                               memory of the last 10 frames, no clock:
                                               deployable; distilled from ``sac``;
                                               ``MODEL_CARD_student_exo.md``
+``residual``     ``residual_knee_exo``        ``obs_preset="full"`` and a gentleness weight: a
+                                              correction on the minimum-jerk PID, trained on
+                                              the current twin (version 3); it runs on its
+                                              base, built on an env
+                                              (``myoexo.load_policy("residual", env)``);
+                                              ``MODEL_CARD_residual.md``
 ===============  ===========================  ==================================================
 
 ``sac_exo`` (the exoskeleton's sensors plus an episode clock) is retired: it read a clock a
@@ -55,6 +61,7 @@ SHIPPED_POLICY = "sac_knee_exo"
 SHIPPED_POLICIES: dict[str, str] = {
     "sac": SHIPPED_POLICY,
     "student_exo": "student_exo",
+    "residual": "residual_knee_exo",
 }
 
 __all__ = [
@@ -81,8 +88,9 @@ def load_policy(name: str = "sac", check: bool = True) -> MLPActor | StudentCont
     Args:
         name: ``"sac"`` (full-state observation), ``"student_exo"`` (the exoskeleton's own sensors
             with a memory of 10 frames, no clock: deployable; a
-            :class:`~myoexo.policies.student.StudentController`), or a file stem inside
-            ``myoexo/policies/``.
+            :class:`~myoexo.policies.student.StudentController`), ``"residual"`` (the
+            correction alone, as stored: :func:`myoexo.load_policy` with an env puts it on
+            its base), or a file stem inside ``myoexo/policies/``.
         check: Replay the reference (observation, action) pairs stored at export time and
             raise ``ValueError`` if the loaded actor disagrees (corrupted or edited files).
 

@@ -130,6 +130,10 @@ class StudentController:
         obs_keys: Layout of the observation vector ``act`` receives (default: the env's
             ``obs_preset="exo"``); :meth:`bind` sets it from an env.
         metadata: Provenance (training run, teacher, dataset, ...).
+        gentleness_input: The network takes the gentleness weight as its last input: the
+            last entry of the observation ``act`` receives (what
+            :class:`~myoexo.control.policy.GentleController` appends), not stored in the
+            memory.
     """
 
     def __init__(
@@ -139,14 +143,18 @@ class StudentController:
         stride: int = 1,
         obs_keys: Sequence[str] = EXO_PRESET_KEYS,
         metadata: Mapping[str, Any] | None = None,
+        gentleness_input: bool = False,
     ) -> None:
         if n_frames < 1 or stride < 1:
             raise ValueError(f"n_frames = {n_frames}, stride = {stride} must be >= 1")
-        if actor.obs_dim != n_frames * FRAME_DIM:
+        extra = int(bool(gentleness_input))
+        if actor.obs_dim != n_frames * FRAME_DIM + extra:
             raise ValueError(
                 f"actor input {actor.obs_dim} != n_frames {n_frames} x frame size {FRAME_DIM}"
+                + (" + the gentleness weight" if extra else "")
             )
         self.actor = actor
+        self.gentleness_input = bool(gentleness_input)
         self.n_frames = int(n_frames)
         self.stride = int(stride)
         self.history = history_length(n_frames, stride)
@@ -165,7 +173,9 @@ class StudentController:
         self._idx = frame_indices(self.obs_keys)
         # the vector's size when every key's size is known (exo preset): checked in act()
         known = all(k in KEY_SIZES for k in self.obs_keys)
-        self._obs_size = sum(KEY_SIZES[k] for k in self.obs_keys) if known else None
+        self._obs_size = (
+            sum(KEY_SIZES[k] for k in self.obs_keys) + int(self.gentleness_input) if known else None
+        )
         return self
 
     def bind(self, env: Any) -> StudentController:
@@ -220,12 +230,16 @@ class StudentController:
 
     def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """One decision: push this observation's frame, return the command ``(1,)`` float32
-        in [-1, 1]. ``measurements`` is not read: the exo's sensors are in the frame."""
+        in [-1, 1]. ``measurements`` is not read: the exo's sensors are in the frame (and,
+        with :attr:`gentleness_input`, the weight is the observation's last entry)."""
         del measurements
         frame = self.frame(obs)
         if not np.isfinite(frame).all():
             raise ValueError(f"non-finite exo sensor reading {frame.tolist()}")
-        action = self.actor(self.push(frame))
+        x = self.push(frame)
+        if self.gentleness_input:
+            x = np.append(x, float(np.asarray(obs).reshape(-1)[-1]))
+        action = self.actor(x)
         if not np.isfinite(action).all():
             raise ValueError(f"the student returned a non-finite action {action.tolist()}")
         return np.clip(action, -1.0, 1.0).astype(np.float32)
@@ -233,8 +247,11 @@ class StudentController:
     # ------------------------------------------------------------------ torch / ONNX
     def to_torch(self) -> Any:
         """The whole controller as a torch module: ``(frame (B, FRAME_DIM), memory (B,
-        history - 1, FRAME_DIM)) -> (action (B, 1), new memory)``; memory oldest first."""
-        return _torch_student_class()(self.actor.to_torch(), self.n_frames, self.stride)
+        history - 1, FRAME_DIM)[, gentleness (B, 1)]) -> (action (B, 1), new memory)``;
+        memory oldest first; the weight with :attr:`gentleness_input`."""
+        return _torch_student_class(self.gentleness_input)(
+            self.actor.to_torch(), self.n_frames, self.stride
+        )
 
     def initial_memory(self, frame: np.ndarray) -> np.ndarray:
         """Memory (``history - 1`` frames) an episode's first step sees: its frame repeated
@@ -243,7 +260,7 @@ class StudentController:
         return np.repeat(f, self.history - 1, axis=0)
 
 
-def _torch_student_class() -> type:
+def _torch_student_class(gentleness_input: bool = False) -> type:
     import torch
     from torch import nn
 
@@ -268,14 +285,25 @@ def _torch_student_class() -> type:
             action = torch.clamp(self.actor(x), -1.0, 1.0)
             return action, full[:, 1:, :]
 
-    return _TorchStudent
+    class _TorchGentleStudent(_TorchStudent):
+        def forward(  # type: ignore[override]
+            self, frame: torch.Tensor, memory: torch.Tensor, gentleness: torch.Tensor
+        ) -> tuple[torch.Tensor, torch.Tensor]:
+            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)
+            x = torch.index_select(full, 1, self.select).flatten(1)
+            action = torch.clamp(self.actor(torch.cat([x, gentleness], dim=1)), -1.0, 1.0)
+            return action, full[:, 1:, :]
+
+    return _TorchGentleStudent if gentleness_input else _TorchStudent
 
 
 def export_student_onnx(student: StudentController, path: str | Path, opset: int = 17) -> Path:
-    """Write the controller as ONNX: inputs ``frame`` (batch, FRAME_DIM) float32 and
-    ``memory`` (batch, history - 1, FRAME_DIM), outputs ``action`` (batch, 1) and
-    ``memory_out`` (the memory for the next step). At an episode's first step, memory is
-    that step's frame repeated (:meth:`StudentController.initial_memory`)."""
+    """Write the controller as ONNX: inputs ``frame`` (batch, FRAME_DIM) float32,
+    ``memory`` (batch, history - 1, FRAME_DIM) and, for a student with
+    :attr:`~StudentController.gentleness_input`, ``gentleness`` (batch, 1), the weight in
+    [0, 1]; outputs ``action`` (batch, 1) and ``memory_out`` (the memory for the next
+    step). At an episode's first step, memory is that step's frame repeated
+    (:meth:`StudentController.initial_memory`)."""
     import warnings
 
     import torch
@@ -283,18 +311,24 @@ def export_student_onnx(student: StudentController, path: str | Path, opset: int
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     module = student.to_torch().eval()
-    args = (torch.zeros(1, FRAME_DIM), torch.zeros(1, student.history - 1, FRAME_DIM))
+    args: tuple[Any, ...] = (
+        torch.zeros(1, FRAME_DIM),
+        torch.zeros(1, student.history - 1, FRAME_DIM),
+    )
+    inputs = ["frame", "memory"]
+    if student.gentleness_input:
+        args = (*args, torch.zeros(1, 1))
+        inputs.append("gentleness")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         torch.onnx.export(
             module,
             args,
             str(path),
-            input_names=["frame", "memory"],
+            input_names=inputs,
             output_names=["action", "memory_out"],
             dynamic_axes={
-                "frame": {0: "batch"},
-                "memory": {0: "batch"},
+                **{name: {0: "batch"} for name in inputs},
                 "action": {0: "batch"},
                 "memory_out": {0: "batch"},
             },
@@ -322,6 +356,7 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
             "stride": student.stride,
             "history": student.history,
             "ignored_keys": ["time_frac"],
+            "gentleness_input": student.gentleness_input,
         },
     )
     # the files hold float32 weights: the reference is computed with those
@@ -372,7 +407,11 @@ def student_from_actor(
         actor.check_reference()
     extra = {k: v for k, v in actor.metadata.items() if k not in _NOT_PROVENANCE}
     return StudentController(
-        actor, n_frames=int(block["n_frames"]), stride=int(block["stride"]), metadata=extra
+        actor,
+        n_frames=int(block["n_frames"]),
+        stride=int(block["stride"]),
+        metadata=extra,
+        gentleness_input=bool(block.get("gentleness_input", False)),
     )
 
 

@@ -3,7 +3,10 @@
 The paper's evaluation protocol (:func:`myoexo.evaluation.evaluate`), small: the paper's PID
 (``pid``), the same PID with its setpoint ramped over 1 s (``pid:ramp_s=1``), the impedance
 controller at its defaults (``impedance``: a spring-damper on a 1 s minimum-jerk reference,
-:mod:`myoexo.control.impedance`), the full-state learned policy ``sac`` alone and with its
+:mod:`myoexo.control.impedance`), the PID tracking a 0.6-s minimum-jerk reference
+(``pid:reference=minjerk,ramp_s=0.6``), the learned correction on it trained on the current
+twin (``residual``, at its default gentleness weight), the full-state learned policy ``sac``
+(trained on an earlier twin) alone and with its
 stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
 ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
 (``guard:student_exo``), on
@@ -14,7 +17,7 @@ Prints one table (per level and controller: mean absolute final error, settled e
 settling time, peak interaction torque and its change from the paper's PID, RMS interaction
 torque to settling) and ends with a paragraph of what the run found, computed from that
 table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. About
-120 s of a core in all (160 episodes): a minute or two on 2 cores. The episodes stay in the
+150 s of a core in all (180 episodes): a minute or two on 2 cores. The episodes stay in the
 output folder (default ``results/demo``; re-running reuses them); ``--report`` also writes
 the figures and the Markdown report (:func:`~myoexo.evaluation.report.write_report`).
 
@@ -48,6 +51,7 @@ DEMO_CONTROLLERS = (
     "pid:ramp_s=1",
     "pid:reference=minjerk,ramp_s=0.6",
     "impedance",
+    "residual",
     "sac",
     "guard:sac",
     "student_exo",

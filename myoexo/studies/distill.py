@@ -64,7 +64,10 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.guard import StallGuardConfig, StallIntegrator
+from myoexo.control.protocol import Controller, declared_sensors
+from myoexo.envs.config import GENTLENESS_RANGE
 from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
+from myoexo.envs.sensors import read_sensors
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root, subject_seed
 from myoexo.model import TWIN_VERSION
 from myoexo.policies.actor import MLPActor
@@ -143,7 +146,11 @@ class DistillConfig:
     batch_size: int = option(512, "Adam minibatch size", low=1)
     lr: float = option(1e-3, "Adam step size", low=0.0, above=True)
     weight_decay: float = option(0.0, "Adam weight decay", low=0.0)
-    teacher: str = option("sac", "shipped full-state policy that labels the states")
+    teacher: str = option(
+        "sac",
+        "shipped full-state policy that labels the states (sac, or residual on its base at its "
+        "default gentleness weight; residual@W at weight W)",
+    )
     fine_gain: float = option(
         0.0, "privileged fine-positioning term on the teacher's labels (0: the teacher alone)",
         low=0.0,
@@ -153,6 +160,12 @@ class DistillConfig:
     )
     teacher_guard: bool = option(
         False, "label with the teacher under the stall guard (guard:sac) on the true knee"
+    )
+    gentleness_input: bool = option(
+        False,
+        "the student takes the gentleness weight as an input: each episode draws a weight "
+        "uniformly over [0, 1] and the teacher (trained over the weight range) labels at it; "
+        "the student is selected at the teacher's default weight",
     )
     root_seed: int = option(
         SELECTION_ROOT_SEED,
@@ -230,8 +243,18 @@ def true_full_observation(env: Any, info: dict[str, Any] | None) -> np.ndarray:
 class Expert:
     """The labelling expert: the teacher on the true full state, plus the optional
     fine-positioning term on the true knee error and the optional stall guard on it
-    (:class:`DistillConfig`). With the guard it has a state: :meth:`reset` at each episode's
-    start, then one call per control step."""
+    (:class:`DistillConfig`). With the guard, or a teacher with a state of its own (a
+    residual policy's base controller), it has a state: :meth:`reset` at each episode's
+    start, then one call per control step.
+
+    Args:
+        teacher: The teacher's actor (its metadata names its observation).
+        fine_gain, fine_width_rad, guard: See :class:`DistillConfig`.
+        controller: The teacher as it runs (:func:`teacher_controller`: a residual policy
+            on its base, a gentleness-trained one at its weight); it then labels, reading
+            the full observation and its sensors from the step's ``info``. ``None``: the
+            actor alone labels.
+    """
 
     def __init__(
         self,
@@ -239,8 +262,11 @@ class Expert:
         fine_gain: float = 0.0,
         fine_width_rad: float = 0.02,
         guard: StallGuardConfig | None = None,
+        controller: Controller | None = None,
     ):
         self.teacher = teacher
+        self.controller = controller
+        self._sensors = frozenset() if controller is None else declared_sensors(controller)
         self.fine_gain = float(fine_gain)
         self.fine_width_rad = float(fine_width_rad)
         keys = list(teacher.metadata.get("obs_keys") or [])
@@ -251,13 +277,35 @@ class Expert:
             raise ValueError(f"the teacher's observation has no error_rad at index 5: {keys}")
         self.guard = None if guard is None else StallIntegrator(guard)
 
+    def set_gentleness(self, weight: float) -> None:
+        """Label at the gentleness weight *weight* from now on (a teacher trained over the
+        weight range, run as a controller).
+
+        Raises:
+            ValueError: The teacher takes no weight.
+        """
+        from myoexo.control.policy import GentleController
+
+        if not isinstance(self.controller, GentleController):
+            raise ValueError("the teacher takes no gentleness weight")
+        self.controller = GentleController(self.controller.controller, weight)
+
     def reset(self, seed: int | None = None) -> None:
-        """Start an episode (disengages the guard)."""
+        """Start an episode (disengages the guard, resets the teacher's controller)."""
         if self.guard is not None:
             self.guard.reset(seed)
+        if self.controller is not None:
+            self.controller.reset(seed)
 
-    def __call__(self, x_full: np.ndarray) -> np.ndarray:
-        a = self.teacher(x_full)
+    def __call__(self, x_full: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
+        """The label of one step: *x_full* the true full observation, *info* the step's
+        ``info`` (what a teacher's controller reads its sensors from)."""
+        if self.controller is None:
+            a = self.teacher(x_full)
+        else:
+            if info is None:
+                raise ValueError("a teacher that runs as a controller needs the step's info")
+            a = self.controller.act(x_full, read_sensors(info, self._sensors))
         e = float(x_full[5])  # error_rad (scale 1): knee minus target, true state
         if self.fine_gain:
             a = a - self.fine_gain * e * math.exp(-((e / self.fine_width_rad) ** 2))
@@ -266,15 +314,29 @@ class Expert:
 
 
 def load_teacher(name: str = "sac") -> MLPActor:
-    """The shipped full-state policy (checked against its reference pairs)."""
-    import myoexo
+    """The shipped full-state policy's actor (checked against its reference pairs); *name*
+    may carry a gentleness weight (``residual@0.5``)."""
+    from myoexo.policies import load_policy
 
-    teacher = myoexo.load_policy(name)
+    teacher = load_policy(name.rpartition("@")[0] if "@" in name else name)
     if not isinstance(teacher, MLPActor):
         raise ValueError(f"teacher {name!r} is not a plain actor ({type(teacher).__name__})")
     if teacher.obs_preset != "full":
         raise ValueError(f"teacher {name!r} reads obs_preset {teacher.obs_preset!r}, not 'full'")
     return teacher
+
+
+def teacher_controller(name: str, actor: MLPActor, env: Any) -> Controller | None:
+    """The teacher *name* as it runs on *env*, where its actor alone is not the teacher: a
+    residual policy on its base controller, a policy trained over the gentleness range at
+    its weight (``NAME@W``, else its default); ``None`` for a plain actor."""
+    from myoexo.control.specs import build_controller, parse_controller_spec
+    from myoexo.training.export import trained_over_gentleness
+
+    meta = actor.metadata
+    if not meta.get("residual") and not trained_over_gentleness(meta):
+        return None
+    return build_controller(parse_controller_spec(name), env)
 
 
 # ---------------------------------------------------------------------------- collection
@@ -286,6 +348,12 @@ class Episodes:
     labels: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     starts: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     rounds: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    #: Each step's gentleness weight (the episode's; 0 where the student takes none).
+    weights: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.weights is None:
+            self.weights = np.zeros(self.labels.size, np.float32)
 
     @property
     def size(self) -> int:
@@ -297,17 +365,30 @@ class Episodes:
             np.concatenate([self.labels, other.labels]),
             np.concatenate([self.starts, other.starts + self.size]),
             np.concatenate([self.rounds, other.rounds]),
+            np.concatenate([self.step_weights, other.step_weights]),
         )
+
+    @property
+    def step_weights(self) -> np.ndarray:
+        """Each step's gentleness weight."""
+        assert self.weights is not None  # set in __post_init__
+        return self.weights
 
     def save(self, path: Path) -> None:
         savez_atomic(
-            path, frames=self.frames, labels=self.labels, starts=self.starts, rounds=self.rounds
+            path,
+            frames=self.frames,
+            labels=self.labels,
+            starts=self.starts,
+            rounds=self.rounds,
+            weights=self.step_weights,
         )
 
     @classmethod
     def load(cls, path: Path) -> Episodes:
         with np.load(path) as d:
-            return cls(d["frames"], d["labels"], d["starts"], d["rounds"])
+            weights = d["weights"] if "weights" in d.files else None
+            return cls(d["frames"], d["labels"], d["starts"], d["rounds"], weights)
 
     def stack_index(self, n_frames: int, stride: int) -> np.ndarray:
         """``(N, n_frames)`` row indices of each sample's frames, newest first, the
@@ -346,17 +427,22 @@ class EnvPool:
 
 def collect_episode(
     env: Any,
-    teacher: Callable[[np.ndarray], np.ndarray],
+    teacher: Callable[[np.ndarray, dict[str, Any]], np.ndarray],
     student: StudentController | None,
     seed: int,
     beta: float,
     rng: np.random.Generator,
     action_noise_std: float = 0.0,
+    gentleness: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """One episode: the executed command is the teacher's with probability ``beta`` per
     step (always without a student), else the student's; every step is labelled by the
-    teacher from the true full state. Returns ``(frames, labels, summary)``."""
+    teacher from the true full state. With *gentleness*, the teacher labels at that weight
+    (:meth:`Expert.set_gentleness`) and the student reads it as its last input. Returns
+    ``(frames, labels, summary)``."""
     idx = frame_indices(list(env.unwrapped.obs_keys))
+    if gentleness is not None:
+        teacher.set_gentleness(gentleness)  # type: ignore[attr-defined]
     obs, info = env.reset(seed=int(seed))
     reset = getattr(teacher, "reset", None)
     if reset is not None:  # a stateful expert (the stall guard) starts its episode
@@ -367,11 +453,12 @@ def collect_episode(
     max_steps = int(env.unwrapped.episode_steps)
     for _ in range(max_steps):
         x_teacher = true_full_observation(env, info)
-        a_teacher = teacher(x_teacher)
+        a_teacher = teacher(x_teacher, info)
         frames.append(np.asarray(obs, np.float64)[idx])
         labels.append(float(a_teacher[0]))
         if student is not None:
-            a_student = student.act(obs)  # its exo sensors are in the observation
+            # its exo sensors are in the observation (and its weight last, where it takes one)
+            a_student = student.act(obs if gentleness is None else np.append(obs, gentleness))
             a = a_teacher if rng.random() < beta else a_student
         else:
             a = a_teacher
@@ -388,25 +475,33 @@ def collect_episode(
 def collect_round(
     config: DistillConfig,
     round_index: int,
-    teacher: Callable[[np.ndarray], np.ndarray],
+    teacher: Callable[[np.ndarray, dict[str, Any]], np.ndarray],
     student: StudentController | None,
     envs: EnvPool,
 ) -> tuple[Episodes, dict[str, Any]]:
     """The episodes of one round (deterministic given the config and the round)."""
     rng = np.random.default_rng([int(config.seed), int(round_index), 0xDA66E4])
     beta = config.beta(round_index) if student is not None else 1.0
-    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    parts: list[tuple[np.ndarray, np.ndarray, float]] = []
     errors: dict[str, list[float]] = {}
     n_levels = len(config.levels)
     for j in range(config.episodes_per_round):
         level = config.levels[j % n_levels]
         perturbed = bool(rng.random() < config.robust_fraction)
+        weight = float(rng.uniform(*GENTLENESS_RANGE)) if config.gentleness_input else None
         index = config.subject_offset + round_index * config.episodes_per_round + j
         seed = subject_seed(level, index, config.root_seed)
         frames, labels, summary = collect_episode(
-            envs.get(level, perturbed), teacher, student, seed, beta, rng, config.action_noise_std
+            envs.get(level, perturbed),
+            teacher,
+            student,
+            seed,
+            beta,
+            rng,
+            config.action_noise_std,
+            weight,
         )
-        parts.append((frames, labels))
+        parts.append((frames, labels, 0.0 if weight is None else weight))
         key = f"L{level}{'p' if perturbed else ''}"
         errors.setdefault(key, []).append(abs(summary["final_error_deg"]))
     sizes = [p[1].size for p in parts]
@@ -416,6 +511,7 @@ def collect_round(
         np.concatenate([p[1] for p in parts]),
         starts,
         np.full(int(sum(sizes)), round_index, np.int32),
+        np.concatenate([np.full(p[1].size, p[2], np.float32) for p in parts]),
     )
     stats = {
         "beta": beta,
@@ -476,8 +572,11 @@ def train_student(
 
     torch.set_num_threads(1)
     torch.manual_seed(seed)
-    in_dim = config.n_frames * FRAME_DIM
+    weighted = config.gentleness_input
+    in_dim = config.n_frames * FRAME_DIM + int(weighted)
     mean, var = _normalization(data.frames, config.n_frames)
+    if weighted:  # the weight's column last, normalised over the uniform draw's range
+        mean, var = np.append(mean, 0.5), np.append(var, 1.0 / 12.0)
     std = np.sqrt(var + 1e-8)
     if previous is not None:
         module = _module_from_actor(previous.actor, config)
@@ -497,6 +596,7 @@ def train_student(
         module = _build_module(config, in_dim)
     z = np.clip((data.frames - mean[:FRAME_DIM]) / std[:FRAME_DIM], -10.0, 10.0)  # as MLPActor
     frames = torch.as_tensor(z, dtype=torch.float32)
+    z_weight = torch.as_tensor((data.step_weights - mean[-1]) / std[-1], dtype=torch.float32)
     index = torch.as_tensor(data.stack_index(config.n_frames, config.stride))
     labels = torch.as_tensor(data.labels, dtype=torch.float32)
     opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -513,6 +613,8 @@ def train_student(
         for k in range(steps_per_epoch):
             rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
             x = frames[index[rows]].flatten(1)
+            if weighted:
+                x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
             pred = torch.tanh(module(x)).squeeze(1)
             loss = torch.mean((pred - labels[rows]) ** 2)
             opt.zero_grad(set_to_none=True)
@@ -529,20 +631,30 @@ def train_student(
         for lin in linears
     ]
     actor = MLPActor(weights, activation=config.activation, obs_mean=mean, obs_var=var)
-    return StudentController(actor, config.n_frames, config.stride), {"train_mse": loss_value}
+    student = StudentController(actor, config.n_frames, config.stride, gentleness_input=weighted)
+    return student, {"train_mse": loss_value}
 
 
 # ---------------------------------------------------------------------------- selection
 def selection_scores(
-    student: StudentController, config: DistillConfig, envs: EnvPool
+    student: StudentController,
+    config: DistillConfig,
+    envs: EnvPool,
+    gentleness: float | None = None,
 ) -> dict[str, float]:
     """Mean |final error| (deg) of the student on the selection subjects (root
     ``config.root_seed``, indices ``0..selection_subjects-1``), per level and twin, and
-    ``score``: their mean."""
+    ``score``: their mean. A student that takes the gentleness weight runs at *gentleness*
+    (default 0)."""
     from myoexo.control.rollout import rollout
     from myoexo.evaluation.metrics import episode_metrics
 
     out: dict[str, float] = {}
+    controller: Any = student
+    if student.gentleness_input:  # at the teacher's default weight
+        from myoexo.control.policy import GentleController
+
+        controller = GentleController(student, float(gentleness if gentleness is not None else 0))
     for perturbed in (False, True):
         for level in config.levels:
             env = envs.get(level, perturbed)
@@ -551,7 +663,7 @@ def selection_scores(
             for i in range(config.selection_subjects):
                 ep = rollout(
                     env,
-                    student,
+                    controller,
                     subject_seed(level, i, config.root_seed),
                     channels=(
                         "time_s",
@@ -645,8 +757,15 @@ def _distill(
     actor = load_teacher(config.teacher)
     provenance = teacher_provenance(actor)
     guard = StallGuardConfig() if config.teacher_guard else None
-    teacher = Expert(actor, config.fine_gain, config.fine_width_rad, guard)
     envs = EnvPool(config.twin)
+    controller = teacher_controller(config.teacher, actor, envs.get(config.levels[0], False))
+    default_weight = getattr(controller, "gentleness", None)
+    if config.gentleness_input and default_weight is None:
+        raise ValueError(
+            f"gentleness_input: the teacher {config.teacher!r} was not trained over the "
+            "gentleness range (it takes no weight)"
+        )
+    teacher = Expert(actor, config.fine_gain, config.fine_width_rad, guard, controller)
     try:
         for r in range(start, config.rounds):
             t0 = time.time()
@@ -659,7 +778,11 @@ def _distill(
             log(f"[distill] round {r}: {new.size} new samples, {data.size} in all; training")
             student, fit = train_student(config, data, epochs, student, config.seed + r, log)
             t2 = time.time()
-            scores = selection_scores(student, config, envs) if config.selection_subjects else {}
+            scores = (
+                selection_scores(student, config, envs, default_weight)
+                if config.selection_subjects
+                else {}
+            )
             entry = {
                 "round": r,
                 **stats,
@@ -671,7 +794,9 @@ def _distill(
                 "train_s": round(t2 - t1, 1),
                 "select_s": round(time.time() - t2, 1),
             }
-            student.metadata.update(_provenance(config, provenance, r, data.size, scores))
+            student.metadata.update(
+                _provenance(config, provenance, r, data.size, scores, default_weight)
+            )
             save_student(student, _round_stem(run_dir, r))
             history["rounds"].append(entry)
             best = _best_round(history["rounds"])
@@ -697,6 +822,7 @@ def _subset(data: Episodes, keep: np.ndarray) -> Episodes:
         data.labels[idx],
         np.array([remap[s] for s in starts], np.int64),
         data.rounds[idx],
+        data.step_weights[idx],
     )
 
 
@@ -726,8 +852,15 @@ def _provenance(
     r: int,
     n: int,
     scores: dict[str, float],
+    default_gentleness: float | None = None,
 ) -> dict[str, Any]:
+    twin = config.twin.replace(obs_preset=StudentController.obs_preset)
+    weighted: dict[str, Any] = {}
+    if config.gentleness_input:  # it runs behind a GentleController, at its default weight
+        twin = twin.replace(gentleness="random")
+        weighted = {"default_gentleness": float(default_gentleness or 0.0)}
     return {
+        **weighted,
         "trained_by": "myoexo policy distill (DAgger)",
         "teacher": config.teacher,
         "teacher_provenance": teacher,
@@ -740,7 +873,7 @@ def _provenance(
         "selection_scores": scores,
         "distill_config": config.to_json(),
         "env_id": f"MyoExoKnee-v{{level}} (levels {list(config.levels)})",
-        "twin": config.twin.replace(obs_preset=StudentController.obs_preset).to_dict(),
+        "twin": twin.to_dict(),
         "twin_version": TWIN_VERSION,
     }
 

@@ -297,6 +297,27 @@ def read_gentleness_record(path: Path) -> dict[str, Any]:
     return dict(record)
 
 
+def record_default_gentleness(actor: MLPActor, path: Path, source: str) -> None:
+    """Make the default weight of the gentleness record at *path* (a ``gentleness.json`` or
+    its folder) *actor*'s own: its metadata gains ``default_gentleness`` and the record, and
+    the record's subjects become its selection root (evaluations there are refused).
+
+    Raises:
+        ValueError: *actor* was not trained over the gentleness range (*source* names it), or
+            *path* holds no record.
+    """
+    if not trained_over_gentleness(actor.metadata):
+        raise ValueError(
+            f"{source} was not trained with a gentleness weight; drop --gentleness-record"
+        )
+    record = read_gentleness_record(Path(path))
+    actor.metadata["default_gentleness"] = float(record["default_gentleness"])
+    actor.metadata["gentleness_record"] = record
+    actor.metadata["selection_root_seed"] = actor.metadata.get("selection_root_seed") or int(
+        record["root_seed"]
+    )
+
+
 def trained_over_gentleness(metadata: dict[str, Any]) -> bool:
     """Whether a policy's metadata records a twin with a gentleness weight (its last
     observation entry is the weight)."""
@@ -407,17 +428,7 @@ def run(args: argparse.Namespace) -> int:
     checkpoint = ck.resolve_checkpoint(options.run, options.checkpoint)
     actor = load_checkpoint_actor(checkpoint, selection_root_seed=options.selection_root_seed)
     if options.gentleness_record:
-        if not trained_over_gentleness(actor.metadata):
-            raise ValueError(
-                f"{checkpoint} was not trained with a gentleness weight; drop --gentleness-record"
-            )
-        record = read_gentleness_record(Path(options.gentleness_record))
-        actor.metadata["default_gentleness"] = float(record["default_gentleness"])
-        actor.metadata["gentleness_record"] = record
-        # the weight was chosen on these subjects: evaluations there are refused
-        actor.metadata["selection_root_seed"] = actor.metadata.get("selection_root_seed") or int(
-            record["root_seed"]
-        )
+        record_default_gentleness(actor, Path(options.gentleness_record), str(checkpoint))
     if options.seed_group:
         actor.metadata["seed_group"] = options.seed_group
     print(f"checkpoint: {checkpoint} ({actor.metadata.get('num_timesteps')} steps)")

@@ -351,12 +351,19 @@ def aggregate_seeds(args: argparse.Namespace) -> int:
     return 0
 
 
-def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> Any:
+def ship_seed(
+    out: Path,
+    stem: Path | None = None,
+    name: str | None = None,
+    gentleness_record: Path | None = None,
+) -> Any:
     """Export the seed the aggregate chose (``aggregate.json``) as a numpy actor whose
     metadata records ``training_seeds``, ``ship_seed``, the ship rule and the selection root,
-    to ``stem`` and/or into the package as ``name`` (:func:`myoexo.load_policy`)."""
+    to ``stem`` and/or into the package as ``name`` (:func:`myoexo.load_policy`). Seeds
+    trained over the gentleness range take their default weight from *gentleness_record*
+    (a ``myoexo policy gentleness`` record, as ``myoexo policy export --gentleness-record``)."""
     from myoexo.policies import save_actor, shipped_path
-    from myoexo.training.export import load_checkpoint_actor
+    from myoexo.training.export import load_checkpoint_actor, record_default_gentleness
 
     path = Path(out) / AGGREGATE_FILE
     if not path.is_file():
@@ -367,6 +374,8 @@ def ship_seed(out: Path, stem: Path | None = None, name: str | None = None) -> A
     )
     for key in ("training_seeds", "ship_seed", "ship_rule", "selection_subjects_per_level"):
         actor.metadata[key] = chosen[key]
+    if gentleness_record is not None:
+        record_default_gentleness(actor, Path(gentleness_record), chosen["ship_checkpoint"])
     stems = ([Path(stem)] if stem else []) + ([shipped_path(name)] if name else [])
     for target in stems:
         npz, js = save_actor(actor, target)
@@ -522,6 +531,12 @@ class SeedsShip:
 
     to: Path | None = option(None, "write STEM.npz + STEM.json", metavar="STEM")
     name: str | None = option(None, "write it into the package as NAME (e.g. sac)", metavar="NAME")
+    gentleness_record: Path | None = option(
+        None,
+        "a `myoexo policy gentleness` record (gentleness.json or its folder): its default "
+        "weight becomes the shipped policy's (seeds trained with --gentleness random)",
+        metavar="FILE",
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -579,6 +594,6 @@ def run(args: argparse.Namespace) -> int:
         where = from_options(SeedsShip, args)
         if not (where.to or where.name):
             raise ValueError("myoexo policy seeds ship: give --to STEM and/or --name NAME")
-        ship_seed(Path(args.out), where.to, where.name)
+        ship_seed(Path(args.out), where.to, where.name, where.gentleness_record)
         return 0
     return aggregate_seeds(args)
