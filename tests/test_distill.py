@@ -589,3 +589,33 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
         env.close()
     assert isinstance(at_default, GentleController) and at_default.gentleness == 0.0
     assert isinstance(at_half, GentleController) and at_half.gentleness == 0.5
+
+
+def test_the_shipped_student_of_the_residual_policy_takes_its_weight_and_reaches_the_target():
+    """`student_residual`: distilled from `residual` (three seeds, one shipped by the seed
+    rule) with the weight as its input; built on an env it runs at its default weight, and a
+    full 8-s level-1 episode ends within 1 deg (its goal)."""
+    import myoexo
+    from myoexo.control.policy import GentleController
+    from myoexo.control.rollout import rollout
+    from myoexo.envs import make_env
+    from myoexo.model import TWIN_VERSION
+
+    stored = myoexo.load_policy("student_residual")
+    meta = stored.metadata
+    assert stored.gentleness_input and meta["teacher"] == "residual"
+    assert meta["ship_seed"] in meta["distill_seeds"] and len(meta["distill_seeds"]) == 3
+    assert meta["twin_version"] == TWIN_VERSION and meta["selection_root_seed"] == 1
+    env = make_env(1, obs_preset="exo")
+    try:
+        controller = myoexo.load_policy("student_residual", env)
+        assert isinstance(controller, GentleController) and controller.gentleness == 0.0
+        with pytest.raises(ValueError, match="gentleness weight last"):
+            obs, _ = env.reset(seed=0)
+            stored.reset()
+            stored.act(obs)
+        episode = rollout(env, controller, seed=5)
+    finally:
+        env.close()
+    assert not episode.unstable
+    assert abs(episode.signals["error_deg"][-1]) < 1.0

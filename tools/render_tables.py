@@ -140,6 +140,24 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
     Block("myoexo/policies/MODEL_CARD_residual.md", "eval_1000_twin3", ("res_sel",)),
     Block("myoexo/policies/MODEL_CARD_residual.md", "eval_200_twin3_perturbed", ("res_sel",)),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_residual.md",
+        "eval_200_twin3_student_residual",
+        ("student_residual_3seeds",),
+    ),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_residual.md",
+        "eval_200_twin3_student_residual_perturbed",
+        ("student_residual_3seeds",),
+    ),
+    GoalsBlock(
+        "myoexo/policies/MODEL_CARD_student_residual.md",
+        "student_residual_3seeds",
+        "eval_200_twin3_student_residual",
+        "eval_200_twin3_student_residual_perturbed",
+        teacher="residual",
+        device_baseline="pid:tuned=exo",
+    ),
     *(
         GoalsBlock(
             "myoexo/policies/MODEL_CARD_student_exo.md",

@@ -1,24 +1,31 @@
 """The policies shipped with myoexo (a model card each beside this file).
 
-===============  ===========================  ==================================================
-name             files (``<stem>.npz/json``)  observation
-===============  ===========================  ==================================================
-``sac``          ``sac_knee_exo``             ``obs_preset="full"``: the twin's whole state,
-                                              muscle activations, forces and lengths included
-                                              (simulation only); ``MODEL_CARD.md``
-``student_exo``  ``student_exo``              ``obs_preset="exo"``: only what the exoskeleton
-                                              measures (encoder, motor torque, cuff
-                                              force/torque sensors, last command, target), a
-                                              memory of the last 10 frames, no clock:
-                                              deployable; distilled from ``sac``;
-                                              ``MODEL_CARD_student_exo.md``
-``residual``     ``residual_knee_exo``        ``obs_preset="full"`` and a gentleness weight: a
-                                              correction on the minimum-jerk PID, trained on
-                                              the current twin (version 3); it runs on its
-                                              base, built on an env
-                                              (``myoexo.load_policy("residual", env)``);
-                                              ``MODEL_CARD_residual.md``
-===============  ===========================  ==================================================
+======================  ===========================  ===========================================
+name                    files (``<stem>.npz/json``)  observation
+======================  ===========================  ===========================================
+``residual``            ``residual_knee_exo``        ``obs_preset="full"`` and a gentleness
+                                                     weight: a correction on the minimum-jerk
+                                                     PID, trained on the current twin (version
+                                                     3); it runs on its base, built on an env
+                                                     (``myoexo.load_policy("residual", env)``);
+                                                     ``MODEL_CARD_residual.md``
+``sac``                 ``sac_knee_exo``             ``obs_preset="full"``: the twin's whole
+                                                     state, muscle activations, forces and
+                                                     lengths included (simulation only; trained
+                                                     on twin version 1); ``MODEL_CARD.md``
+``student_exo``         ``student_exo``              ``obs_preset="exo"``: only what the
+                                                     exoskeleton measures (encoder, motor torque,
+                                                     cuff force/torque sensors, last command,
+                                                     target), a memory of the last 10 frames, no
+                                                     clock: deployable; distilled from ``sac``
+                                                     on twin version 1;
+                                                     ``MODEL_CARD_student_exo.md``
+``student_residual``    ``student_residual``         ``obs_preset="exo"`` and a gentleness
+                                                     weight: the same sensors and memory,
+                                                     distilled from ``residual`` on the current
+                                                     twin, the weight its last input;
+                                                     ``MODEL_CARD_student_residual.md``
+======================  ===========================  ===========================================
 
 ``sac_exo`` (the exoskeleton's sensors plus an episode clock) is retired: it read a clock a
 device does not have and ended 20-50 deg off on perturbed level-3 twins; ``student_exo``
@@ -62,6 +69,7 @@ SHIPPED_POLICIES: dict[str, str] = {
     "sac": SHIPPED_POLICY,
     "student_exo": "student_exo",
     "residual": "residual_knee_exo",
+    "student_residual": "student_residual",
 }
 
 __all__ = [

@@ -199,9 +199,15 @@ class StudentController:
         """This step's frame (float64, ``FRAME_DIM``) from an observation vector."""
         x = np.asarray(obs, dtype=np.float64).reshape(-1)
         if self._obs_size is not None and x.size != self._obs_size:
+            weight = (
+                " and the gentleness weight last (myoexo.load_policy(name, env) or a "
+                "GentleController appends it)"
+                if self.gentleness_input
+                else ""
+            )
             raise ValueError(
                 f"observation of size {x.size}, but the student reads the layout "
-                f"{list(self.obs_keys)} ({self._obs_size} entries): build the env with "
+                f"{list(self.obs_keys)}{weight} ({self._obs_size} entries): build the env with "
                 f"obs_preset={self.obs_preset!r} or call bind(env)"
             )
         if x.size <= self._idx[-1]:

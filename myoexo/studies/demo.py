@@ -9,7 +9,8 @@ twin (``residual``, at its default gentleness weight), the full-state learned po
 (trained on an earlier twin) alone and with its
 stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
 ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
-(``guard:student_exo``), on
+(``guard:student_exo``), and the deployable student of ``residual`` trained on the current
+twin (``student_residual``), on
 :data:`DEMO_SUBJECTS` subjects per spasticity level 0-3 (the protocol: 1000). Subject *i* of
 a level is the same simulated person for every controller.
 
@@ -17,7 +18,7 @@ Prints one table (per level and controller: mean absolute final error, settled e
 settling time, peak interaction torque and its change from the paper's PID, RMS interaction
 torque to settling) and ends with a paragraph of what the run found, computed from that
 table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. About
-150 s of a core in all (180 episodes): a minute or two on 2 cores. The episodes stay in the
+160 s of a core in all (200 episodes): a minute or two on 2 cores. The episodes stay in the
 output folder (default ``results/demo``; re-running reuses them); ``--report`` also writes
 the figures and the Markdown report (:func:`~myoexo.evaluation.report.write_report`).
 
@@ -56,6 +57,7 @@ DEMO_CONTROLLERS = (
     "guard:sac",
     "student_exo",
     "guard:student_exo",
+    "student_residual",
 )
 DEMO_OUT = Path("results") / "demo"
 #: Band above the reference PID's mean absolute final error (deg) within which a controller

@@ -952,6 +952,7 @@ def ship_students(
                 n_frames=student.n_frames,
                 stride=student.stride,
                 metadata={**student.metadata, "seed_group": group},
+                gentleness_input=student.gentleness_input,
             )
             save_student(copy, seed_copy_stem(seed_copies, name or "student", len(seeds), seed, r))
     chosen = students[ship][0]
@@ -1021,7 +1022,11 @@ def run(args: argparse.Namespace) -> int:
             print(msg, flush=True)
 
     if options.ship:
-        ship_students(options.ship, options.name, options.export, options.seed_copies, log=log)
+        chosen = ship_students(
+            options.ship, options.name, options.export, options.seed_copies, log=log
+        )
+        if options.onnx:
+            print(f"onnx: {export_student_onnx(chosen, options.onnx)}")
         return 0
     if options.resume:
         given = [
