@@ -142,6 +142,11 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     Block("myoexo/policies/MODEL_CARD_residual.md", "eval_200_twin3_perturbed", ("res_sel",)),
     Block(
         "myoexo/policies/MODEL_CARD_student_residual.md",
+        "eval_1000_twin3",
+        ("student_residual_3seeds",),
+    ),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_residual.md",
         "eval_200_twin3_student_residual",
         ("student_residual_3seeds",),
     ),
