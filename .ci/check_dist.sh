@@ -44,7 +44,8 @@ missing = sorted(expected - names)
 assert not missing, f"the wheel lacks {missing}"
 for required in ("myoexo/assets/exo_knee.xml", "myoexo/assets/fits/pid_tuned_exo.json",
                  "myoexo/policies/sac_knee_exo.npz",
-                 "myoexo/policies/student_exo.npz", "myoexo/policies/MODEL_CARD.md"):
+                 "myoexo/policies/student_exo.npz", "myoexo/policies/residual_knee_exo.npz",
+                 "myoexo/policies/student_residual.npz", "myoexo/policies/MODEL_CARD.md"):
     assert required in names, f"the wheel lacks {required}"
 stray = sorted(n for n in names if not n.startswith(("myoexo/", "myoexo-")))
 assert not stray, f"the wheel holds files outside the package: {stray}"
@@ -78,10 +79,12 @@ MYOEXO_WHEEL_SITE=$site "$WORK/venv/bin/python" -c '
 import os, gymnasium as gym, myoexo
 site = os.path.realpath(os.environ["MYOEXO_WHEEL_SITE"])
 assert os.path.realpath(myoexo.__file__).startswith(site + os.sep), myoexo.__file__
-gym.make("MyoExoKnee-v1").reset(seed=0)
-from myoexo.policies import SHIPPED_POLICIES
+env = gym.make("MyoExoKnee-v1")
+env.reset(seed=0)
+from myoexo.policies import SHIPPED_POLICIES, load_policy
 for name in SHIPPED_POLICIES:
-    myoexo.load_policy(name)
+    load_policy(name)  # as stored
+    myoexo.load_policy(name, env)  # as it runs (a residual policy on its base)
 from myoexo.control.tuned import TUNED_PIDS
 assert {"exo", "latency"} <= set(TUNED_PIDS), TUNED_PIDS
 print("  import, env reset, shipped policies and tuned PIDs from", os.path.dirname(myoexo.__file__))
