@@ -150,12 +150,12 @@ def test_a_different_run_in_the_same_folder_is_refused(reference):
 
 
 def test_missing_shipped_policy_is_skipped_with_a_message(monkeypatch):
-    import myoexo
+    import myoexo.policies
 
     def unavailable(name="sac"):
         raise FileNotFoundError("no policy file")
 
-    monkeypatch.setattr(myoexo, "load_policy", unavailable)
+    monkeypatch.setattr(myoexo.policies, "load_policy", unavailable)
     messages = []
     specs, skipped = resolve_controllers(["pid", "sac"], log=messages.append)
     assert [s.label for s in specs] == ["pid"] and "sac" in skipped
