@@ -152,6 +152,11 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     ),
     Block(
         "myoexo/policies/MODEL_CARD_student_residual.md",
+        "eval_1000_twin3_student_perturbed",
+        ("student_residual_3seeds",),
+    ),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_residual.md",
         "eval_200_twin3_student_residual_perturbed",
         ("student_residual_3seeds",),
     ),
