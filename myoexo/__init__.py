@@ -65,13 +65,14 @@ def load_policy(
         from myoexo.control import build_controller, parse_controller_spec
 
         return build_controller(parse_controller_spec(name), env)
+    from myoexo.control.residual import ResidualConfig
     from myoexo.policies import load_policy as _load
 
     policy = _load(name, check=check)
-    base = (getattr(policy, "metadata", None) or {}).get("residual")
-    if base:
+    residual = ResidualConfig.from_metadata(getattr(policy, "metadata", None))
+    if residual is not None:
         raise ValueError(
-            f"the policy {name!r} is a correction on the controller {base['base']!r}: pass the "
+            f"the policy {name!r} is a correction on the controller {residual.base!r}: pass the "
             f"env it runs on, myoexo.load_policy({name!r}, env), for the controller as it runs"
         )
     return policy

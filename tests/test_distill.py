@@ -572,7 +572,7 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
     cfg = DistillConfig(teacher="residual", gentleness_input=True, **tiny)
     distill(cfg, tmp_path / "run", log=lambda m: None)
     data = Episodes.load(tmp_path / "run" / "dataset.npz")
-    per_episode = data.step_weights[data.starts]
+    per_episode = data.weights[data.starts]
     assert len(set(per_episode.tolist())) == per_episode.size  # one draw per episode
     assert np.all((per_episode >= 0.0) & (per_episode <= 1.0))
     student = load_student(tmp_path / "run" / "student")

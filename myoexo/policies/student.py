@@ -283,22 +283,26 @@ def _torch_student_class(gentleness_input: bool = False) -> type:
 
         select: torch.Tensor
 
+        def step(
+            self, frame: torch.Tensor, memory: torch.Tensor, *extra: torch.Tensor
+        ) -> tuple[torch.Tensor, torch.Tensor]:
+            """The action from the memory with this frame (then *extra* inputs, the weight)
+            and the memory for the next step."""
+            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)  # (B, history, F)
+            x = torch.index_select(full, 1, self.select).flatten(1)
+            action = torch.clamp(self.actor(torch.cat([x, *extra], dim=1)), -1.0, 1.0)
+            return action, full[:, 1:, :]
+
         def forward(
             self, frame: torch.Tensor, memory: torch.Tensor
         ) -> tuple[torch.Tensor, torch.Tensor]:
-            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)  # (B, history, F)
-            x = torch.index_select(full, 1, self.select).flatten(1)
-            action = torch.clamp(self.actor(x), -1.0, 1.0)
-            return action, full[:, 1:, :]
+            return self.step(frame, memory)
 
     class _TorchGentleStudent(_TorchStudent):
         def forward(  # type: ignore[override]
             self, frame: torch.Tensor, memory: torch.Tensor, gentleness: torch.Tensor
         ) -> tuple[torch.Tensor, torch.Tensor]:
-            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)
-            x = torch.index_select(full, 1, self.select).flatten(1)
-            action = torch.clamp(self.actor(torch.cat([x, gentleness], dim=1)), -1.0, 1.0)
-            return action, full[:, 1:, :]
+            return self.step(frame, memory, gentleness)
 
     return _TorchGentleStudent if gentleness_input else _TorchStudent
 

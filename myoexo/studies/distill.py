@@ -330,11 +330,12 @@ def teacher_controller(name: str, actor: MLPActor, env: Any) -> Controller | Non
     """The teacher *name* as it runs on *env*, where its actor alone is not the teacher: a
     residual policy on its base controller, a policy trained over the gentleness range at
     its weight (``NAME@W``, else its default); ``None`` for a plain actor."""
+    from myoexo.control.residual import ResidualConfig
     from myoexo.control.specs import build_controller, parse_controller_spec
     from myoexo.training.export import trained_over_gentleness
 
     meta = actor.metadata
-    if not meta.get("residual") and not trained_over_gentleness(meta):
+    if ResidualConfig.from_metadata(meta) is None and not trained_over_gentleness(meta):
         return None
     return build_controller(parse_controller_spec(name), env)
 
@@ -348,11 +349,12 @@ class Episodes:
     labels: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     starts: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     rounds: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
-    #: Each step's gentleness weight (the episode's; 0 where the student takes none).
-    weights: np.ndarray | None = None
+    #: Each step's gentleness weight (the episode's; 0 where the student takes none, and
+    #: where none is given).
+    weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
     def __post_init__(self) -> None:
-        if self.weights is None:
+        if self.weights.size == 0:
             self.weights = np.zeros(self.labels.size, np.float32)
 
     @property
@@ -365,14 +367,8 @@ class Episodes:
             np.concatenate([self.labels, other.labels]),
             np.concatenate([self.starts, other.starts + self.size]),
             np.concatenate([self.rounds, other.rounds]),
-            np.concatenate([self.step_weights, other.step_weights]),
+            np.concatenate([self.weights, other.weights]),
         )
-
-    @property
-    def step_weights(self) -> np.ndarray:
-        """Each step's gentleness weight."""
-        assert self.weights is not None  # set in __post_init__
-        return self.weights
 
     def save(self, path: Path) -> None:
         savez_atomic(
@@ -381,13 +377,13 @@ class Episodes:
             labels=self.labels,
             starts=self.starts,
             rounds=self.rounds,
-            weights=self.step_weights,
+            weights=self.weights,
         )
 
     @classmethod
     def load(cls, path: Path) -> Episodes:
         with np.load(path) as d:
-            weights = d["weights"] if "weights" in d.files else None
+            weights = d["weights"] if "weights" in d.files else np.zeros(0, np.float32)
             return cls(d["frames"], d["labels"], d["starts"], d["rounds"], weights)
 
     def stack_index(self, n_frames: int, stride: int) -> np.ndarray:
@@ -575,8 +571,9 @@ def train_student(
     weighted = config.gentleness_input
     in_dim = config.n_frames * FRAME_DIM + int(weighted)
     mean, var = _normalization(data.frames, config.n_frames)
-    if weighted:  # the weight's column last, normalised over the uniform draw's range
-        mean, var = np.append(mean, 0.5), np.append(var, 1.0 / 12.0)
+    if weighted:  # the weight's column last, normalised by the uniform draw's moments
+        low, high = GENTLENESS_RANGE
+        mean, var = np.append(mean, 0.5 * (low + high)), np.append(var, (high - low) ** 2 / 12)
     std = np.sqrt(var + 1e-8)
     if previous is not None:
         module = _module_from_actor(previous.actor, config)
@@ -596,7 +593,11 @@ def train_student(
         module = _build_module(config, in_dim)
     z = np.clip((data.frames - mean[:FRAME_DIM]) / std[:FRAME_DIM], -10.0, 10.0)  # as MLPActor
     frames = torch.as_tensor(z, dtype=torch.float32)
-    z_weight = torch.as_tensor((data.step_weights - mean[-1]) / std[-1], dtype=torch.float32)
+    z_weight = (
+        torch.as_tensor((data.weights - mean[-1]) / std[-1], dtype=torch.float32)
+        if weighted
+        else None
+    )
     index = torch.as_tensor(data.stack_index(config.n_frames, config.stride))
     labels = torch.as_tensor(data.labels, dtype=torch.float32)
     opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -613,7 +614,7 @@ def train_student(
         for k in range(steps_per_epoch):
             rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
             x = frames[index[rows]].flatten(1)
-            if weighted:
+            if z_weight is not None:
                 x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
             pred = torch.tanh(module(x)).squeeze(1)
             loss = torch.mean((pred - labels[rows]) ** 2)
@@ -822,7 +823,7 @@ def _subset(data: Episodes, keep: np.ndarray) -> Episodes:
         data.labels[idx],
         np.array([remap[s] for s in starts], np.int64),
         data.rounds[idx],
-        data.step_weights[idx],
+        data.weights[idx],
     )
 
 
