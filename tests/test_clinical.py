@@ -169,6 +169,17 @@ def test_reclined_pendulum_releases_from_extension() -> None:
     assert reclined["exo_stop_hit"]
 
 
+def test_the_reclined_hold_releases_every_level_from_full_extension() -> None:
+    """The hold's stiff PD (HOLD_DRIVE) keeps the knee within 2.5 deg of full extension
+    against level 3's tone; the stretch tests' softer drive left it 8 deg short."""
+    from myoexo.clinical.common import DriveParams
+
+    release = run_pendulum(RECLINED).table()["release_deg"].to_numpy()
+    assert np.all(release < 2.5)
+    soft = dataclasses.replace(RECLINED, levels=(3,), drive=DriveParams())
+    assert run_pendulum(soft).table()["release_deg"].iloc[0] > 5.0
+
+
 # ----------------------------------------------------------------------------- MAS exam
 def test_minimum_jerk_profile() -> None:
     p = MASExamParams(hold_s=0.2, duration_s=1.0, end_hold_s=0.1)

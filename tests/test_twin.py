@@ -28,8 +28,9 @@ def test_step_is_raw_physics_with_the_stage_ctrl() -> None:
     twin = Twin(model, stage_a, 0.01, data=a)
     host = Twin(model, stage_b, 0.01, data=b)  # only as the stage's host for the raw loop
     for k in range(50):
-        command = math.sin(k / 7.0)
+        command = 0.3 * math.sin(k / 7.0)  # away from the drive's braking curve
         assert not twin.step(command)
+        assert not twin.braking
         ctrl = np.zeros(model.nu)
         ctrl[twin.exo_actuator] = command
         b.ctrl[:] = stage_b.apply(host, ctrl)

@@ -258,13 +258,14 @@ def simulate_drive(
             u = min(max(torque / nm_per_ctrl, ctrl_lo), ctrl_hi)
         else:
             torque, u = 0.0, 0.0
-        twin.apply_command(u)  # relaxed limb: the muscles get the reflex only
+        # relaxed limb: the muscles get the reflex only
+        twin.apply_command(u, powered=bool(powered_steps[i]))
         rec[i] = (  # in the order of DRIVE_COLUMNS
             twin.exo_angle_deg,
             twin.knee_angle_deg,
             twin.knee_velocity_rad_s,
             stage.last_sc_total,
-            u * nm_per_ctrl,
+            twin.applied_command * nm_per_ctrl,
             twin.leg_torque_nm,
             torque,
             math.degrees(q),

@@ -143,6 +143,14 @@ _GRAVITY_M_S2 = 9.81
 _THIGH_HORIZONTAL_HIP_DEG = 90.0
 
 
+#: The hold's PD: the clinic releases the leg from the held angle (full extension, reclined),
+#: so the hold is stiffer than the stretch tests' drive (400 Nm/rad, 5 Nm s/rad), whose lag
+#: against level 3's tone left the reclined knee 8 deg short of full extension; at 1500 Nm/rad
+#: the knee is released within 2.5 deg of the held angle at every level (hold torque at most
+#: 65 Nm, spindle reflex, nominal subjects).
+HOLD_DRIVE = DriveParams(kp_nm_per_rad=1500.0, kd_nm_s_per_rad=10.0)
+
+
 @dataclasses.dataclass(frozen=True)
 class PendulumParams:
     """Parameters of the simulated pendulum test (defaults: the seated twin; each field but
@@ -150,8 +158,8 @@ class PendulumParams:
 
     Attributes:
         start_deg: Knee flexion the exo holds before the release, deg (20 seated: the
-            seated hamstrings resist further extension; the PD's lag leaves the knee about
-            5 deg more flexed, measured as ``release_deg``).
+            seated hamstrings resist further extension; the PD's lag leaves the knee a few
+            degrees more flexed, measured as ``release_deg``).
         hip_flexion_deg: Hip flexion of the twin, deg (90 seated; less: the trunk reclines
             by ``90 - hip_flexion_deg`` and gravity turns with it, the thigh stays horizontal).
         hold_s: Time the exo holds the knee before the release, s.
@@ -162,7 +170,7 @@ class PendulumParams:
         stop_margin_deg: The exo's flexion stop counts as hit when the exo angle comes this
             close to it, deg.
         levels: Spasticity levels to test.
-        drive: The hold PD's gains and the control period.
+        drive: The hold PD's gains and the control period (:data:`HOLD_DRIVE`).
     """
 
     start_deg: float = option(
@@ -198,7 +206,7 @@ class PendulumParams:
         low=0.0, above=True, unit="deg",
     )  # fmt: skip
     levels: tuple[int, ...] = levels_option()
-    drive: DriveParams = dataclasses.field(default_factory=DriveParams)
+    drive: DriveParams = dataclasses.field(default_factory=lambda: HOLD_DRIVE)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -164,6 +164,7 @@ class OracleMPC:
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         self._state_spec = spec
         self._state = np.zeros(mujoco.mj_stateSize(e.model, spec))
+        self._drive_state = 0
         # knot values -> per-step commands (linear interpolation matrix, steps x knots)
         t = np.linspace(0.0, self.config.knots - 1, self._steps)
         lo = np.minimum(np.floor(t).astype(int), self.config.knots - 2)
@@ -198,6 +199,7 @@ class OracleMPC:
         twin = self._twin
         d = twin.data
         mujoco.mj_setState(twin.model, d, self._state, self._state_spec)
+        twin.set_drive_state(self._drive_state)
         twin.stage = stage
         stage.set_history_state(delay)
         cfg = self.config
@@ -231,6 +233,7 @@ class OracleMPC:
     def _plan_now(self) -> None:
         e, cfg = self.env, self.config
         mujoco.mj_getState(e.model, e.data, self._state, self._state_spec)
+        self._drive_state = e.twin.drive_state()
         if self._start_rad is None:
             self._start_rad = e.twin.knee_angle_rad
         stage = e.spasticity.planning_copy(e.model, e.dt)

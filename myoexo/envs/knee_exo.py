@@ -512,7 +512,9 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         Physics: :meth:`Twin.step <myoexo.envs.twin.Twin.step>`, exactly ``mj_step(model, data,
         frame_skip)`` with this step's ``ctrl``
         (run as ``frame_skip - 1`` substeps and a last one, to note the knee angle in
-        between; the state trajectory is bit-identical to raw ``mj_step``), and no extra
+        between; the state trajectory is bit-identical to raw ``mj_step``; near the flexion
+        stop the drive's end-stop protection may set the motor's command of each substep,
+        ``info["drive_braking"]``), and no extra
         ``mj_forward``: the returned quantities are what the state and the last substep
         provide. With ``t = info["time_s"]`` and ``h`` the physics
         timestep (the last substep integrated the state from ``t - h`` to ``t``):
@@ -587,6 +589,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
         """Start an episode: new subject (seeded), knee at the start angle, exo at rest."""
         gym.Env.reset(self, seed=seed)
         mujoco.mj_resetData(self.model, self.data)
+        self.twin.set_drive_state()
         self._clear_episode_state()
         self._run_reset_stages()  # the spasticity stage draws this episode's subject
         scales = self._set_personal() if self.personal is not None else {}
@@ -673,6 +676,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             target_angle_deg=target_deg,
             error_deg=knee_deg - target_deg,
             command=self._command,
+            drive_braking=self.twin.braking,
             exo_torque_nm=exo_nm,
             muscle_knee_torque_nm=muscle_nm,
             interaction_torque_nm=values[at.interaction_torque_nm],

@@ -16,8 +16,10 @@ the spastic muscles) and names what a task, a controller or a clinical test read
   ``sensory_record()`` (each spastic muscle's normalised fibre length, lengthening speed and
   force, :class:`~myoexo.spasticity.SensoryRecord`);
 * ``step(command)``: one control period: the exo motor's command (in ``[-1, 1]``, the
-  fraction of its torque limit), the reflex's excitations on the muscles, ``frame_skip``
-  physics steps.
+  fraction of its torque limit) as the drive applies it (its end-stop protection,
+  :mod:`myoexo.model.drive`, brakes at any physics timestep where the command would carry
+  the limb into the flexion stop; ``applied_command`` and ``braking``), the reflex's
+  excitations on the muscles, ``frame_skip`` physics steps.
 
 The env (:class:`~myoexo.envs.MyoExoKneeEnv`, as ``env.twin``), the oracle's planner and the
 clinical tests' drive step the twin through it; nothing else calls ``mj_step`` on it.
@@ -38,12 +40,17 @@ import mujoco
 import numpy as np
 
 from myoexo.model import EXO_ACTUATOR, EXO_JOINT, KNEE_JOINT, strap_knee_torque
+from myoexo.model.drive import stop_protection
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import SensoryRecord, SpasticityStage
 
 __all__ = ["Twin", "frame_skip_of"]
 
 _RAD_TO_DEG = 180.0 / math.pi
+#: Control periods the drive keeps checking every timestep after it braked (the check at
+#: the period's start assumes the leg adds at most the motor's authority; right after a
+#: braking the stretched strap still passes more on).
+_WATCH_PERIODS = 10
 
 
 def frame_skip_of(control_period_s: float, timestep_s: float) -> int:
@@ -113,49 +120,111 @@ class Twin:
             for name in ("thigh_cuff_force", "shank_cuff_force")
         )
         self._ctrl = np.zeros(model.nu)
+        #: The drive's end-stop protection (``None``: the model's drive has none).
+        self.protection = stop_protection(model)
+        #: The motor command the drive applied in the last physics timestep.
+        self.applied_command = 0.0
+        #: Whether the drive braked in the last control period instead of applying the
+        #: command it was given.
+        self.braking = False
+        self._command = 0.0
+        self._protected = False
+        self._protect_periods = 0
         self._half_timestep_s = 0.5 * timestep_s
         #: The knee angle (rad) at the start of the last physics substep, where the force
         #: accessors were computed.
         self.force_knee_angle_rad = float(self.data.qpos[self._knee_q])
 
     # ------------------------------------------------------------------ stepping
-    def apply_command(self, command: float) -> np.ndarray:
-        """Write the ``ctrl`` of one control step: the exo motor's *command* and the reflex's
-        (and any other stage's) excitations on the muscles. Returns ``data.ctrl``."""
+    def apply_command(self, command: float, *, powered: bool = True) -> np.ndarray:
+        """Write the ``ctrl`` of one control step: the exo motor's *command* (with *powered*
+        False the motor is off: the command is 0 and the drive does not act) and the reflex's
+        (and any other stage's) excitations on the muscles. Returns ``data.ctrl``. When the
+        hinge is near its braking curve, :meth:`advance` lets the drive's protection decide
+        the motor's command at every physics timestep."""
+        if not powered:
+            command = 0.0
+        protection = self.protection
+        d = self.data
+        if not powered or protection is None:
+            self._protected = False
+        elif self._protect_periods > 0:  # braked lately: the strap may still carry momentum
+            self._protect_periods -= 1
+            self._protected = True
+        else:
+            self._protected = protection.near(
+                d.qpos.item(self._exo_q), d.qvel.item(self._knee_d), self.dt
+            )
+        self._command = self.applied_command = command
+        self.braking = False
         ctrl = self._ctrl
         ctrl.fill(0.0)
         ctrl[self.exo_actuator] = command
         applied = self.stage.apply(self, ctrl) if self._stages is None else self._stages(ctrl)
-        self.data.ctrl[:] = applied
-        return self.data.ctrl
+        d.ctrl[:] = applied
+        return d.ctrl
 
     def advance(self) -> bool:
         """Run one control period of physics with the ``ctrl`` in place (``frame_skip`` steps,
-        the last one alone, to note :attr:`force_knee_angle_rad`). Returns whether MuJoCo
+        the last one alone, to note :attr:`force_knee_angle_rad`; one at a time, each with
+        the drive's command, when the drive protects its stops). Returns whether MuJoCo
         found the simulation unstable and reset its data (the time went back); the data then
         holds the reset state, forward-computed."""
         m, d = self.model, self.data
         t_expected_s = d.time + self.dt
-        if self.frame_skip > 1:
-            mujoco.mj_step(m, d, self.frame_skip - 1)
-        self.force_knee_angle_rad = d.qpos.item(self._knee_q)
-        mujoco.mj_step(m, d)
+        if self._protected:
+            self._advance_protected()
+        else:
+            if self.frame_skip > 1:
+                mujoco.mj_step(m, d, self.frame_skip - 1)
+            self.force_knee_angle_rad = d.qpos.item(self._knee_q)
+            mujoco.mj_step(m, d)
         unstable = d.time < t_expected_s - self._half_timestep_s
         if unstable:
             mujoco.mj_forward(m, d)
             self.force_knee_angle_rad = d.qpos.item(self._knee_q)
         return unstable
 
-    def step(self, command: float) -> bool:
+    def _advance_protected(self) -> None:
+        """The control period, one physics timestep at a time, each with the command the
+        drive's protection applies (:attr:`braking`: whether it braked in any)."""
+        m, d = self.model, self.data
+        protection = self.protection
+        assert protection is not None
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        exo_q, knee_d, exo_a = self._exo_q, self._knee_d, self.exo_actuator
+        command = self._command
+        for _ in range(self.frame_skip):
+            applied = protection.command(qpos.item(exo_q), qvel.item(knee_d), command)
+            if applied != command:
+                self.braking = True
+                self._protect_periods = _WATCH_PERIODS
+            ctrl[exo_a] = applied
+            self.applied_command = applied
+            self.force_knee_angle_rad = qpos.item(self._knee_q)
+            mujoco.mj_step(m, d)
+
+    def step(self, command: float, *, powered: bool = True) -> bool:
         """One control step: :meth:`apply_command` then :meth:`advance`. Returns whether the
         simulation went unstable."""
-        self.apply_command(command)
+        self.apply_command(command, powered=powered)
         return self.advance()
 
     def forward(self) -> None:
         """``mj_forward`` of the present state: every accessor then refers to it."""
         mujoco.mj_forward(self.model, self.data)
         self.force_knee_angle_rad = self.data.qpos.item(self._knee_q)
+
+    def drive_state(self) -> int:
+        """The drive's protection state (the control periods it goes on checking every
+        timestep), for :meth:`set_drive_state` (e.g. to replay from here in a planner)."""
+        return self._protect_periods
+
+    def set_drive_state(self, state: int = 0) -> None:
+        """Restore a state taken by :meth:`drive_state` (default: the drive at rest, as at
+        the start of an episode)."""
+        self._protect_periods = int(state)
+        self.braking = False
 
     def reset_reflex(self) -> None:
         """Draw the reflex stage's next subject (from :attr:`np_random`) and clear its delay

@@ -16,6 +16,7 @@ import functools
 import mujoco
 import numpy as np
 
+from myoexo.model.drive import STOP_PROTECTION_NUMERIC
 from myoexo.model.exo import EXO_ACTUATOR, exo_spec, strap_to_shank
 from myoexo.model.geometry import ExoGeometry, KneeAxisFit, exo_geometry, fit_knee_axis
 from myoexo.model.leg import (
@@ -134,6 +135,10 @@ def build_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoc
     spec = build_spec_quietly(builder)
     spec.modelname = "myoexo_twin"
     spec = standalone_spec(spec)
+    spec.add_numeric(
+        name=STOP_PROTECTION_NUMERIC,
+        data=[params.exo_stop_braking_fraction, params.exo_stop_contact_speed_rad_s],
+    )
     model = compile_quietly(spec)
     if model.actuator(model.nu - 1).name != EXO_ACTUATOR:
         raise RuntimeError("exo_motor must be the last actuator of the twin")

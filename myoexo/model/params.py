@@ -48,8 +48,9 @@ __all__ = [
 #: each version changed. 2: the sagittal cuff pins are damped (``pin_damping_nm_s_rad``) and
 #: carry an armature (``pin_armature_kg_m2``). 3: the passive knee is Riener and Edrich's
 #: measured moment with a knee damping of its own (``passive_knee``,
-#: ``knee_damping_nm_s_rad``; :mod:`myoexo.model.passive_knee`).
-TWIN_VERSION = 3
+#: ``knee_damping_nm_s_rad``; :mod:`myoexo.model.passive_knee`). 4: the exo drive brakes
+#: before its end stops (``exo_stop_braking_fraction``, :mod:`myoexo.model.drive`).
+TWIN_VERSION = 4
 
 #: The fields that give an earlier twin version's physics (:meth:`TwinParams.of_version`), so
 #: that a result or a policy of that version can be reproduced on the twin it was made on.
@@ -59,8 +60,14 @@ EARLIER_TWINS: dict[int, dict[str, float | str]] = {
         "pin_armature_kg_m2": 0.001,
         "passive_knee": "muscles",
         "knee_damping_nm_s_rad": 0.5,
+        "exo_stop_braking_fraction": 0.0,
     },
-    2: {"passive_knee": "muscles", "knee_damping_nm_s_rad": 0.5},
+    2: {
+        "passive_knee": "muscles",
+        "knee_damping_nm_s_rad": 0.5,
+        "exo_stop_braking_fraction": 0.0,
+    },
+    3: {"exo_stop_braking_fraction": 0.0},
 }
 
 
@@ -174,6 +181,11 @@ class TwinParams:
             [-motor_limit_nm, motor_limit_nm].
         exo_knee_damping_nm_s_rad: Viscous damping of the exo hinge (Nm s/rad).
         exo_knee_armature_kg_m2: Reflected rotor inertia of the exo drive (kg m^2).
+        exo_stop_braking_fraction: The share of the motor's authority the drive's end-stop
+            protection plans to brake with (:mod:`myoexo.model.drive`; 0: no protection,
+            twins 1-3). 0.5 leaves the other half for the leg's own torques.
+        exo_stop_contact_speed_rad_s: The speed at which the drive lets the exo hinge touch
+            a stop, rad/s.
         thigh_cuff_mass_kg: Thigh cuff + strap mass (kg).
         exo_thigh_mass_kg: Upper exo frame (bar, motor and gearbox) mass (kg).
         exo_shank_mass_kg: Lower exo frame mass (kg).
@@ -226,6 +238,8 @@ class TwinParams:
     motor_limit_nm: float = 100.0
     exo_knee_damping_nm_s_rad: float = 0.5
     exo_knee_armature_kg_m2: float = 0.01
+    exo_stop_braking_fraction: float = 0.5
+    exo_stop_contact_speed_rad_s: float = 0.5
 
     thigh_cuff_mass_kg: float = 0.25
     exo_thigh_mass_kg: float = 1.0
@@ -289,12 +303,18 @@ class TwinParams:
             "exo_knee_damping_nm_s_rad",
             "exo_knee_armature_kg_m2",
             "knee_damping_nm_s_rad",
+            "exo_stop_contact_speed_rad_s",
         )
         for name in non_negative:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"TwinParams.{name} must be >= 0, got {value!r}")
 
+        if not 0.0 <= self.exo_stop_braking_fraction <= 1.0:
+            raise ValueError(
+                f"TwinParams.exo_stop_braking_fraction must be in [0, 1], "
+                f"got {self.exo_stop_braking_fraction!r}"
+            )
         if not 0.0 < self.slide_efficiency <= 1.0:
             raise ValueError(
                 f"TwinParams.slide_efficiency must be in (0, 1], got {self.slide_efficiency!r}"

@@ -26,11 +26,13 @@ motor, ``2 tau_motor``. No controller can make the strap pass more than that whi
 moves inside its range: the motor cannot push harder, the leg's torques reach the exo only
 in the share of the exo's inertia, and the strap rings no more than its damping allows.
 
-The bound does not hold through an impact on the exo's own end stops
-(``exo_knee_range_deg``): the stop halts the lower exo and the strap must stop the shank's
-momentum, a torque of about ``omega * sqrt(k_strap * I_knee)`` at knee speed ``omega``,
-scaled by the strap's damping (``impact_torque_nm``). A controller that slams the exo into
-its stop meets that physics, not a modelling artefact.
+The bound assumes the shank is never stopped by the exo's own end stop
+(``exo_knee_range_deg``): there the stop halts the lower exo and the strap must stop the
+shank's momentum, a torque of about ``omega * sqrt(k_strap * I_knee)`` at knee speed
+``omega``, scaled by the strap's damping (``impact_torque_nm``), 300-400 Nm at the 13 rad/s a
+bang-bang command reaches. The drive's end-stop protection (:mod:`myoexo.model.drive`)
+brakes before the flexion stop, the one inside the knee's range, so that no command reaches
+it faster than the contact speed; the knee's own limit comes before the extension stop.
 
 The misalignment (knee angle minus exo hinge angle, ``info["misalignment_deg"]``) is bounded
 by the coupling's design: each sagittal cuff pin absorbs misalignment within its range
