@@ -119,3 +119,20 @@ def test_registered_and_reads_only_the_record() -> None:
     with pytest.raises(NotImplementedError, match="SensoryRecord"):
         model.step((), (), 10.0, 0.0)
     assert dataclasses.replace(model, delay_s=0.03).delay_s == 0.03
+
+
+def test_a_refit_that_differs_in_the_last_digits_records_the_same_parameters():
+    """A policy's recorded reflex parameters match today's within floating-point noise (a
+    re-fit of the same geometry on another MuJoCo build), not a real change."""
+    import copy
+
+    from myoexo.spasticity.registry import reflex_parameter_changes, reflex_parameters
+
+    recorded = copy.deepcopy(reflex_parameters("spindle"))
+    assert reflex_parameter_changes(recorded, "spindle") == []
+    slopes = recorded["geometry"]["slope_per_rad"]
+    slopes[2] *= 1.0 + 1e-14
+    assert reflex_parameter_changes(recorded, "spindle") == []
+    slopes[2] *= 1.001
+    (change,) = reflex_parameter_changes(recorded, "spindle")
+    assert change.startswith("geometry.slope_per_rad:")

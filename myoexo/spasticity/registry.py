@@ -450,8 +450,30 @@ def reflex_parameter_changes(recorded: Mapping[str, Any], reflex: str | ReflexMo
     return [
         f"{key}: {before.get(key, 'absent')} -> {now.get(key, 'absent')}"
         for key in sorted(set(before) | set(now))
-        if before.get(key) != now.get(key)
+        if not _same_value(before.get(key), now.get(key))
     ]
+
+
+#: Relative tolerance under which two recorded floats are the same parameter: a re-fit that
+#: measures the same geometry on another MuJoCo build differs in the last digits.
+_PARAMETER_RTOL = 1e-9
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """Whether two recorded parameter values are the same: equal, or numbers (or lists of
+    numbers) equal within :data:`_PARAMETER_RTOL`."""
+    if a == b:
+        return True
+    numbers = (int, float)
+    if isinstance(a, numbers) and isinstance(b, numbers):
+        return (
+            not isinstance(a, bool)
+            and not isinstance(b, bool)
+            and math.isclose(a, b, rel_tol=_PARAMETER_RTOL, abs_tol=0.0)
+        )
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple) and len(a) == len(b):
+        return all(_same_value(x, y) for x, y in zip(a, b, strict=True))
+    return False
 
 
 def reflex_argument(name: str) -> str:
