@@ -46,6 +46,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
+from myoexo.model.joint_torque import joint_inertia
 from myoexo.model.leg import KNEE_JOINT
 
 __all__ = ["STOP_PROTECTION_NUMERIC", "StopProtection", "stop_protection"]
@@ -123,13 +124,6 @@ class StopProtection:
         return command
 
 
-def _diagonal_inertia(model: mujoco.MjModel, data: mujoco.MjData, joint: str) -> float:
-    dense = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, dense)
-    dof = int(model.jnt_dofadr[model.joint(joint).id])
-    return float(dense[dof, dof])
-
-
 def stop_protection(model: mujoco.MjModel) -> StopProtection | None:
     """The drive's protection of the compiled twin *model* (``None``: the model's drive has
     none, its braking fraction is 0 or absent, or neither stop lies inside the knee's range).
@@ -142,7 +136,7 @@ def stop_protection(model: mujoco.MjModel) -> StopProtection | None:
         return None
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    inertia = _diagonal_inertia(model, data, EXO_JOINT) + _diagonal_inertia(model, data, KNEE_JOINT)
+    inertia = joint_inertia(model, data, EXO_JOINT) + joint_inertia(model, data, KNEE_JOINT)
     motor = model.actuator(EXO_ACTUATOR)
     motor_nm = float(np.max(np.abs(motor.forcerange)))
     lower, upper = (float(v) for v in model.jnt_range[model.joint(EXO_JOINT).id])

@@ -15,6 +15,15 @@ import mujoco
 import numpy as np
 
 
+def joint_inertia(model: mujoco.MjModel, data: mujoco.MjData, joint: str) -> float:
+    """The diagonal entry of the joint space inertia matrix at *joint*'s dof (kg m^2 for a
+    hinge): the inertia the joint moves on its own at *data*'s pose (``mj_forward`` done)."""
+    dense = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, dense)
+    dof = int(model.jnt_dofadr[model.joint(joint).id])
+    return float(dense[dof, dof])
+
+
 class CoupledJointTorque:
     """Generalized actuator force along a joint and every joint tied to it by a polynomial
     joint equality (``eq_obj2id`` = that joint).

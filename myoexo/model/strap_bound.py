@@ -50,7 +50,7 @@ import mujoco
 import numpy as np
 
 from myoexo.model.exo import EXO_ACTUATOR, EXO_JOINT
-from myoexo.model.joint_torque import CoupledJointTorque
+from myoexo.model.joint_torque import CoupledJointTorque, joint_inertia
 from myoexo.model.leg import KNEE_JOINT
 from myoexo.model.posing import pose_twin
 
@@ -170,13 +170,6 @@ def kelvin_voigt_impact_peak(damping_ratio: float) -> float:
     return _kelvin_voigt_peak(damping_ratio, force=0.0, speed=1.0)
 
 
-def _diagonal_inertia(model: mujoco.MjModel, data: mujoco.MjData, joint: str) -> float:
-    dense = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, dense)
-    dof = int(model.jnt_dofadr[model.joint(joint).id])
-    return float(dense[dof, dof])
-
-
 def _muscle_knee_torque(model: mujoco.MjModel, data: mujoco.MjData) -> float:
     """The larger of the flexors' and the extensors' knee torque, all fully active, at the
     current pose (Nm; along the knee's coupled motion)."""
@@ -207,8 +200,8 @@ def strap_bound(model: mujoco.MjModel) -> StrapBound:
     data = mujoco.MjData(model)
     pose_twin(model, data, knee_angle_deg=90.0)
     mujoco.mj_forward(model, data)
-    exo_inertia = _diagonal_inertia(model, data, EXO_JOINT)
-    knee_inertia = _diagonal_inertia(model, data, KNEE_JOINT)
+    exo_inertia = joint_inertia(model, data, EXO_JOINT)
+    knee_inertia = joint_inertia(model, data, KNEE_JOINT)
     human = 0.0
     for angle in _KNEE_ANGLES_DEG:
         pose_twin(model, data, knee_angle_deg=float(angle))
