@@ -11,7 +11,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from myoexo.clinical.pendulum import FREED_EXO_RANGE_DEG, RECLINED, run_pendulum
+from myoexo.clinical.pendulum import (
+    FREED_EXO_RANGE_DEG,
+    HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S,
+    RECLINED,
+    SUPINE,
+    run_pendulum,
+)
 from myoexo.model import KNEE_JOINT, TwinParams, build_model, pose_twin
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.model.passive_knee import (
@@ -23,6 +29,8 @@ from myoexo.model.passive_knee import (
 
 #: Kim, Chon, Park and Choi 1996: healthy adults' relaxation index, mean and SD.
 KIM_RELAXATION_INDEX = (1.678, 0.090)
+#: The same adults' second-swing velocity, rad/s.
+KIM_SECOND_SWING_RAD_S = (3.076, 0.551)
 
 
 def _relaxed_knee_moment_nm(model: mujoco.MjModel, knee_deg: float) -> float:
@@ -124,3 +132,21 @@ def test_healthy_pendulum_relaxation_index_is_kims() -> None:
     old = run_pendulum(params, twin=earlier)
     assert old.summary.iloc[0]["relaxation_index"] < mean - 2.0 * sd
     assert math.isfinite(row["second_peak_velocity_deg_s"])
+
+
+def test_healthy_supine_pendulum_lies_within_kims_two_sd() -> None:
+    """Kim et al. tested healthy adults supine: in that posture (hip extended, the hamstrings
+    slack) the freed twin's index and both swing velocities lie within 2 SD; reclined at hip
+    40 deg the stretched hamstrings pull the released shank faster than their first swing."""
+    twin = TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG)
+    supine = run_pendulum(dataclasses.replace(SUPINE, levels=(0,)), twin=twin).summary.iloc[0]
+    assert supine["release_deg"] < 2.0
+    for value, (mean, sd) in (
+        (supine["relaxation_index"], KIM_RELAXATION_INDEX),
+        (math.radians(supine["peak_velocity_deg_s"]), HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S),
+        (math.radians(supine["second_peak_velocity_deg_s"]), KIM_SECOND_SWING_RAD_S),
+    ):
+        assert abs(value - mean) <= 2.0 * sd, (value, mean, sd)
+    reclined = run_pendulum(dataclasses.replace(RECLINED, levels=(0,)), twin=twin).summary
+    mean, sd = HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S
+    assert math.radians(reclined.iloc[0]["peak_velocity_deg_s"]) > mean + 2.0 * sd

@@ -181,7 +181,10 @@ def _cli(*args: str, env_plugins: str | None = None) -> subprocess.CompletedProc
 def test_an_unknown_reflex_on_the_command_line_lists_the_registered_ones():
     out = _cli("clinic", "tardieu", "--reflex", "clonus", "--levels", "1")
     assert out.returncode == 2
-    assert "clonus" in out.stderr and "persistent, spindle, stretch, tsrt, uniform" in out.stderr
+    assert (
+        "clonus" in out.stderr
+        and "persistent, spindle, spindle_tsrt, stretch, tsrt, uniform" in out.stderr
+    )
 
 
 @pytest.mark.slow

@@ -21,7 +21,8 @@ from myoexo.spasticity import (
     reflex_names,
 )
 from myoexo.spasticity.reflex import CALIBRATION, StretchReflex, stretch_constants, stretch_terms
-from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
+from myoexo.spasticity.spindle import SpindleReflex, SpindleTSRTReflex, spindle_geometry
+from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRTReflex, tsrt_constants, tsrt_terms
 
 HAMSTRINGS = ("semimem_r", "semiten_r", "bflh_r")
 
@@ -70,25 +71,37 @@ def test_the_reclined_hip_slackens_the_hamstrings_and_stretches_rectus_femoris(s
     assert abs(theta["bfsh_r"] - 10.0) < 15.0  # a one-joint muscle does not care
 
 
-def test_the_folded_excitation_is_the_stretch_reflex_on_each_muscles_state(seated) -> None:
-    """excite's one affine map and tanh equal the stretch reflex's terms evaluated at each
-    muscle's equivalent knee angle and speed, the flexor term for the muscles extension
-    lengthens and the extensor term for the others."""
+@pytest.mark.parametrize(
+    ("reflex_class", "calibration", "constants_of", "terms"),
+    [
+        (SpindleReflex, CALIBRATION, stretch_constants, stretch_terms),
+        (SpindleTSRTReflex, TSRT_CALIBRATION, tsrt_constants, tsrt_terms),
+    ],
+    ids=["spindle", "spindle_tsrt"],
+)
+def test_the_excitation_is_the_knee_reflex_on_each_muscles_state(
+    seated, reflex_class, calibration, constants_of, terms
+) -> None:
+    """excite equals the knee-angle reflex's terms (``"stretch"``'s for ``"spindle"``,
+    ``"tsrt"``'s for ``"spindle_tsrt"``) evaluated at each muscle's equivalent knee angle
+    and speed, the flexor term for the muscles extension lengthens and the extensor term
+    for the others."""
     model, geometry = seated
-    reflex = SpindleReflex(calibration=CALIBRATION, geometry=geometry)
+    reflex = reflex_class(calibration=calibration, geometry=geometry)
     rng = np.random.default_rng(0)
     for level in (1, 2, 3):
         subject = LEVELS[level]
         constants = reflex.subject_constants(level, subject, None, 0.01)
-        stretch = stretch_constants(subject, CALIBRATION[level])
+        knee_constants = constants_of(subject, calibration[level])
         for knee_deg in (10.0, 50.0, 85.0):
             record = _record(model, knee_deg)._replace(
                 lengthening_speed=rng.normal(0.0, 1.5, len(SPASTIC_MUSCLES))
             )
-            got, _ = reflex.excite(constants, (), record)
+            got, memory = reflex.excite(constants, (), record)
+            assert memory == ()
             theta = geometry.equivalent_knee_deg(record.fibre_length)
             vel = geometry.equivalent_knee_velocity_rad_s(record.lengthening_speed)
-            flex, ext = stretch_terms(theta, vel, stretch, np.tanh)
+            flex, ext = terms(theta, vel, knee_constants, np.tanh)
             expected = np.where(np.asarray(geometry.slope_per_rad) < 0.0, flex, ext)
             np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
 
@@ -136,3 +149,34 @@ def test_a_refit_that_differs_in_the_last_digits_records_the_same_parameters():
     slopes[2] *= 1.001
     (change,) = reflex_parameter_changes(recorded, "spindle")
     assert change.startswith("geometry.slope_per_rad:")
+
+
+# ----------------------------------------------------------------------------- spindle_tsrt
+def test_spindle_tsrt_fires_on_a_fast_stretch_of_the_hamstrings_only_where_stretched(
+    seated,
+) -> None:
+    """A fast extension (hamstrings lengthening at 3 rad/s of knee motion) excites the
+    hamstrings seated, where they are long, and hardly reclined, where the hip slackens
+    them: the dynamic threshold is a fibre length."""
+    model, geometry = seated
+    reflex = SpindleTSRTReflex(calibration=TSRT_CALIBRATION, geometry=geometry)
+    constants = reflex.subject_constants(2, LEVELS[2], None, 0.01)
+    ham = [SPASTIC_MUSCLES.index(n) for n in HAMSTRINGS]
+    reclined, _ = build_model(TwinParams(hip_flexion_deg=40.0, scene=False))
+    fired = {}
+    for name, m in (("seated", model), ("reclined", reclined)):
+        record = _record(m, 30.0)
+        speed = -3.0 * np.asarray(geometry.slope_per_rad)  # knee extending at 3 rad/s
+        at_rest, _ = reflex.excite(constants, (), record)
+        fast, _ = reflex.excite(constants, (), record._replace(lengthening_speed=speed))
+        fired[name] = float(np.mean(np.asarray(fast)[ham] - np.asarray(at_rest)[ham]))
+    assert fired["seated"] > 0.1
+    assert fired["reclined"] < 0.25 * fired["seated"], fired
+
+
+def test_spindle_tsrt_registered_and_reads_only_the_record() -> None:
+    assert "spindle_tsrt" in reflex_names()
+    model = get_reflex("spindle_tsrt")
+    assert isinstance(model, SpindleTSRTReflex) and isinstance(model, TSRTReflex)
+    with pytest.raises(NotImplementedError, match="SensoryRecord"):
+        model.step((), (), 10.0, 0.0)

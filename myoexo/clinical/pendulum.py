@@ -23,8 +23,8 @@ Outcome measures per level (knee flexion positive, deg):
     extensors brake the swing: ``R`` below (an overdamped leg that creeps to rest gives
     1). ``relaxation_index_norm`` is their normalised ``R / 1.6`` (>= 1: normal). Kim, Chon,
     Park and Choi 1996 measured it in 50 healthy adults lying supine
-    (:data:`HEALTHY_RELAXATION_INDEX_SUPINE`): the twin's reclined, device-free posture is the
-    one to compare with.
+    (:data:`HEALTHY_RELAXATION_INDEX_SUPINE`): the twin's supine, device-free posture
+    (:data:`SUPINE`, ``--device freed``) is the one to compare with.
 ``peak_velocity_deg_s``
     The largest flexion velocity of the knee during the first swing. White et al. (2007)
     measured about 293 deg/s in typically developing children and 202 deg/s in children with
@@ -56,7 +56,7 @@ whose passive knee is its muscles' passive fibres, gives 1.57 and 1.38).
 CLI::
 
     myoexo clinic pendulum [--levels 0 1 2 3] [--reflex NAME]
-                    [--posture seated|reclined] [--start-deg D] [--swing-s 10]
+                    [--posture seated|reclined|supine] [--start-deg D] [--swing-s 10]
                     [--device worn|freed] [--subject-seed N] [--out DIR]
 
 ``--posture`` picks the preset (:data:`POSTURES`); every field of :class:`PendulumParams` but
@@ -126,8 +126,8 @@ __all__ = [
 #: Vodovnik 1984); below it, spastic.
 HEALTHY_RELAXATION_INDEX = 1.6
 #: Relaxation index of healthy adults in the pendulum test, mean and SD (Kim, Chon, Park and
-#: Choi 1996, J Korean Acad Rehabil Med 20(3); n = 50, supine, no device): compare with the
-#: reclined posture without the device.
+#: Choi 1996, J Korean Acad Rehabil Med 20(3); n = 50, supine, no device): compare with
+#: :data:`SUPINE` without the device.
 HEALTHY_RELAXATION_INDEX_SUPINE = (1.678, 0.090)
 #: Angular velocity of the first swing of the same healthy adults, mean and SD, rad/s (Kim
 #: et al. 1996: 3.873 +- 0.622 rad/s, 222 +- 36 deg/s).
@@ -228,8 +228,14 @@ SEATED = PendulumParams()
 #: The clinic's semi-reclined test: hip at 40 deg, trunk reclined 50 deg, thigh horizontal,
 #: released from full extension (the slack hamstrings allow it).
 RECLINED = PendulumParams(start_deg=0.0, hip_flexion_deg=40.0)
+#: Kim et al.'s (1996) supine test: hip extended (0 deg), trunk lying flat, thigh horizontal
+#: on the table, released from full extension: the posture of the healthy reference values
+#: (:data:`HEALTHY_RELAXATION_INDEX_SUPINE`, :data:`HEALTHY_FIRST_SWING_VELOCITY_SUPINE_RAD_S`).
+SUPINE = PendulumParams(start_deg=0.0, hip_flexion_deg=0.0)
 #: Named postures of the CLI.
-POSTURES: Mapping[str, PendulumParams] = MappingProxyType({"seated": SEATED, "reclined": RECLINED})
+POSTURES: Mapping[str, PendulumParams] = MappingProxyType(
+    {"seated": SEATED, "reclined": RECLINED, "supine": SUPINE}
+)
 #: The exo's knee range with its flexion stop out of the way (``--device freed``): the exo's
 #: mass and straps stay, its motor is off during the swing, its stop is past the swing:
 #: as close to the clinic's test without the device as the strapped twin gets.
@@ -377,7 +383,11 @@ def run_pendulum(
     from myoexo.model import TwinParams, pose_twin
 
     label = reflex_label(reflex)
-    twin = dataclasses.replace(twin or TwinParams(), hip_flexion_deg=params.hip_flexion_deg)
+    # no scene: the test is never rendered, and the plinth, placed under the thigh of the
+    # upright pelvis, has no room below the knee once the hip extends
+    twin = dataclasses.replace(
+        twin or TwinParams(), hip_flexion_deg=params.hip_flexion_deg, scene=False
+    )
     model: mujoco.MjModel = twin_model(twin)
     model.opt.gravity[:] = reclined_gravity(params.recline_deg)
     exo = model.joint(EXO_JOINT)
@@ -480,7 +490,8 @@ class PendulumSetup:
     posture: str = option(
         "seated",
         "the preset test, which the options below change (seated: hip 90 deg, the twin as "
-        "built; reclined: hip 40 deg, thigh horizontal, as in clinics)",
+        "built; reclined: hip 40 deg, thigh horizontal, as in clinics; supine: hip 0 deg, "
+        "lying flat, as Kim et al. 1996 tested healthy adults)",
         choices=sorted(POSTURES),
     )
     device: str = option(

@@ -33,6 +33,20 @@ fitted by ``myoexo twin calibrate --reflex spindle`` to the study's PID table li
 ``"stretch"``'s, and written with the geometry to the package's fit :data:`SPINDLE_FIT`.
 
 No memory, no torch twin (the gradient fits do not take it).
+
+``"spindle_tsrt"`` (:class:`SpindleTSRTReflex`) reads the ``"tsrt"`` reflex
+(:mod:`myoexo.spasticity.tsrt`) the same way: each muscle's static and dynamic thresholds are
+fibre lengths, its dynamic threshold falls as its own lengthening speed rises (Levin and
+Feldman 1994), and its excitation is the ``"tsrt"`` term of the side that stretches it at
+its equivalent seated knee angle and velocity::
+
+    e_i = tsrt flexor term (theta_i, v_i)     (muscles extension lengthens)
+    e_i = tsrt extensor term (theta_i, v_i)   (muscles flexion lengthens)
+
+Its per-level parameters (:class:`~myoexo.spasticity.tsrt.TSRTCalibration`) are fitted by
+``myoexo twin calibrate --reflex spindle_tsrt`` (:mod:`myoexo.studies.joint_fit`, starting
+from ``"tsrt"``'s knee-angle fit) and written to the package's fit
+:data:`SPINDLE_TSRT_FIT`; the geometry is ``"spindle"``'s (:data:`SPINDLE_GEOMETRY`).
 """
 
 from __future__ import annotations
@@ -52,7 +66,14 @@ from myoexo.spasticity.reflex import (
     StretchReflex,
     stretch_constants,
 )
-from myoexo.spasticity.registry import Memory, register_reflex
+from myoexo.spasticity.registry import Memory, ReflexModel, register_reflex
+from myoexo.spasticity.tsrt import (
+    TSRT_CALIBRATION,
+    TSRTCalibration,
+    TSRTConstants,
+    TSRTReflex,
+    tsrt_constants,
+)
 
 if TYPE_CHECKING:
     from myoexo.model import TwinParams
@@ -60,16 +81,24 @@ if TYPE_CHECKING:
 
 __all__ = [
     "SPINDLE_FIT",
+    "SPINDLE_TSRT_CALIBRATION",
+    "SPINDLE_TSRT_FIT",
     "SpindleConstants",
     "SpindleGeometry",
     "SpindleReflex",
+    "SpindleTSRTConstants",
+    "SpindleTSRTReflex",
     "spindle_constants",
     "spindle_geometry",
+    "spindle_tsrt_constants",
 ]
 
 #: The package's fit of the ``"spindle"`` reflex: its geometry and its per-level parameters
 #: (``myoexo twin calibrate --reflex spindle --write``).
 SPINDLE_FIT = "reflex_spindle"
+#: The package's fit of the ``"spindle_tsrt"`` reflex's per-level parameters
+#: (``myoexo twin calibrate --reflex spindle_tsrt --write``).
+SPINDLE_TSRT_FIT = "reflex_spindle_tsrt"
 
 #: Knee angles (deg) over which each muscle's fibre length is fitted by a line, seated.
 _GEOMETRY_KNEE_DEG = tuple(float(v) for v in range(0, 95, 5))
@@ -278,15 +307,113 @@ class SpindleReflex(StretchReflex):
         n = c.n_muscles
         return x[:n] + x[n:], memory
 
-    def step(
-        self, constants: Any, memory: Memory, theta_deg: float, vel_rad_s: float
-    ) -> tuple[float, float, Memory]:
-        raise NotImplementedError(
-            "SpindleReflex reads the muscles' own state: call excite with a SensoryRecord"
-        )
+    # on the muscles' own state only: the group step and its torch twin refuse
+    step = ReflexModel.step
+    step_torch = ReflexModel.step_torch
 
-    def step_torch(self, *args: Any, **kwargs: Any) -> Any:
-        raise NotImplementedError("SpindleReflex has no torch twin of its step")
+
+class SpindleTSRTConstants(NamedTuple):
+    """A subject's constants of the ``"spindle_tsrt"`` reflex, one entry per muscle (the
+    ``"tsrt"`` constants of the side that stretches it: ``side`` -1 for a muscle that
+    extension lengthens, whose flexor term it takes, +1 for the others).
+
+    Each muscle's equivalent seated knee state is ``theta_i = length_i * deg_per_length_i +
+    theta_offset_deg_i`` and ``v_i = speed_i * inv_slope_i``; its stretch speed is ``max(0,
+    side_i v_i)``. ``half_k``, ``half_k_v``: the slopes; ``threshold_deg``: the static
+    threshold; ``mu_deg_s_rad``: the dynamic threshold's shift per rad/s of stretch;
+    ``v_threshold_rad_s``: the velocity window's edge; ``s_theta``, ``s_v``: the gains."""
+
+    deg_per_length: np.ndarray
+    theta_offset_deg: np.ndarray
+    inv_slope: np.ndarray
+    side: np.ndarray
+    half_k: float
+    half_k_v: float
+    threshold_deg: np.ndarray
+    mu_deg_s_rad: np.ndarray
+    v_threshold_rad_s: np.ndarray
+    s_theta: np.ndarray
+    s_v: np.ndarray
+
+
+def spindle_tsrt_constants(tsrt: TSRTConstants, geometry: SpindleGeometry) -> SpindleTSRTConstants:
+    """Each muscle's :class:`SpindleTSRTConstants` from the ``"tsrt"`` constants and the
+    geometry."""
+    slope = np.asarray(geometry.slope_per_rad, dtype=np.float64)
+    deg_per_length = np.degrees(1.0 / slope)
+    flexor = slope < 0.0  # lengthened by extension: the flexor term
+
+    def side(flex_value: float, ext_value: float) -> np.ndarray:
+        return np.where(flexor, float(flex_value), float(ext_value))
+
+    return SpindleTSRTConstants(
+        deg_per_length=deg_per_length,
+        theta_offset_deg=geometry.reference_knee_deg
+        - np.asarray(geometry.reference_length) * deg_per_length,
+        inv_slope=1.0 / slope,
+        side=np.where(flexor, -1.0, 1.0),
+        half_k=float(tsrt.half_k),
+        half_k_v=float(tsrt.half_k_v),
+        threshold_deg=side(tsrt.flex_theta_deg, tsrt.ext_theta_deg),
+        mu_deg_s_rad=side(tsrt.flex_mu_deg_s_rad, tsrt.ext_mu_deg_s_rad),
+        v_threshold_rad_s=side(tsrt.v_lower_rad_s, tsrt.v_upper_rad_s),
+        s_theta=side(tsrt.flex_s_theta, tsrt.ext_s_theta),
+        s_v=side(tsrt.flex_s_v, tsrt.ext_s_v),
+    )
+
+
+def _package_tsrt_fit() -> TSRTCalibration:
+    """The package's ``"spindle_tsrt"`` calibration (before its first ``--write``: the
+    ``"tsrt"`` knee-angle fit its own fit starts from)."""
+    if not fit_path(SPINDLE_TSRT_FIT).exists():
+        return TSRT_CALIBRATION
+    return TSRTCalibration.from_dict(read_fit(SPINDLE_TSRT_FIT)["result"])
+
+
+#: The ``"spindle_tsrt"`` reflex's per-level parameters: the package's fit
+#: :data:`SPINDLE_TSRT_FIT` (record: ``docs/studies/calibration_spindle_tsrt``).
+SPINDLE_TSRT_CALIBRATION = _package_tsrt_fit()
+
+
+@dataclass(frozen=True)
+class SpindleTSRTReflex(TSRTReflex):
+    """``"spindle_tsrt"``: the tonic-stretch-reflex-threshold reflex on each muscle's own
+    fibre length and lengthening speed (module docstring).
+
+    Attributes:
+        delay_s: Transmission delay, s (the stretch reflex's 20 ms).
+        calibration: Per-level parameters (:data:`SPINDLE_TSRT_CALIBRATION`).
+        geometry: The muscles' fibre length against the knee angle, seated
+            (:data:`SPINDLE_GEOMETRY`; measured with :func:`spindle_geometry` when the
+            package has no fit yet).
+    """
+
+    calibration: TSRTCalibration = SPINDLE_TSRT_CALIBRATION
+    geometry: SpindleGeometry | None = field(default=SPINDLE_GEOMETRY, compare=True)
+
+    def subject_constants(
+        self, level: int, subject: Any, individual: Any, control_period_s: float
+    ) -> SpindleTSRTConstants:
+        geometry = self.geometry or _measured_geometry()
+        return spindle_tsrt_constants(tsrt_constants(subject, self.calibration[level]), geometry)
+
+    def excite(
+        self, constants: Any, memory: Memory, record: SensoryRecord
+    ) -> tuple[Sequence[float], Memory]:
+        c: SpindleTSRTConstants = constants
+        side = c.side
+        theta = record.fibre_length * c.deg_per_length + c.theta_offset_deg
+        vel = record.lengthening_speed * c.inv_slope
+        stretch_speed = np.maximum(side * vel, 0.0)
+        beyond = theta - c.threshold_deg
+        static = 1.0 + side * np.tanh(c.half_k * beyond)
+        dynamic = 1.0 + side * np.tanh(c.half_k * (beyond + side * c.mu_deg_s_rad * stretch_speed))
+        gate = 0.5 * (1.0 + side * np.tanh(c.half_k_v * (vel - c.v_threshold_rad_s)))
+        return 0.5 * (c.s_theta * static + c.s_v * gate * dynamic), memory
+
+    # on the muscles' own state only: the group step and its torch twin refuse
+    step = ReflexModel.step
+    step_torch = ReflexModel.step_torch
 
 
 @functools.cache
@@ -296,3 +423,4 @@ def _measured_geometry() -> SpindleGeometry:
 
 
 register_reflex("spindle", SpindleReflex())
+register_reflex("spindle_tsrt", SpindleTSRTReflex())

@@ -3,8 +3,8 @@
 Each reflex model registers its own fit (:func:`register_fit`, a :class:`ReflexFit` with the
 options only that fit takes); ``--reflex MODEL`` runs it, and an option of another model's
 fit is refused with one line naming whose it is. Built in: ``stretch`` and ``spindle`` (the
-threshold fit below), ``persistent`` (:func:`calibrate_persistent`) and ``tsrt``
-(:mod:`myoexo.studies.joint_fit`).
+threshold fit below), ``persistent`` (:func:`calibrate_persistent`), ``tsrt`` and
+``spindle_tsrt`` (:mod:`myoexo.studies.joint_fit`).
 
 The study reports what its Ziegler-Nichols PID (Kp = 7, Ki = 40, Kd = 0.05 on the error in
 rad) does on its twin: it overshoots the 7 deg target at levels 0 and 1 and stops short of it
@@ -844,6 +844,7 @@ def _run_persistent(config: CalibrationConfig, options: PersistentFitOptions) ->
 
 
 def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
+    """The tsrt reflex, on the knee angle or (``spindle_tsrt``) on each muscle's state."""
     from myoexo.studies.joint_fit import calibrate_tsrt
 
     result = calibrate_tsrt(
@@ -852,6 +853,7 @@ def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
         sweeps=options.sweeps,
         verify_subjects=config.verify_subjects,
         root_seed=config.root_seed,
+        reflex=config.reflex,
     )
     text = result.markdown()
     print(text)
@@ -860,9 +862,11 @@ def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
 
         write_study_files(config.out, {"calibration.md": text})
     if config.write:
+        from myoexo.spasticity.spindle import SPINDLE_TSRT_FIT
         from myoexo.spasticity.tsrt import TSRT_FIT
 
-        _write_calibration(TSRT_FIT, result.calibration, result.fit_root_seed)
+        name = SPINDLE_TSRT_FIT if config.reflex == "spindle_tsrt" else TSRT_FIT
+        _write_calibration(name, result.calibration, result.fit_root_seed)
     return 0
 
 
@@ -895,6 +899,14 @@ register_fit(
     ReflexFit(
         "tsrt",
         "jointly to the PID table and the clinical rows (myoexo.studies.joint_fit)",
+        _run_tsrt,
+        TsrtFitOptions,
+    )
+)
+register_fit(
+    ReflexFit(
+        "spindle_tsrt",
+        "the same joint fit on the muscles' fibre lengths, from tsrt's fit",
         _run_tsrt,
         TsrtFitOptions,
     )

@@ -1,7 +1,9 @@
-"""The joint fit of the ``"tsrt"`` reflex: the study's PID table and the clinical rows
-together, on the calibration root.
+"""The joint fit of the ``"tsrt"`` reflex (and of ``"spindle_tsrt"``, the same reflex on each
+muscle's own fibre state): the study's PID table and the clinical rows together, on the
+calibration root.
 
-``myoexo twin calibrate --reflex tsrt`` runs :func:`calibrate_tsrt`. Its objective is the
+``myoexo twin calibrate --reflex tsrt`` (or ``--reflex spindle_tsrt``) runs
+:func:`calibrate_tsrt`. Its objective is the
 validation table's (:mod:`myoexo.studies.validate`): the number of rows a candidate passes,
 with a small continuous term that breaks ties towards the study's PID final errors (6.3 / 9.3
 deg at levels 2-3, within 0.5 deg of the target at level 1), a velocity-dependent resistance
@@ -30,11 +32,11 @@ from typing import Any
 
 from myoexo.evaluation.config import CALIBRATION_ROOT_SEED, EVALUATION_ROOT_SEED, check_fit_root
 from myoexo.spasticity.levels import VALID_LEVELS
-from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRTCalibration, TSRTLevel, TSRTReflex
+from myoexo.spasticity.tsrt import TSRTCalibration, TSRTLevel, TSRTReflex
 from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
 from myoexo.studies.validate import ValidationConfig, measure_model, score
 
-__all__ = ["STEPS", "JointFitResult", "calibrate_tsrt", "objective"]
+__all__ = ["FITTED_MODELS", "STEPS", "JointFitResult", "calibrate_tsrt", "objective"]
 
 #: The first sweep's step of every fitted field (halved each sweep), and its bounds.
 STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
@@ -85,6 +87,7 @@ class JointFitResult:
         wall_time_s: Time the fit and the check took.
         fit_root_seed: Root seed of the fit's subjects.
         check_root_seed: Root seed of the check's subjects.
+        reflex: The registered name of the fitted model.
     """
 
     calibration: TSRTCalibration
@@ -95,10 +98,11 @@ class JointFitResult:
     wall_time_s: float
     fit_root_seed: int = CALIBRATION_ROOT_SEED
     check_root_seed: int = EVALUATION_ROOT_SEED
+    reflex: str = "tsrt"
 
     def snippet(self) -> str:
-        """The fitted levels as Python (what :data:`myoexo.spasticity.tsrt.TSRT_CALIBRATION`
-        reads from the package's fit once it is written with ``--write``)."""
+        """The fitted levels as Python (what the model's calibration reads from the
+        package's fit once it is written with ``--write``)."""
         lines = ["{"]
         for level, c in sorted(self.calibration.levels.items()):
             fields = ", ".join(f"{f.name}={getattr(c, f.name):.4g}" for f in dataclasses.fields(c))
@@ -110,11 +114,12 @@ class JointFitResult:
         """The calibration record: note, fitted values, the fit's rows, the check."""
         passed = sum(ok for _, ok in self.rows.values())
         lines = [
-            "# Calibration of the tsrt reflex",
+            f"# Calibration of the {self.reflex} reflex",
             "",
             self.calibration.note,
             "",
-            "Fitted values (the package's with --write: myoexo/assets/fits/reflex_tsrt.json):",
+            "Fitted values (the package's with --write: "
+            f"myoexo/assets/fits/reflex_{self.reflex}.json):",
             "",
             "```python",
             self.snippet(),
@@ -150,12 +155,18 @@ class JointFitResult:
         return "\n".join(lines)
 
 
-def _model(levels: Mapping[int, TSRTLevel]) -> TSRTReflex:
-    return TSRTReflex(calibration=TSRTCalibration(levels=MappingProxyType(dict(levels))))
+#: The registered models this fit takes (a :class:`~myoexo.spasticity.tsrt.TSRTReflex`
+#: each, whose calibration it replaces).
+FITTED_MODELS: tuple[str, ...] = ("tsrt", "spindle_tsrt")
+
+
+def _model(levels: Mapping[int, TSRTLevel], base: TSRTReflex) -> TSRTReflex:
+    calibration = TSRTCalibration(levels=MappingProxyType(dict(levels)))
+    return dataclasses.replace(base, calibration=calibration)
 
 
 def calibrate_tsrt(
-    start: TSRTCalibration = TSRT_CALIBRATION,
+    start: TSRTCalibration | None = None,
     pid_subjects: int = 6,
     clinical_subjects: int = 1,
     sweeps: int = 2,
@@ -163,12 +174,15 @@ def calibrate_tsrt(
     root_seed: int = CALIBRATION_ROOT_SEED,
     check_root_seed: int = EVALUATION_ROOT_SEED,
     log: Callable[[str], None] = print,
+    reflex: str = "tsrt",
 ) -> JointFitResult:
-    """Fit the ``"tsrt"`` reflex jointly to the PID table and the clinical rows (module
-    docstring), starting from *start*.
+    """Fit the ``"tsrt"`` reflex (or *reflex*, another reading of it) jointly to the PID
+    table and the clinical rows (module docstring), starting from *start*.
 
     Args:
-        start: The starting values (every spastic level must be listed).
+        start: The starting values (every spastic level must be listed; default: the
+            model's own calibration, the package's fit: a re-run refines it; before its
+            first ``--write``, ``"spindle_tsrt"``'s is ``"tsrt"``'s).
         pid_subjects: Subjects per level of the PID in the fit.
         clinical_subjects: Subjects per level of the clinical tests in the fit.
         sweeps: Coordinate sweeps (each halves the steps).
@@ -176,7 +190,20 @@ def calibrate_tsrt(
         root_seed: Root seed of the fit's subjects (the evaluation root is refused).
         check_root_seed: Root seed of the check.
         log: Progress lines.
+        reflex: The model fitted, one of :data:`FITTED_MODELS`.
+
+    Raises:
+        ValueError: If *reflex* is not one of :data:`FITTED_MODELS`, the root is the
+            evaluation root or *sweeps* is negative.
     """
+    if reflex not in FITTED_MODELS:
+        raise ValueError(f"reflex = {reflex!r}; the joint fit takes {list(FITTED_MODELS)}")
+    from myoexo.spasticity.registry import get_reflex
+
+    base = get_reflex(reflex)
+    assert isinstance(base, TSRTReflex)
+    if start is None:
+        start = base.calibration
     root_seed = check_fit_root(root_seed, "calibration")
     if sweeps < 0:
         raise ValueError(f"sweeps = {sweeps} must be >= 0")
@@ -190,7 +217,7 @@ def calibrate_tsrt(
     def evaluate(candidate: Mapping[int, TSRTLevel]) -> tuple[float, int]:
         nonlocal evaluations
         evaluations += 1
-        return objective(measure_model(_model(candidate), config))
+        return objective(measure_model(_model(candidate, base), config))
 
     best, passed = evaluate(levels)
     log(f"start: {passed} rows, objective {best:.3f}")
@@ -228,7 +255,7 @@ def calibrate_tsrt(
         def outcome(shift: float, level: int = level) -> PIDOutcome:
             trial = dict(levels)
             trial[level] = dataclasses.replace(levels[level], flexor_threshold_shift_deg=shift)
-            return pid_outcome(level, _model(trial), pid_subjects, root_seed)
+            return pid_outcome(level, _model(trial, base), pid_subjects, root_seed)
 
         shift, fit_outcomes[level] = bisect_final_error(
             outcome, (current - 15.0, current + 15.0), target, 0.1, level, "threshold shift"
@@ -237,12 +264,13 @@ def calibrate_tsrt(
             levels[level], flexor_threshold_shift_deg=round(shift, 2)
         )
         log(f"L{level}: threshold shift {shift:.2f} deg")
-    rows = score(measure_model(_model(levels), config))
+    rows = score(measure_model(_model(levels, base), config))
     outcomes = {
-        lv: pid_outcome(lv, _model(levels), verify_subjects, check_root_seed) for lv in VALID_LEVELS
+        lv: pid_outcome(lv, _model(levels, base), verify_subjects, check_root_seed)
+        for lv in VALID_LEVELS
     }
     note = (
-        f"myoexo twin calibrate --reflex tsrt --subjects {pid_subjects} --clinical-subjects "
+        f"myoexo twin calibrate --reflex {reflex} --subjects {pid_subjects} --clinical-subjects "
         f"{clinical_subjects} --sweeps {sweeps} --verify-subjects {verify_subjects} --seed "
         f"{root_seed}: fitted on root {root_seed} ({sum(ok for _, ok in rows.values())} of "
         f"{len(rows)} validation rows in-sample); check on root {check_root_seed}, PID final "
@@ -264,4 +292,5 @@ def calibrate_tsrt(
         wall_time_s=time.perf_counter() - t0,
         fit_root_seed=root_seed,
         check_root_seed=check_root_seed,
+        reflex=reflex,
     )

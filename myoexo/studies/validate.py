@@ -20,13 +20,17 @@ definitions are in :mod:`myoexo.clinical`):
   at 3 rad/s minus that at 0.2 rad/s, each the peak over the stretch);
 * MAS (:func:`~myoexo.clinical.mas.run_mas_exam`): the resisted fraction of the range and the
   mean excess over level 0;
-* pendulum, reclined, the exo's flexion stop freed (:data:`~myoexo.clinical.pendulum.RECLINED`,
-  the clinic's supine test): release angle, relaxation index, first-swing peak velocity.
+* pendulum, the exo's flexion stop freed: reclined (:data:`~myoexo.clinical.pendulum.RECLINED`,
+  the clinic's semi-reclined test) at every level: release angle, relaxation index,
+  first-swing peak velocity; and supine (:data:`~myoexo.clinical.pendulum.SUPINE`, the
+  posture of Kim et al.'s healthy adults) at level 0 (``pendulum_supine``), for the healthy
+  rows.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import math
 import time
@@ -118,7 +122,8 @@ class ValidationConfig:
 
 Measures = Mapping[str, Any]
 """One model's measurements: ``pid`` (level -> PIDOutcome) and per-level mean tables of the
-clinical tests (``tardieu``, ``mas``, ``pendulum``: pandas, indexed by level)."""
+clinical tests (``tardieu``, ``mas``, ``pendulum``, and ``pendulum_supine`` at level 0:
+pandas, indexed by level)."""
 
 
 @dataclass(frozen=True)
@@ -313,20 +318,21 @@ ROWS: tuple[ValidationRow, ...] = (
     ValidationRow("mas_l3", "MAS", "level 3 (MAS 3): more resistance than level 2, through most "
                   "of the range", "fraction >= 0.5, mean excess above level 2's", "mas",
                   _mas_level3),
-    ValidationRow("pendulum_ri_healthy", "pendulum", "level 0: relaxation index (reclined)",
+    ValidationRow("pendulum_ri_healthy", "pendulum", "level 0, supine: relaxation index",
                   f"{_KIM_RI} ± 2 SD "
                   f"({_KIM_RI - 2 * _KIM_RI_SD:.2f}-{_KIM_RI + 2 * _KIM_RI_SD:.2f})",
-                  "kim", _within("pendulum", "relaxation_index", (0,), _KIM_RI - 2 * _KIM_RI_SD,
-                                 _KIM_RI + 2 * _KIM_RI_SD)),
-    ValidationRow("pendulum_v_healthy", "pendulum", "level 0: first-swing peak velocity (rad/s)",
+                  "kim", _within("pendulum_supine", "relaxation_index", (0,),
+                                 _KIM_RI - 2 * _KIM_RI_SD, _KIM_RI + 2 * _KIM_RI_SD)),
+    ValidationRow("pendulum_v_healthy", "pendulum",
+                  "level 0, supine: first-swing peak velocity (rad/s)",
                   f"{_KIM_V} ± 2 SD ({_KIM_V - 2 * _KIM_V_SD:.2f}-{_KIM_V + 2 * _KIM_V_SD:.2f})",
-                  "kim", _within("pendulum", "peak_velocity_rad_s", (0,), _KIM_V - 2 * _KIM_V_SD,
-                                 _KIM_V + 2 * _KIM_V_SD)),
+                  "kim", _within("pendulum_supine", "peak_velocity_rad_s", (0,),
+                                 _KIM_V - 2 * _KIM_V_SD, _KIM_V + 2 * _KIM_V_SD)),
     ValidationRow("pendulum_v2_healthy", "pendulum",
-                  "level 0: second-swing peak velocity (rad/s)",
+                  "level 0, supine: second-swing peak velocity (rad/s)",
                   f"{_KIM_V2} ± 2 SD "
                   f"({_KIM_V2 - 2 * _KIM_V2_SD:.2f}-{_KIM_V2 + 2 * _KIM_V2_SD:.2f})",
-                  "kim", _within("pendulum", "second_peak_velocity_rad_s", (0,),
+                  "kim", _within("pendulum_supine", "second_peak_velocity_rad_s", (0,),
                                  _KIM_V2 - 2 * _KIM_V2_SD, _KIM_V2 + 2 * _KIM_V2_SD)),
     ValidationRow("pendulum_v_white", "pendulum", "spastic legs swing slower than typical ones "
                   "(peak velocity CP 202 vs TD 293 deg/s)",
@@ -362,7 +368,7 @@ def measure_model(
     import pandas as pd
 
     from myoexo.clinical.mas import MASExamParams, run_mas_exam
-    from myoexo.clinical.pendulum import FREED_EXO_RANGE_DEG, RECLINED, run_pendulum
+    from myoexo.clinical.pendulum import FREED_EXO_RANGE_DEG, RECLINED, SUPINE, run_pendulum
     from myoexo.clinical.tardieu import TardieuParams, run_tardieu
     from myoexo.spasticity.registry import resolve_reflex
     from myoexo.studies.pid_check import pid_outcome
@@ -370,7 +376,13 @@ def measure_model(
     model = resolve_reflex(reflex)
     t0 = time.perf_counter()
     pid = {lv: pid_outcome(lv, model, config.pid_subjects, config.root_seed) for lv in VALID_LEVELS}
-    tables: dict[str, list[pd.DataFrame]] = {"tardieu": [], "mas": [], "pendulum": []}
+    tables: dict[str, list[pd.DataFrame]] = {
+        "tardieu": [],
+        "mas": [],
+        "pendulum": [],
+        "pendulum_supine": [],
+    }
+    supine = dataclasses.replace(SUPINE, levels=(0,))
     freed = TwinParams(exo_knee_range_deg=FREED_EXO_RANGE_DEG)
     for i in range(config.subjects):
         subjects = {lv: _subjects(lv, i, config.root_seed) for lv in VALID_LEVELS}
@@ -381,14 +393,18 @@ def measure_model(
         tables["pendulum"].append(
             run_pendulum(RECLINED, reflex=model, subjects=subjects, twin=freed).table()
         )
+        tables["pendulum_supine"].append(
+            run_pendulum(supine, reflex=model, subjects=subjects, twin=freed).table()
+        )
     out: dict[str, Any] = {"pid": pid}
     for test, frames in tables.items():
         df = pd.concat(frames, ignore_index=True).drop(columns=["reflex"])
         out[test] = df.groupby("level").mean(numeric_only=True)
     out["tardieu"]["velocity_nm"] = out["tardieu"]["fast_peak_nm"] - out["tardieu"]["slow_peak_nm"]
-    pendulum = out["pendulum"]
-    pendulum["peak_velocity_rad_s"] = np.deg2rad(pendulum["peak_velocity_deg_s"])
-    pendulum["second_peak_velocity_rad_s"] = np.deg2rad(pendulum["second_peak_velocity_deg_s"])
+    for test in ("pendulum", "pendulum_supine"):
+        pendulum = out[test]
+        pendulum["peak_velocity_rad_s"] = np.deg2rad(pendulum["peak_velocity_deg_s"])
+        pendulum["second_peak_velocity_rad_s"] = np.deg2rad(pendulum["second_peak_velocity_deg_s"])
     if log:
         log(f"  {reflex_label(model)}: measured in {time.perf_counter() - t0:.0f} s")
     return out
