@@ -130,6 +130,36 @@ def test_never_reads_forbidden_keys(env_exo, env_full):
         np.testing.assert_array_equal(ua, ub)
 
 
+def test_the_smoothness_term_makes_the_students_command_change_less_between_steps():
+    """With labels that jitter from step to step around a slow trend, the student trained
+    with the temporal smoothness term changes its command less between consecutive steps
+    of an episode than the one trained on imitation alone, and still follows the trend."""
+    from myoexo.studies.distill import DistillConfig, Episodes, train_student
+
+    rng = np.random.default_rng(0)
+    lengths = [200, 200]
+    n = sum(lengths)
+    t = np.concatenate([np.arange(k) for k in lengths]) / 200.0
+    frames = rng.normal(size=(n, FRAME_DIM)).astype(np.float32)
+    frames[:, 0] = t  # the trend is readable from the frame
+    trend = 0.8 * t - 0.4
+    labels = (trend + 0.3 * np.where(np.arange(n) % 2, 1.0, -1.0)).astype(np.float32)
+    data = Episodes(frames, labels, np.array([0, lengths[0]]), np.zeros(n, np.int32))
+    changes, errors = {}, {}
+    for weight in (0.0, 5.0):
+        config = DistillConfig(
+            n_frames=1, hidden=(32,), batch_size=64, lr=3e-3, smoothness_weight=weight
+        )
+        student, _ = train_student(config, data, 40, None, seed=0, log=lambda _: None)
+        command = np.array([student.actor.act(frames[i].astype(np.float64))[0] for i in range(n)])
+        within = np.ones(n - 1, bool)
+        within[lengths[0] - 1] = False  # the step across the two episodes
+        changes[weight] = float(np.mean(np.abs(np.diff(command))[within]))
+        errors[weight] = float(np.mean(np.abs(command - trend)))
+    assert changes[5.0] < 0.5 * changes[0.0], changes
+    assert errors[5.0] < 0.15, errors
+
+
 def test_frame_indices_refuses_unknown_layouts():
     with pytest.raises(ValueError, match="lacks"):
         frame_indices(["exo_angle_rad", "time_frac"])

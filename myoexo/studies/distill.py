@@ -146,6 +146,13 @@ class DistillConfig:
     batch_size: int = option(512, "Adam minibatch size", low=1)
     lr: float = option(1e-3, "Adam step size", low=0.0, above=True)
     weight_decay: float = option(0.0, "Adam weight decay", low=0.0)
+    smoothness_weight: float = option(
+        0.0,
+        "weight of the temporal smoothness term: the mean squared change of the student's "
+        "command between consecutive control steps of an episode, added to the imitation "
+        "loss (CAPS, Mysore et al. 2021; 0: imitation alone)",
+        low=0.0,
+    )
     teacher: str = option(
         "sac",
         "shipped full-state policy that labels the states (sac, or residual on its base at its "
@@ -600,6 +607,17 @@ def train_student(
     )
     index = torch.as_tensor(data.stack_index(config.n_frames, config.stride))
     labels = torch.as_tensor(data.labels, dtype=torch.float32)
+    # each step's next step in the same episode (the last step of an episode: itself)
+    following = np.arange(1, labels.numel() + 1)
+    following[np.append(data.starts[1:], labels.numel()) - 1] -= 1
+    next_row = torch.as_tensor(following)
+
+    def command(rows: Any) -> Any:
+        x = frames[index[rows]].flatten(1)
+        if z_weight is not None:
+            x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
+        return torch.tanh(module(x)).squeeze(1)
+
     opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     n = labels.numel()
     gen = torch.Generator().manual_seed(seed)
@@ -613,16 +631,17 @@ def train_student(
         total, count = 0.0, 0
         for k in range(steps_per_epoch):
             rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
-            x = frames[index[rows]].flatten(1)
-            if z_weight is not None:
-                x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
-            pred = torch.tanh(module(x)).squeeze(1)
-            loss = torch.mean((pred - labels[rows]) ** 2)
+            pred = command(rows)
+            mse = torch.mean((pred - labels[rows]) ** 2)
+            loss = mse
+            if config.smoothness_weight > 0.0:
+                step = command(next_row[rows]) - pred
+                loss = mse + config.smoothness_weight * torch.mean(step**2)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
             sched.step()
-            total += float(loss.detach()) * rows.numel()
+            total += float(mse.detach()) * rows.numel()
             count += rows.numel()
         loss_value = total / max(count, 1)
         log(f"[distill]   epoch {epoch + 1}/{epochs}: mse {loss_value:.3e}")
