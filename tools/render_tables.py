@@ -168,6 +168,14 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         teacher="residual",
         device_baseline="pid:tuned=exo",
     ),
+    GoalsBlock(
+        "docs/results.md",
+        "student_smooth_3seeds",
+        "eval_200_twin4_student_smooth",
+        "eval_200_twin4_student_smooth_perturbed",
+        teacher="residual",
+        device_baseline="pid:tuned=exo",
+    ),
     *(
         GoalsBlock(
             "myoexo/policies/MODEL_CARD_student_exo.md",
