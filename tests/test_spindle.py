@@ -125,10 +125,14 @@ def test_it_excites_each_muscle_on_its_own_stretch(seated) -> None:
     assert min(by_name[n] for n in HAMSTRINGS) > max(by_name[n] for n in ("vasmed_r", "vasint_r"))
 
 
-def test_registered_and_reads_only_the_record() -> None:
-    assert "spindle" in reflex_names()
-    model = get_reflex("spindle")
-    assert isinstance(model, SpindleReflex) and isinstance(model, StretchReflex)
+@pytest.mark.parametrize(
+    ("name", "reflex_class", "knee_class"),
+    [("spindle", SpindleReflex, StretchReflex), ("spindle_tsrt", SpindleTSRTReflex, TSRTReflex)],
+)
+def test_registered_and_reads_only_the_record(name, reflex_class, knee_class) -> None:
+    assert name in reflex_names()
+    model = get_reflex(name)
+    assert isinstance(model, reflex_class) and isinstance(model, knee_class)
     with pytest.raises(NotImplementedError, match="SensoryRecord"):
         model.step((), (), 10.0, 0.0)
     assert dataclasses.replace(model, delay_s=0.03).delay_s == 0.03
@@ -172,11 +176,3 @@ def test_spindle_tsrt_fires_on_a_fast_stretch_of_the_hamstrings_only_where_stret
         fired[name] = float(np.mean(np.asarray(fast)[ham] - np.asarray(at_rest)[ham]))
     assert fired["seated"] > 0.1
     assert fired["reclined"] < 0.25 * fired["seated"], fired
-
-
-def test_spindle_tsrt_registered_and_reads_only_the_record() -> None:
-    assert "spindle_tsrt" in reflex_names()
-    model = get_reflex("spindle_tsrt")
-    assert isinstance(model, SpindleTSRTReflex) and isinstance(model, TSRTReflex)
-    with pytest.raises(NotImplementedError, match="SensoryRecord"):
-        model.step((), (), 10.0, 0.0)

@@ -862,11 +862,9 @@ def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
 
         write_study_files(config.out, {"calibration.md": text})
     if config.write:
-        from myoexo.spasticity.spindle import SPINDLE_TSRT_FIT
-        from myoexo.spasticity.tsrt import TSRT_FIT
+        from myoexo.studies.joint_fit import FITTED_MODELS
 
-        name = SPINDLE_TSRT_FIT if config.reflex == "spindle_tsrt" else TSRT_FIT
-        _write_calibration(name, result.calibration, result.fit_root_seed)
+        _write_calibration(FITTED_MODELS[config.reflex], result.calibration, result.fit_root_seed)
     return 0
 
 

@@ -32,7 +32,8 @@ from typing import Any
 
 from myoexo.evaluation.config import CALIBRATION_ROOT_SEED, EVALUATION_ROOT_SEED, check_fit_root
 from myoexo.spasticity.levels import VALID_LEVELS
-from myoexo.spasticity.tsrt import TSRTCalibration, TSRTLevel, TSRTReflex
+from myoexo.spasticity.spindle import SPINDLE_TSRT_FIT
+from myoexo.spasticity.tsrt import TSRT_FIT, TSRTCalibration, TSRTLevel, TSRTReflex
 from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
 from myoexo.studies.validate import ValidationConfig, measure_model, score
 
@@ -119,7 +120,7 @@ class JointFitResult:
             self.calibration.note,
             "",
             "Fitted values (the package's with --write: "
-            f"myoexo/assets/fits/reflex_{self.reflex}.json):",
+            f"myoexo/assets/fits/{FITTED_MODELS[self.reflex]}.json):",
             "",
             "```python",
             self.snippet(),
@@ -156,8 +157,10 @@ class JointFitResult:
 
 
 #: The registered models this fit takes (a :class:`~myoexo.spasticity.tsrt.TSRTReflex`
-#: each, whose calibration it replaces).
-FITTED_MODELS: tuple[str, ...] = ("tsrt", "spindle_tsrt")
+#: each, whose calibration it replaces) -> the package's fit its ``--write`` makes.
+FITTED_MODELS: Mapping[str, str] = MappingProxyType(
+    {"tsrt": TSRT_FIT, "spindle_tsrt": SPINDLE_TSRT_FIT}
+)
 
 
 def _model(levels: Mapping[int, TSRTLevel], base: TSRTReflex) -> TSRTReflex:
