@@ -621,31 +621,43 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
     assert isinstance(at_half, GentleController) and at_half.gentleness == 0.5
 
 
-def test_the_shipped_student_of_the_residual_policy_takes_its_weight_and_reaches_the_target():
-    """`student_residual`: distilled from `residual` (three seeds, one shipped by the seed
-    rule) with the weight as its input; built on an env it runs at its default weight, and a
-    full 8-s level-1 episode ends within 1 deg (its goal)."""
+def test_the_shipped_smooth_student_takes_its_weight_and_reaches_the_target_smoothly():
+    """`student_smooth`: distilled from `residual` on the current twin with the temporal
+    smoothness term (five seeds, one shipped by the seed rule) and the weight as its input;
+    built on an env it runs at its default weight, and a full 8-s level-1 episode ends within
+    1 deg (its goal) with a command whose total variation is below the paper's PID's on the
+    same subject."""
     import myoexo
+    from myoexo.control import PID
     from myoexo.control.policy import GentleController
-    from myoexo.control.rollout import rollout
+    from myoexo.control.rollout import Rollout, rollout
     from myoexo.envs import make_env
     from myoexo.model import TWIN_VERSION
 
-    stored = myoexo.load_policy("student_residual")
+    stored = myoexo.load_policy("student_smooth")
     meta = stored.metadata
     assert stored.gentleness_input and meta["teacher"] == "residual"
-    assert meta["ship_seed"] in meta["distill_seeds"] and len(meta["distill_seeds"]) == 3
-    assert meta["twin_version"] == 3 < TWIN_VERSION and meta["selection_root_seed"] == 1
+    assert meta["ship_seed"] in meta["distill_seeds"] and len(meta["distill_seeds"]) == 5
+    assert meta["twin_version"] == TWIN_VERSION and meta["selection_root_seed"] == 1
+    assert meta["distill_config"]["smoothness_weight"] == 10.0
+    with pytest.raises(FileNotFoundError, match="student_smooth"):
+        myoexo.load_policy("student_residual")  # retired
     env = make_env(1, obs_preset="exo")
     try:
-        controller = myoexo.load_policy("student_residual", env)
+        controller = myoexo.load_policy("student_smooth", env)
         assert isinstance(controller, GentleController) and controller.gentleness == 0.0
         with pytest.raises(ValueError, match="gentleness weight last"):
             obs, _ = env.reset(seed=0)
             stored.reset()
             stored.act(obs)
         episode = rollout(env, controller, seed=5)
+        pid = rollout(env, PID.from_env(env), seed=5)
     finally:
         env.close()
     assert not episode.unstable
     assert abs(episode.signals["error_deg"][-1]) < 1.0
+
+    def total_variation(run: Rollout) -> float:
+        return float(np.abs(np.diff(run.signals["command"])).sum())
+
+    assert total_variation(episode) < total_variation(pid)

@@ -168,6 +168,24 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         teacher="residual",
         device_baseline="pid:tuned=exo",
     ),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_smooth.md",
+        "eval_1000_twin4",
+        ("student_smooth_5seeds",),
+    ),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_smooth.md",
+        "eval_1000_twin4_perturbed",
+        ("student_smooth_5seeds",),
+    ),
+    GoalsBlock(
+        "myoexo/policies/MODEL_CARD_student_smooth.md",
+        "student_smooth_3seeds",
+        "eval_200_twin4_student_smooth",
+        "eval_200_twin4_student_smooth_perturbed",
+        teacher="residual",
+        device_baseline="pid:tuned=exo",
+    ),
     GoalsBlock(
         "docs/results.md",
         "student_smooth_3seeds",

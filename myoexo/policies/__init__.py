@@ -5,8 +5,9 @@ name                    files (``<stem>.npz/json``)  observation
 ======================  ===========================  ===========================================
 ``residual``            ``residual_knee_exo``        ``obs_preset="full"`` and a gentleness
                                                      weight: a correction on the minimum-jerk
-                                                     PID, trained on the current twin (version
-                                                     3); it runs on its base, built on an env
+                                                     PID, trained on twin version 3 (the
+                                                     teacher of ``student_smooth``); it runs
+                                                     on its base, built on an env
                                                      (``myoexo.load_policy("residual", env)``);
                                                      ``MODEL_CARD_residual.md``
 ``sac``                 ``sac_knee_exo``             ``obs_preset="full"``: the twin's whole
@@ -20,16 +21,19 @@ name                    files (``<stem>.npz/json``)  observation
                                                      clock: deployable; distilled from ``sac``
                                                      on twin version 1;
                                                      ``MODEL_CARD_student_exo.md``
-``student_residual``    ``student_residual``         ``obs_preset="exo"`` and a gentleness
+``student_smooth``      ``student_smooth``           ``obs_preset="exo"`` and a gentleness
                                                      weight: the same sensors and memory,
                                                      distilled from ``residual`` on the current
-                                                     twin, the weight its last input;
-                                                     ``MODEL_CARD_student_residual.md``
+                                                     twin (version 4) with a temporal smoothness
+                                                     term, the weight its last input;
+                                                     ``MODEL_CARD_student_smooth.md``
 ======================  ===========================  ===========================================
 
-``sac_exo`` (the exoskeleton's sensors plus an episode clock) is retired: it read a clock a
-device does not have and ended 20-50 deg off on perturbed level-3 twins; ``student_exo``
-supersedes it (``MODEL_CARD_sac_exo.md`` says why and what it measured).
+Retired (their model cards stay as the record of what they measured): ``sac_exo`` (the
+exoskeleton's sensors plus an episode clock) read a clock a device does not have and ended
+20-50 deg off on perturbed level-3 twins, and ``student_exo`` supersedes it;
+``student_residual`` (distilled on twin version 3, without the smoothness term) had a command
+rougher than the paper's PID's, and ``student_smooth`` supersedes it.
 
     import gymnasium as gym, myoexo
 
@@ -69,7 +73,7 @@ SHIPPED_POLICIES: dict[str, str] = {
     "sac": SHIPPED_POLICY,
     "student_exo": "student_exo",
     "residual": "residual_knee_exo",
-    "student_residual": "student_residual",
+    "student_smooth": "student_smooth",
 }
 
 __all__ = [

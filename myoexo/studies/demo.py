@@ -4,13 +4,13 @@ The paper's evaluation protocol (:func:`myoexo.evaluation.evaluate`), small: the
 (``pid``), the same PID with its setpoint ramped over 1 s (``pid:ramp_s=1``), the impedance
 controller at its defaults (``impedance``: a spring-damper on a 1 s minimum-jerk reference,
 :mod:`myoexo.control.impedance`), the PID tracking a 0.6-s minimum-jerk reference
-(``pid:reference=minjerk,ramp_s=0.6``), the learned correction on it trained on the current
-twin (``residual``, at its default gentleness weight), the full-state learned policy ``sac``
+(``pid:reference=minjerk,ramp_s=0.6``), the learned correction on it (``residual``, trained on
+twin version 3, at its default gentleness weight), the full-state learned policy ``sac``
 (trained on an earlier twin) alone and with its
 stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
 ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
-(``guard:student_exo``), and the deployable student of ``residual`` trained on the current
-twin (``student_residual``), on
+(``guard:student_exo``), and the deployable student of ``residual`` distilled on the current
+twin with a smoothness term (``student_smooth``), on
 :data:`DEMO_SUBJECTS` subjects per spasticity level 0-3 (the protocol: 1000). Subject *i* of
 a level is the same simulated person for every controller.
 
@@ -57,7 +57,7 @@ DEMO_CONTROLLERS = (
     "guard:sac",
     "student_exo",
     "guard:student_exo",
-    "student_residual",
+    "student_smooth",
 )
 DEMO_OUT = Path("results") / "demo"
 #: Band above the reference PID's mean absolute final error (deg) within which a controller
