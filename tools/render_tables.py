@@ -178,21 +178,16 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         "eval_1000_twin4_perturbed",
         ("student_smooth_5seeds",),
     ),
-    GoalsBlock(
-        "myoexo/policies/MODEL_CARD_student_smooth.md",
-        "student_smooth_3seeds",
-        "eval_200_twin4_student_smooth",
-        "eval_200_twin4_student_smooth_perturbed",
-        teacher="residual",
-        device_baseline="pid:tuned=exo",
-    ),
-    GoalsBlock(
-        "docs/results.md",
-        "student_smooth_3seeds",
-        "eval_200_twin4_student_smooth",
-        "eval_200_twin4_student_smooth_perturbed",
-        teacher="residual",
-        device_baseline="pid:tuned=exo",
+    *(
+        GoalsBlock(
+            page,
+            "student_smooth_3seeds",
+            "eval_200_twin4_student_smooth",
+            "eval_200_twin4_student_smooth_perturbed",
+            teacher="residual",
+            device_baseline="pid:tuned=exo",
+        )
+        for page in ("myoexo/policies/MODEL_CARD_student_smooth.md", "docs/results.md")
     ),
     *(
         GoalsBlock(
