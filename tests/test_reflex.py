@@ -104,7 +104,8 @@ def test_delay_line_returns_the_state_delay_steps_ago() -> None:
 def test_bad_reflex_settings_are_rejected() -> None:
     with pytest.raises(
         ValueError,
-        match=r"not a registered reflex model.*persistent, spindle, spindle_tsrt, stretch",
+        match=r"not a registered reflex model.*persistent, spindle, spindle_tone, spindle_tsrt, "
+        r"stretch",
     ):
         get_reflex("clonus")
     with pytest.raises(ValueError, match=r"outside \[0, 0.2\]"):
@@ -228,7 +229,7 @@ def _wrappers(env):
         env = env.env
 
 
-@pytest.mark.parametrize("model", ["stretch", "spindle", "tsrt", "spindle_tsrt"])
+@pytest.mark.parametrize("model", ["stretch", "spindle", "tsrt", "spindle_tsrt", "spindle_tone"])
 def test_the_reflex_calibrations_are_fitted_data_with_provenance(model: str) -> None:
     """The fitted reflexes read their calibrations from the package's fits, which record how
     they were fitted, on the twin of today."""
@@ -241,6 +242,7 @@ def test_the_reflex_calibrations_are_fitted_data_with_provenance(model: str) -> 
         SPINDLE_TSRT_CALIBRATION,
         SPINDLE_TSRT_FIT,
     )
+    from myoexo.spasticity.spindle_tone import SPINDLE_TONE_CALIBRATION, SPINDLE_TONE_FIT
     from myoexo.spasticity.tsrt import TSRT_CALIBRATION, TSRT_FIT
 
     name, calibration = {
@@ -248,6 +250,7 @@ def test_the_reflex_calibrations_are_fitted_data_with_provenance(model: str) -> 
         "spindle": (SPINDLE_FIT, SPINDLE_CALIBRATION),
         "tsrt": (TSRT_FIT, TSRT_CALIBRATION),
         "spindle_tsrt": (SPINDLE_TSRT_FIT, SPINDLE_TSRT_CALIBRATION),
+        "spindle_tone": (SPINDLE_TONE_FIT, SPINDLE_TONE_CALIBRATION),
     }[model]
     doc = read_fit(name)
     result = doc["result"]["calibration"] if model == "spindle" else doc["result"]
@@ -304,9 +307,10 @@ def test_each_model_registers_its_own_fit_and_options(capsys) -> None:
 
     assert set(cal.fit_names()) >= {"stretch", "spindle", "persistent", "tsrt"}
     assert cli.main(["twin", "calibrate", "--sweeps", "3"]) == 2
-    assert "--sweeps is an option of --reflex tsrt / spindle_tsrt, not of --reflex stretch" in (
-        capsys.readouterr().err
-    )
+    assert (
+        "--sweeps is an option of --reflex tsrt / spindle_tsrt / spindle_tone, not of --reflex "
+        "stretch"
+    ) in (capsys.readouterr().err)
 
     @dataclass(frozen=True)
     class MineOptions:

@@ -183,7 +183,7 @@ def test_an_unknown_reflex_on_the_command_line_lists_the_registered_ones():
     assert out.returncode == 2
     assert (
         "clonus" in out.stderr
-        and "persistent, spindle, spindle_tsrt, stretch, tsrt, uniform" in out.stderr
+        and "persistent, spindle, spindle_tone, spindle_tsrt, stretch, tsrt, uniform" in out.stderr
     )
 
 

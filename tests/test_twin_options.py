@@ -42,7 +42,10 @@ def test_the_record_parses_validates_and_round_trips():
     assert TwinOptions().env_kwargs() == {}  # the default twin adds nothing
     assert twin.replace(episode_duration_s=None).task == ()
     for bad, match in (
-        ("reflex=clonus", "registered: persistent, spindle, spindle_tsrt, stretch, tsrt, uniform"),
+        (
+            "reflex=clonus",
+            "registered: persistent, spindle, spindle_tone, spindle_tsrt, stretch, tsrt, uniform",
+        ),
         ("episode_duration_s=-1", r"is outside \[0.001, 3600\] s"),
         ("reward_weights=nope:1", "accepted"),
         ("obs_preset=nope", "accepted"),

@@ -117,6 +117,7 @@ from myoexo.spasticity.registry import (
 )
 from myoexo.spasticity.sensory import MuscleSensors, SensoryRecord
 from myoexo.spasticity.spindle import SpindleReflex, spindle_geometry
+from myoexo.spasticity.spindle_tone import SpindleToneReflex
 from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage, StageHost
 from myoexo.spasticity.wrapper import SpasticityWrapper
 
@@ -148,6 +149,7 @@ __all__ = [
     "SpasticityStage",
     "SpasticityWrapper",
     "SpindleReflex",
+    "SpindleToneReflex",
     "StageHost",
     "StretchCalibration",
     "StretchReflex",

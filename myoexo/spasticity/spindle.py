@@ -91,6 +91,7 @@ __all__ = [
     "spindle_constants",
     "spindle_geometry",
     "spindle_tsrt_constants",
+    "spindle_tsrt_terms",
 ]
 
 #: The package's fit of the ``"spindle"`` reflex: its geometry and its per-level parameters
@@ -362,6 +363,21 @@ def spindle_tsrt_constants(tsrt: TSRTConstants, geometry: SpindleGeometry) -> Sp
     )
 
 
+def spindle_tsrt_terms(
+    theta_deg: np.ndarray, vel_rad_s: np.ndarray, c: SpindleTSRTConstants
+) -> np.ndarray:
+    """Each muscle's ``"spindle_tsrt"`` excitation at its equivalent seated knee angle
+    *theta_deg* and velocity *vel_rad_s* (module docstring)."""
+    side = c.side
+    stretch_speed = np.maximum(side * vel_rad_s, 0.0)
+    beyond = theta_deg - c.threshold_deg
+    static = 1.0 + side * np.tanh(c.half_k * beyond)
+    dynamic = 1.0 + side * np.tanh(c.half_k * (beyond + side * c.mu_deg_s_rad * stretch_speed))
+    gate = 0.5 * (1.0 + side * np.tanh(c.half_k_v * (vel_rad_s - c.v_threshold_rad_s)))
+    result: np.ndarray = 0.5 * (c.s_theta * static + c.s_v * gate * dynamic)
+    return result
+
+
 def _package_tsrt_fit() -> TSRTCalibration:
     """The package's ``"spindle_tsrt"`` calibration (before its first ``--write``: the
     ``"tsrt"`` knee-angle fit its own fit starts from)."""
@@ -401,15 +417,10 @@ class SpindleTSRTReflex(TSRTReflex):
         self, constants: Any, memory: Memory, record: SensoryRecord
     ) -> tuple[Sequence[float], Memory]:
         c: SpindleTSRTConstants = constants
-        side = c.side
         theta = record.fibre_length * c.deg_per_length + c.theta_offset_deg
         vel = record.lengthening_speed * c.inv_slope
-        stretch_speed = np.maximum(side * vel, 0.0)
-        beyond = theta - c.threshold_deg
-        static = 1.0 + side * np.tanh(c.half_k * beyond)
-        dynamic = 1.0 + side * np.tanh(c.half_k * (beyond + side * c.mu_deg_s_rad * stretch_speed))
-        gate = 0.5 * (1.0 + side * np.tanh(c.half_k_v * (vel - c.v_threshold_rad_s)))
-        return 0.5 * (c.s_theta * static + c.s_v * gate * dynamic), memory
+        e: Sequence[float] = spindle_tsrt_terms(theta, vel, c)  # type: ignore[assignment]
+        return e, memory
 
     # on the muscles' own state only: the group step and its torch twin refuse
     step = ReflexModel.step

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -725,6 +726,12 @@ class TsrtFitOptions:
         1, "subjects per level of the clinical tests in the fit", low=1, high=10_000
     )
     sweeps: int = option(2, "coordinate sweeps of the joint fit", low=0)
+    start: Path | None = option(
+        None,
+        "JSON of the values the search starts from (a calibration's levels, or a fit file; "
+        "default: the model's current fit)",
+        metavar="JSON",
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -845,9 +852,17 @@ def _run_persistent(config: CalibrationConfig, options: PersistentFitOptions) ->
 
 def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
     """The tsrt reflex, on the knee angle or (``spindle_tsrt``) on each muscle's state."""
+    from myoexo.spasticity.registry import get_reflex
     from myoexo.studies.joint_fit import calibrate_tsrt
 
+    start = None
+    if options.start is not None:
+        doc = json.loads(Path(options.start).read_text())
+        kind = type(get_reflex(config.reflex).calibration)  # type: ignore[attr-defined]
+        start = kind.from_dict(doc.get("result", doc))
     result = calibrate_tsrt(
+        start=start,
+        start_source=None if options.start is None else str(options.start),
         pid_subjects=config.subjects,
         clinical_subjects=options.clinical_subjects,
         sweeps=options.sweeps,
@@ -905,6 +920,14 @@ register_fit(
     ReflexFit(
         "spindle_tsrt",
         "the same joint fit on the muscles' fibre lengths, from tsrt's fit",
+        _run_tsrt,
+        TsrtFitOptions,
+    )
+)
+register_fit(
+    ReflexFit(
+        "spindle_tone",
+        "spindle_tsrt's joint fit with the flexors' length tone and a phasic scale per level",
         _run_tsrt,
         TsrtFitOptions,
     )

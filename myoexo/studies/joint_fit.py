@@ -33,11 +33,19 @@ from typing import Any
 from myoexo.evaluation.config import CALIBRATION_ROOT_SEED, EVALUATION_ROOT_SEED, check_fit_root
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.spasticity.spindle import SPINDLE_TSRT_FIT
+from myoexo.spasticity.spindle_tone import SPINDLE_TONE_FIT
 from myoexo.spasticity.tsrt import TSRT_FIT, TSRTCalibration, TSRTLevel, TSRTReflex
 from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
 from myoexo.studies.validate import ValidationConfig, measure_model, score
 
-__all__ = ["FITTED_MODELS", "STEPS", "JointFitResult", "calibrate_tsrt", "objective"]
+__all__ = [
+    "FITTED_MODELS",
+    "HOLD_PARAMETERS",
+    "STEPS",
+    "JointFitResult",
+    "calibrate_tsrt",
+    "objective",
+]
 
 #: The first sweep's step of every fitted field (halved each sweep), and its bounds.
 STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
@@ -47,6 +55,8 @@ STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
         "flexor_gain": (0.2, 0.0, 20.0),
         "extensor_gain": (0.15, 0.0, 20.0),
         "extensor_threshold_shift_deg": (8.0, -100.0, 100.0),
+        "flexor_tone": (0.02, 0.0, 1.0),
+        "phasic_scale": (0.1, 0.0, 2.0),
     }
 )
 #: The shared velocity slope's first step, 1/(rad/s), and its bounds.
@@ -107,7 +117,7 @@ class JointFitResult:
         lines = ["{"]
         for level, c in sorted(self.calibration.levels.items()):
             fields = ", ".join(f"{f.name}={getattr(c, f.name):.4g}" for f in dataclasses.fields(c))
-            lines.append(f"    {level}: TSRTLevel({fields}),")
+            lines.append(f"    {level}: {type(c).__name__}({fields}),")
         lines.append("}")
         return "\n".join(lines)
 
@@ -128,7 +138,7 @@ class JointFitResult:
             "",
             f"**The fit** (in-sample, root {self.fit_root_seed}): {passed} of "
             f"{len(self.rows)} validation rows pass on the fit's subjects; the PID at the "
-            "fitted thresholds:",
+            "fitted values:",
             "",
             "| level | subjects | PID final error (deg) | target (deg) |",
             "|---|---|---|---|",
@@ -159,12 +169,45 @@ class JointFitResult:
 #: The registered models this fit takes (a :class:`~myoexo.spasticity.tsrt.TSRTReflex`
 #: each, whose calibration it replaces) -> the package's fit its ``--write`` makes.
 FITTED_MODELS: Mapping[str, str] = MappingProxyType(
-    {"tsrt": TSRT_FIT, "spindle_tsrt": SPINDLE_TSRT_FIT}
+    {"tsrt": TSRT_FIT, "spindle_tsrt": SPINDLE_TSRT_FIT, "spindle_tone": SPINDLE_TONE_FIT}
+)
+
+
+@dataclass(frozen=True)
+class HoldParameter:
+    """The level parameter the PID's final error at levels 2-3 is bisected on.
+
+    Attributes:
+        name: The :class:`~myoexo.spasticity.tsrt.TSRTLevel` field.
+        half_bracket: The bisection's bracket is the fitted value +- this.
+        tol: The bisection stops once the bracket is this narrow.
+        digits: Decimals the result is rounded to.
+        low: Lowest value the field takes.
+        high: Highest value the field takes.
+    """
+
+    name: str
+    half_bracket: float
+    tol: float
+    digits: int
+    low: float
+    high: float
+
+
+_THRESHOLD = HoldParameter("flexor_threshold_shift_deg", 15.0, 0.1, 2, -50.0, 150.0)
+#: Each fitted model's hold parameter: the flexors' static threshold, or (``spindle_tone``)
+#: the flexors' length tone, which holds the knee without the threshold's clonus.
+HOLD_PARAMETERS: Mapping[str, HoldParameter] = MappingProxyType(
+    {
+        "tsrt": _THRESHOLD,
+        "spindle_tsrt": _THRESHOLD,
+        "spindle_tone": HoldParameter("flexor_tone", 0.1, 0.002, 3, 0.0, 1.0),
+    }
 )
 
 
 def _model(levels: Mapping[int, TSRTLevel], base: TSRTReflex) -> TSRTReflex:
-    calibration = TSRTCalibration(levels=MappingProxyType(dict(levels)))
+    calibration = type(base.calibration)(levels=MappingProxyType(dict(levels)))
     return dataclasses.replace(base, calibration=calibration)
 
 
@@ -178,6 +221,7 @@ def calibrate_tsrt(
     check_root_seed: int = EVALUATION_ROOT_SEED,
     log: Callable[[str], None] = print,
     reflex: str = "tsrt",
+    start_source: str | None = None,
 ) -> JointFitResult:
     """Fit the ``"tsrt"`` reflex (or *reflex*, another reading of it) jointly to the PID
     table and the clinical rows (module docstring), starting from *start*.
@@ -194,10 +238,13 @@ def calibrate_tsrt(
         check_root_seed: Root seed of the check.
         log: Progress lines.
         reflex: The model fitted, one of :data:`FITTED_MODELS`.
+        start_source: The file *start* was read from (named in the provenance note as
+            ``--start``).
 
     Raises:
-        ValueError: If *reflex* is not one of :data:`FITTED_MODELS`, the root is the
-            evaluation root or *sweeps* is negative.
+        ValueError: If *reflex* is not one of :data:`FITTED_MODELS`, *start* is not the
+            model's kind of calibration, the root is the evaluation root or *sweeps* is
+            negative.
     """
     if reflex not in FITTED_MODELS:
         raise ValueError(f"reflex = {reflex!r}; the joint fit takes {list(FITTED_MODELS)}")
@@ -207,6 +254,11 @@ def calibrate_tsrt(
     assert isinstance(base, TSRTReflex)
     if start is None:
         start = base.calibration
+    if type(start) is not type(base.calibration):
+        raise ValueError(
+            f"start is a {type(start).__name__}; {reflex!r} takes a "
+            f"{type(base.calibration).__name__}"
+        )
     root_seed = check_fit_root(root_seed, "calibration")
     if sweeps < 0:
         raise ValueError(f"sweeps = {sweeps} must be >= 0")
@@ -224,7 +276,8 @@ def calibrate_tsrt(
 
     best, passed = evaluate(levels)
     log(f"start: {passed} rows, objective {best:.3f}")
-    steps = {name: step for name, (step, _, _) in STEPS.items()}
+    fields = {f.name for f in dataclasses.fields(levels[1])}
+    steps = {name: step for name, (step, _, _) in STEPS.items() if name in fields}
     slope_step = VELOCITY_SLOPE_STEP[0]
     for sweep in range(sweeps):
         moves: list[tuple[int | None, str, float]] = [
@@ -252,21 +305,24 @@ def calibrate_tsrt(
         log(f"sweep {sweep}: {passed} rows, objective {best:.3f}")
 
     fit_outcomes: dict[int, PIDOutcome] = {}
+    hold = HOLD_PARAMETERS[reflex]
     for level, target in sorted(_TARGETS_DEG.items()):
-        current = levels[level].flexor_threshold_shift_deg
+        current = getattr(levels[level], hold.name)
 
-        def outcome(shift: float, level: int = level) -> PIDOutcome:
+        def outcome(value: float, level: int = level) -> PIDOutcome:
             trial = dict(levels)
-            trial[level] = dataclasses.replace(levels[level], flexor_threshold_shift_deg=shift)
+            trial[level] = dataclasses.replace(levels[level], **{hold.name: value})
             return pid_outcome(level, _model(trial, base), pid_subjects, root_seed)
 
-        shift, fit_outcomes[level] = bisect_final_error(
-            outcome, (current - 15.0, current + 15.0), target, 0.1, level, "threshold shift"
+        bracket = (
+            max(current - hold.half_bracket, hold.low),
+            min(current + hold.half_bracket, hold.high),
         )
-        levels[level] = dataclasses.replace(
-            levels[level], flexor_threshold_shift_deg=round(shift, 2)
+        value, fit_outcomes[level] = bisect_final_error(
+            outcome, bracket, target, hold.tol, level, hold.name
         )
-        log(f"L{level}: threshold shift {shift:.2f} deg")
+        levels[level] = dataclasses.replace(levels[level], **{hold.name: round(value, hold.digits)})
+        log(f"L{level}: {hold.name} {value:.{hold.digits}f}")
     rows = score(measure_model(_model(levels, base), config))
     outcomes = {
         lv: pid_outcome(lv, _model(levels, base), verify_subjects, check_root_seed)
@@ -275,7 +331,9 @@ def calibrate_tsrt(
     note = (
         f"myoexo twin calibrate --reflex {reflex} --subjects {pid_subjects} --clinical-subjects "
         f"{clinical_subjects} --sweeps {sweeps} --verify-subjects {verify_subjects} --seed "
-        f"{root_seed}: fitted on root {root_seed} ({sum(ok for _, ok in rows.values())} of "
+        f"{root_seed}"
+        + (f" --start {start_source}" if start_source else "")
+        + f": fitted on root {root_seed} ({sum(ok for _, ok in rows.values())} of "
         f"{len(rows)} validation rows in-sample); check on root {check_root_seed}, PID final "
         "error "
         + ", ".join(
@@ -283,7 +341,7 @@ def calibrate_tsrt(
             for lv, o in outcomes.items()
         )
     )
-    calibration = TSRTCalibration(
+    calibration = type(base.calibration)(
         levels=MappingProxyType(dict(levels)), note=note, root_seed=root_seed
     )
     return JointFitResult(

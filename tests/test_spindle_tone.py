@@ -1,0 +1,150 @@
+"""The ``"spindle_tone"`` reflex: ``"spindle_tsrt"`` plus a broad tone on each flexor's own
+fibre length and a phasic scale per level."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import MappingProxyType
+
+import mujoco
+import numpy as np
+import pytest
+
+from myoexo.model import TwinParams, build_model, pose_twin
+from myoexo.spasticity import LEVELS, SPASTIC_FLEXORS, SPASTIC_MUSCLES, MuscleSensors
+from myoexo.spasticity.registry import get_reflex
+from myoexo.spasticity.spindle import SPINDLE_TSRT_CALIBRATION, SpindleTSRTReflex, spindle_geometry
+from myoexo.spasticity.spindle_tone import (
+    SpindleToneReflex,
+    ToneCalibration,
+    ToneLevel,
+)
+from myoexo.studies.joint_fit import calibrate_tsrt
+
+HAMSTRINGS = ("semimem_r", "semiten_r", "bflh_r")
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    return spindle_geometry(TwinParams(scene=False))
+
+
+def _record(model: mujoco.MjModel, knee_deg: float, speed: np.ndarray | None = None):
+    data = mujoco.MjData(model)
+    pose_twin(model, data, knee_angle_deg=knee_deg)
+    mujoco.mj_forward(model, data)
+    ids = np.array([model.actuator(n).id for n in SPASTIC_MUSCLES])
+    record = MuscleSensors(model, ids, len(SPASTIC_FLEXORS)).read(data, knee_deg, 0.0)
+    return record if speed is None else record._replace(lengthening_speed=speed)
+
+
+def _tone(level: int, tone: float, scale: float = 1.0) -> ToneCalibration:
+    levels = {lv: ToneLevel.from_tsrt(c) for lv, c in SPINDLE_TSRT_CALIBRATION.levels.items()}
+    levels[level] = dataclasses.replace(levels[level], flexor_tone=tone, phasic_scale=scale)
+    return ToneCalibration(levels=MappingProxyType(levels))
+
+
+def test_without_tone_it_is_spindle_tsrt_bit_for_bit(geometry) -> None:
+    model, _ = build_model(TwinParams(scene=False))
+    plain = SpindleTSRTReflex(calibration=SPINDLE_TSRT_CALIBRATION, geometry=geometry)
+    toned = SpindleToneReflex(
+        calibration=ToneCalibration.from_tsrt(SPINDLE_TSRT_CALIBRATION), geometry=geometry
+    )
+    speed = -2.0 * np.asarray(geometry.slope_per_rad)
+    for level in (1, 2, 3):
+        a = plain.subject_constants(level, LEVELS[level], None, 0.01)
+        b = toned.subject_constants(level, LEVELS[level], None, 0.01)
+        for knee_deg in (5.0, 40.0, 80.0):
+            record = _record(model, knee_deg, speed)
+            ea, _ = plain.excite(a, (), record)
+            eb, _ = toned.excite(b, (), record)
+            np.testing.assert_array_equal(np.asarray(ea), np.asarray(eb))
+
+
+def test_the_tone_rises_as_a_flexor_lengthens_and_spares_the_extensors(geometry) -> None:
+    model, _ = build_model(TwinParams(scene=False))
+    without = SpindleToneReflex(calibration=_tone(3, 0.0), geometry=geometry)
+    toned = SpindleToneReflex(calibration=_tone(3, 0.4), geometry=geometry)
+    c0 = without.subject_constants(3, LEVELS[3], None, 0.01)
+    c1 = toned.subject_constants(3, LEVELS[3], None, 0.01)
+    flexor = np.asarray(geometry.slope_per_rad) < 0.0
+    added = {}
+    for knee_deg in (10.0, 45.0, 85.0):
+        record = _record(model, knee_deg)
+        added[knee_deg] = np.asarray(toned.excite(c1, (), record)[0]) - np.asarray(
+            without.excite(c0, (), record)[0]
+        )
+        assert np.all(added[knee_deg][~flexor] == 0.0)
+        assert np.all(added[knee_deg][flexor] > 0.0)
+        assert np.all(added[knee_deg][flexor] < 0.4)
+    # extension lengthens the flexors: more tone at 10 deg than at 85
+    assert np.all(added[10.0][flexor] > added[45.0][flexor])
+    assert np.all(added[45.0][flexor] > added[85.0][flexor])
+    # the tone is gentle: at most tone / (2 width) per deg over the seated range
+    slope = (added[10.0][flexor] - added[85.0][flexor]) / 75.0
+    assert np.all(slope <= 0.4 / (2 * toned.tone_width_deg) + 1e-9)
+
+
+def test_the_reclined_hip_takes_the_hamstrings_tone_away(geometry) -> None:
+    seated, _ = build_model(TwinParams(scene=False))
+    reclined, _ = build_model(TwinParams(hip_flexion_deg=40.0, scene=False))
+    toned = SpindleToneReflex(calibration=_tone(3, 0.4), geometry=geometry)
+    without = SpindleToneReflex(calibration=_tone(3, 0.0), geometry=geometry)
+    c1 = toned.subject_constants(3, LEVELS[3], None, 0.01)
+    c0 = without.subject_constants(3, LEVELS[3], None, 0.01)
+    ham = [SPASTIC_MUSCLES.index(n) for n in HAMSTRINGS]
+
+    def tone(model: mujoco.MjModel) -> float:
+        record = _record(model, 10.0)
+        e1 = np.asarray(toned.excite(c1, (), record)[0])
+        e0 = np.asarray(without.excite(c0, (), record)[0])
+        return float(np.mean((e1 - e0)[ham]))
+
+    assert tone(reclined) < 0.6 * tone(seated)
+
+
+def test_the_phasic_scale_scales_the_velocity_term_only(geometry) -> None:
+    model, _ = build_model(TwinParams(scene=False))
+    full = SpindleToneReflex(calibration=_tone(2, 0.0, 1.0), geometry=geometry)
+    half = SpindleToneReflex(calibration=_tone(2, 0.0, 0.5), geometry=geometry)
+    cf = full.subject_constants(2, LEVELS[2], None, 0.01)
+    ch = half.subject_constants(2, LEVELS[2], None, 0.01)
+    speed = -3.0 * np.asarray(geometry.slope_per_rad)
+    rest, fast = _record(model, 30.0), _record(model, 30.0, speed)
+    # at rest the velocity term is nearly off: the tonic term is the same
+    np.testing.assert_allclose(
+        full.excite(cf, (), rest)[0], half.excite(ch, (), rest)[0], rtol=1e-3
+    )
+    phasic_full = np.asarray(full.excite(cf, (), fast)[0]) - np.asarray(
+        full.excite(cf, (), rest)[0]
+    )
+    phasic_half = np.asarray(half.excite(ch, (), fast)[0]) - np.asarray(
+        half.excite(ch, (), rest)[0]
+    )
+    assert phasic_full.max() > 0.05
+    np.testing.assert_allclose(phasic_half, 0.5 * phasic_full, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"flexor_tone": 1.5}, r"ToneLevel.flexor_tone = 1.5 .*\[0(\.0)?, 1(\.0)?\]"),
+        ({"phasic_scale": -0.1}, r"ToneLevel.phasic_scale = -0.1 .*\[0(\.0)?, 2(\.0)?\]"),
+    ],
+)
+def test_bad_tone_parameters_are_refused_with_their_range(changes, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        ToneLevel(**changes)
+
+
+def test_the_calibration_round_trips_and_takes_tone_levels_only() -> None:
+    calibration = _tone(2, 0.12, 0.5)
+    assert ToneCalibration.from_dict(calibration.to_dict()) == calibration
+    with pytest.raises(ValueError, match="must be a ToneLevel"):
+        ToneCalibration(levels=MappingProxyType({2: SPINDLE_TSRT_CALIBRATION[2]}))
+
+
+def test_the_joint_fit_refuses_another_models_start() -> None:
+    assert isinstance(get_reflex("spindle_tone"), SpindleToneReflex)
+    with pytest.raises(ValueError, match="takes a ToneCalibration"):
+        calibrate_tsrt(start=SPINDLE_TSRT_CALIBRATION, reflex="spindle_tone", sweeps=0)
