@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -60,12 +61,15 @@ def _measures(**overrides: dict[int, float]) -> dict:
     }
     # the healthy leg supine (Kim et al.'s posture): level 0 only
     supine = pendulum.loc[[0]].copy()
+    # the weak P controllers: every trial decays
+    weak = {lv: [SimpleNamespace(sustained=False)] * 3 for lv in levels}
     out = {
         "tardieu": tardieu,
         "mas": mas,
         "pendulum": pendulum,
         "pendulum_supine": supine,
         "pid": pid,
+        "weak_control": weak,
     }
     for key, values in overrides.items():
         test, column = key.split(".")
@@ -115,6 +119,20 @@ def test_pid_rows_hold_the_studys_table() -> None:
     assert not score(m)["pid_misalignment"][1]  # the exo 37 deg from the knee
     m["pid"][3] = PIDOutcome(3, 5, 9.5, 2.0, 0.0, 0.38)  # a sustained oscillation (clonus)
     assert not score(m)["pid_settles"][1] and score(m)["pid_l3"][1]
+
+
+def test_a_twin_that_oscillates_under_a_weak_controller_misses_the_row() -> None:
+    """The weak-controller row: a sustained oscillation at a spastic level misses it; level 0
+    (no reflex: the healthy pendulum's swing) is reported, not held to it."""
+    m = _measures()
+    sustained = [SimpleNamespace(sustained=True)] + [SimpleNamespace(sustained=False)] * 2
+    m["weak_control"][0] = sustained
+    value, ok = score(m)["pid_weak_control"]
+    assert ok and value.startswith("sustained in 1 / 0 / 0 / 0")
+    m["weak_control"][2] = sustained
+    value, ok = score(m)["pid_weak_control"]
+    assert not ok and value == "sustained in 1 / 0 / 1 / 0 of 3"
+    assert sum(not ok for _, ok in score(m).values()) == 1  # only that row
 
 
 def test_the_joint_fits_objective_counts_rows_and_breaks_ties_towards_the_study() -> None:
@@ -213,3 +231,15 @@ def test_tsrt_catches_earlier_in_the_range_the_faster_the_stretch() -> None:
     # Table I read literally with no shifts: nothing fires inside the knee's range at rest
     plain = tsrt_excitations(np.linspace(10, 60, 6), 0.0, LEVELS[1], TSRTLevel())
     assert np.all(np.asarray(plain[0]) < 1e-3)
+
+
+def test_the_default_twin_decays_under_a_weak_controller_and_spindle_tone_does_not() -> None:
+    """The weak-controller row on the real twin: the default reflex decays at every spastic
+    level on the three tuning loops; ``spindle_tone``'s level 2 oscillates by itself."""
+    from myoexo.spasticity import DEFAULT_REFLEX
+    from myoexo.studies.validate import weak_control
+
+    default = weak_control(DEFAULT_REFLEX)
+    assert not any(t.sustained for lv in (1, 2, 3) for t in default[lv])
+    tone = weak_control("spindle_tone")
+    assert all(t.sustained for t in tone[2])

@@ -15,6 +15,8 @@ definitions are in :mod:`myoexo.clinical`):
 
 * the paper's PID on the task (:func:`myoexo.studies.pid_check.pid_outcome`): final error
   and overshoot;
+* weak P-only controllers on the task (:func:`weak_control`, the Ziegler-Nichols procedure's
+  first trials): whether the twin oscillates by itself;
 * Tardieu (:func:`~myoexo.clinical.tardieu.run_tardieu`): R1, R2, R2 - R1, and the
   velocity-dependent resistance ``fast_peak_nm - slow_peak_nm`` (the muscles' resisting torque
   at 3 rad/s minus that at 0.2 rad/s, each the peak over the stretch);
@@ -53,6 +55,8 @@ if TYPE_CHECKING:
 __all__ = [
     "ROWS",
     "SOURCES",
+    "WEAK_CONTROL_GAINS",
+    "WEAK_CONTROL_LOOPS",
     "ValidationConfig",
     "ValidationOutput",
     "ValidationRow",
@@ -63,6 +67,7 @@ __all__ = [
     "score",
     "validate",
     "validation_table",
+    "weak_control",
 ]
 
 #: The sources the rows cite (key -> reference).
@@ -121,7 +126,8 @@ class ValidationConfig:
 
 
 Measures = Mapping[str, Any]
-"""One model's measurements: ``pid`` (level -> PIDOutcome) and per-level mean tables of the
+"""One model's measurements: ``pid`` (level -> PIDOutcome), ``weak_control`` (level -> the
+P-only trials of :func:`weak_control`) and per-level mean tables of the
 clinical tests (``tardieu``, ``mas``, ``pendulum``, and ``pendulum_supine`` at level 0:
 pandas, indexed by level)."""
 
@@ -219,6 +225,13 @@ def _pid_settles(m: Measures) -> tuple[str, bool]:
     return " / ".join(f"{100 * f:.0f} %" for f in fractions), min(fractions) >= 0.9
 
 
+def _weak_control(m: Measures) -> tuple[str, bool]:
+    trials = m["weak_control"]
+    sustained = [sum(t.sustained for t in trials[lv]) for lv in VALID_LEVELS]
+    n = len(trials[VALID_LEVELS[0]])
+    return f"sustained in {_fmt(sustained, 0)} of {n}", not any(sustained[1:])
+
+
 def _catch_inside(m: Measures) -> tuple[str, bool]:
     t = m["tardieu"]
     values = [float(t["r1_deg"][lv]) for lv in (1, 2, 3)]
@@ -288,6 +301,12 @@ ROWS: tuple[ValidationRow, ...] = (
     ValidationRow("pid_settles", "PID", "the PID settles at every level (the study gives its "
                   "settling times; 2 % band): no sustained oscillation",
                   "settled in >= 90 % of the subjects, levels 0-3", "study", _pid_settles),
+    ValidationRow("pid_weak_control", "PID", "a weak P controller leaves no sustained "
+                  "oscillation (the study tuned its PID by Ziegler-Nichols, which needs a loop "
+                  "that decays at low gain): P-only at 1 /rad on the knee, on the encoder and "
+                  "on the knee read 10 ms late (the package's three tunings), nominal subject; "
+                  "trials sustained per level", "none at levels 1-3 (level 0: the healthy "
+                  "pendulum's swing)", "study", _weak_control),
     ValidationRow("pid_misalignment", "straps", "the exo stays aligned with the knee under the "
                   "paper's PID: largest misalignment (deg) over the subjects, levels 0-3",
                   f"<= {_MISALIGNMENT_BOUND_DEG:g} deg at every level", "straps",
@@ -359,6 +378,41 @@ def _subjects(level: int, index: int, root_seed: int) -> Any:
     return sample_subject(level, rng)
 
 
+#: The weak controllers of the ``pid_weak_control`` row: the Ziegler-Nichols procedure's
+#: first P gain (1/rad), with the feedback and sensor latency of each tuning the package runs
+#: (``myoexo twin tune-pid``: the study's knee feedback, the encoder's, and the knee's read
+#: 10 ms late as on the perturbed twins). Level 0 is not held to it: without a reflex a
+#: weakly held shank swings as the healthy pendulum does.
+WEAK_CONTROL_GAINS: tuple[float, ...] = (1.0,)
+WEAK_CONTROL_LOOPS: tuple[tuple[str, float], ...] = (("knee", 0.0), ("exo", 0.0), ("knee", 0.01))
+
+
+def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
+    """Level -> the P-only trials (:class:`~myoexo.control.ziegler_nichols.GainTrial`) of
+    every gain of :data:`WEAK_CONTROL_GAINS` on every loop of :data:`WEAK_CONTROL_LOOPS`, on
+    the level's nominal subject (as the tuning runs them)."""
+    from myoexo.control import ziegler_nichols as zn
+    from myoexo.envs.registration import make_env
+    from myoexo.envs.robustness import RobustnessParams
+
+    trials: dict[int, list[Any]] = {}
+    for level in VALID_LEVELS:
+        trials[level] = []
+        for feedback, latency_s in WEAK_CONTROL_LOOPS:
+            settings = zn.ZieglerNicholsSettings(
+                level=level, feedback=feedback, latency_s=latency_s
+            )
+            robustness = None
+            if latency_s > 0.0:
+                robustness = dataclasses.replace(RobustnessParams.nominal(), latency_s=latency_s)
+            env = make_env(level, subject_noise=False, reflex=reflex, robustness=robustness)
+            try:
+                trials[level] += [zn.p_only_trial(env, kp, settings) for kp in WEAK_CONTROL_GAINS]
+            finally:
+                env.close()
+    return trials
+
+
 def measure_model(
     reflex: str | ReflexModel,
     config: ValidationConfig = ValidationConfig(),
@@ -376,6 +430,7 @@ def measure_model(
     model = resolve_reflex(reflex)
     t0 = time.perf_counter()
     pid = {lv: pid_outcome(lv, model, config.pid_subjects, config.root_seed) for lv in VALID_LEVELS}
+    weak = weak_control(model)
     tables: dict[str, list[pd.DataFrame]] = {
         "tardieu": [],
         "mas": [],
@@ -396,7 +451,7 @@ def measure_model(
         tables["pendulum_supine"].append(
             run_pendulum(supine, reflex=model, subjects=subjects, twin=freed).table()
         )
-    out: dict[str, Any] = {"pid": pid}
+    out: dict[str, Any] = {"pid": pid, "weak_control": weak}
     for test, frames in tables.items():
         df = pd.concat(frames, ignore_index=True).drop(columns=["reflex"])
         out[test] = df.groupby("level").mean(numeric_only=True)
