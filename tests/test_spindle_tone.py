@@ -4,6 +4,8 @@ fibre length and a phasic scale per level."""
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 from types import MappingProxyType
 
 import mujoco
@@ -22,6 +24,7 @@ from myoexo.spasticity.spindle_tone import (
 from myoexo.studies.joint_fit import calibrate_tsrt
 
 HAMSTRINGS = ("semimem_r", "semiten_r", "bflh_r")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -148,3 +151,20 @@ def test_the_joint_fit_refuses_another_models_start() -> None:
     assert isinstance(get_reflex("spindle_tone"), SpindleToneReflex)
     with pytest.raises(ValueError, match="takes a ToneCalibration"):
         calibrate_tsrt(start=SPINDLE_TSRT_CALIBRATION, reflex="spindle_tone", sweeps=0)
+
+
+def test_the_fit_reads_its_start_file_and_refuses_one_without_levels(tmp_path, capsys) -> None:
+    """``--start`` names the JSON the search starts from; a file without a calibration's
+    ``levels`` is refused with one line, before any candidate is measured."""
+    from myoexo import cli
+
+    bad = tmp_path / "start.json"
+    bad.write_text('{"note": "no levels"}')
+    args = ["twin", "calibrate", "--reflex", "spindle_tone", "--start", str(bad), "--sweeps", "0"]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert f"--start {bad}: expected a calibration's JSON with its 'levels'" in err
+    # the committed start reads back as the model's kind of calibration
+    doc = ROOT / "docs" / "studies" / "calibration_spindle_tone" / "start.json"
+    start = ToneCalibration.from_dict(json.loads(doc.read_text()))
+    assert start[2].phasic_scale == 0.5 and start[3].flexor_tone > 0.0

@@ -858,8 +858,14 @@ def _run_tsrt(config: CalibrationConfig, options: TsrtFitOptions) -> int:
     start = None
     if options.start is not None:
         doc = json.loads(Path(options.start).read_text())
+        levels = doc.get("result", doc) if isinstance(doc, dict) else None
+        if not isinstance(levels, dict) or not isinstance(levels.get("levels"), dict):
+            raise ValueError(
+                f"--start {options.start}: expected a calibration's JSON with its 'levels' "
+                "(as the fit's calibration.to_dict() or a package fit file holds it)"
+            )
         kind = type(get_reflex(config.reflex).calibration)  # type: ignore[attr-defined]
-        start = kind.from_dict(doc.get("result", doc))
+        start = kind.from_dict(levels)
     result = calibrate_tsrt(
         start=start,
         start_source=None if options.start is None else str(options.start),
