@@ -1,18 +1,19 @@
 """The joint fit of the ``"tsrt"`` reflex (and of ``"spindle_tsrt"``, the same reflex on each
-muscle's own fibre state): the study's PID table and the clinical rows together, on the
-calibration root.
+muscle's own fibre state, and ``"spindle_tone"``, that one with a length tone): the study's
+PID table and the clinical rows together, on the calibration root.
 
-``myoexo twin calibrate --reflex tsrt`` (or ``--reflex spindle_tsrt``) runs
+``myoexo twin calibrate --reflex tsrt`` (or ``spindle_tsrt``, ``spindle_tone``) runs
 :func:`calibrate_tsrt`. Its objective is the
 validation table's (:mod:`myoexo.studies.validate`): the number of rows a candidate passes,
 with a small continuous term that breaks ties towards the study's PID final errors (6.3 / 9.3
 deg at levels 2-3, within 0.5 deg of the target at level 1), a velocity-dependent resistance
 and spasticity angle that rise with the level, and catches inside the range. The search is
-coordinate-wise: each sweep tries one step up and one down of every
-:class:`~myoexo.spasticity.tsrt.TSRTLevel` field of every spastic level (the velocity slope
+coordinate-wise: each sweep tries one step up and one down of every fitted field
+(:data:`STEPS`) the model's level parameters have, at every spastic level (the velocity slope
 is shared by the levels), keeps a step that raises the objective, and halves the steps for
-the next sweep. Then the flexors' static threshold of levels 2 and 3 is fitted by bisection
-on the PID's mean final error (as the stretch reflex's calibration does), and the PID is
+the next sweep. Then the model's hold parameter of levels 2 and 3 (:data:`HOLD_PARAMETERS`:
+the flexors' static threshold, as the stretch reflex's calibration fits it, or
+``"spindle_tone"``'s tone) is fitted by bisection on the PID's mean final error, and the PID is
 checked on the evaluation root. The fit reads the calibration root only (the evaluation root
 is refused).
 
