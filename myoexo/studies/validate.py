@@ -305,8 +305,8 @@ ROWS: tuple[ValidationRow, ...] = (
                   "oscillation (the study tuned its PID by Ziegler-Nichols, which needs a loop "
                   "that decays at low gain): P-only at 1 /rad on the knee, on the encoder and "
                   "on the knee read 10 ms late (the package's three tunings), nominal subject; "
-                  "trials sustained per level", "none at levels 1-3 (level 0: the healthy "
-                  "pendulum's swing)", "study", _weak_control),
+                  "trials sustained per level", "none at levels 1-3 (level 0, without a "
+                  "reflex, reported)", "study", _weak_control),
     ValidationRow("pid_misalignment", "straps", "the exo stays aligned with the knee under the "
                   "paper's PID: largest misalignment (deg) over the subjects, levels 0-3",
                   f"<= {_MISALIGNMENT_BOUND_DEG:g} deg at every level", "straps",
@@ -381,8 +381,9 @@ def _subjects(level: int, index: int, root_seed: int) -> Any:
 #: The weak controllers of the ``pid_weak_control`` row: the Ziegler-Nichols procedure's
 #: first P gain (1/rad), with the feedback and sensor latency of each tuning the package runs
 #: (``myoexo twin tune-pid``: the study's knee feedback, the encoder's, and the knee's read
-#: 10 ms late as on the perturbed twins). Level 0 is not held to it: without a reflex a
-#: weakly held shank swings as the healthy pendulum does.
+#: 10 ms late as on the perturbed twins). Level 0 is reported, not held to it: the row holds
+#: the reflex, and without one the leg and the exo held that weakly on the 10 ms-late knee
+#: oscillate at about 3 Hz (a reflex's velocity term damps that loop).
 WEAK_CONTROL_GAINS: tuple[float, ...] = (1.0,)
 WEAK_CONTROL_LOOPS: tuple[tuple[str, float], ...] = (("knee", 0.0), ("exo", 0.0), ("knee", 0.01))
 
