@@ -133,6 +133,10 @@ def test_the_phasic_scale_scales_the_velocity_term_only(geometry) -> None:
     [
         ({"flexor_tone": 1.5}, r"ToneLevel.flexor_tone = 1.5 .*\[0(\.0)?, 1(\.0)?\]"),
         ({"phasic_scale": -0.1}, r"ToneLevel.phasic_scale = -0.1 .*\[0(\.0)?, 2(\.0)?\]"),
+        (
+            {"phasic_threshold_offset_deg": 250.0},
+            r"ToneLevel.phasic_threshold_offset_deg = 250.0 .*\[-100(\.0)?, 200(\.0)?\] deg",
+        ),
     ],
 )
 def test_bad_tone_parameters_are_refused_with_their_range(changes, message) -> None:
@@ -168,3 +172,30 @@ def test_the_fit_reads_its_start_file_and_refuses_one_without_levels(tmp_path, c
     doc = ROOT / "docs" / "studies" / "calibration_spindle_tone" / "start.json"
     start = ToneCalibration.from_dict(json.loads(doc.read_text()))
     assert start[2].phasic_scale == 0.5 and start[3].flexor_tone > 0.0
+
+
+def test_the_phasic_threshold_offset_keeps_the_catch_with_the_static_threshold_out(
+    geometry,
+) -> None:
+    """With the flexors' static threshold beyond full extension, a fast extension at 30 deg
+    hardly excites the hamstrings; an offset that puts the dynamic threshold back inside the
+    range restores the phasic burst, and leaves the excitation at rest as it was."""
+    model, _ = build_model(TwinParams(scene=False))
+    levels = {lv: ToneLevel.from_tsrt(c) for lv, c in SPINDLE_TSRT_CALIBRATION.levels.items()}
+    out = dataclasses.replace(levels[2], flexor_threshold_shift_deg=-10.0)
+    ham = [SPASTIC_MUSCLES.index(n) for n in HAMSTRINGS]
+    speed = -3.0 * np.asarray(geometry.slope_per_rad)  # the knee extending at 3 rad/s
+    rest, fast = _record(model, 30.0), _record(model, 30.0, speed)
+    burst, at_rest = {}, {}
+    for offset in (0.0, 60.0):
+        level = dataclasses.replace(out, phasic_threshold_offset_deg=offset)
+        reflex = SpindleToneReflex(
+            calibration=ToneCalibration(levels=MappingProxyType({**levels, 2: level})),
+            geometry=geometry,
+        )
+        c = reflex.subject_constants(2, LEVELS[2], None, 0.01)
+        e_rest = np.asarray(reflex.excite(c, (), rest)[0])
+        burst[offset] = float(np.mean((np.asarray(reflex.excite(c, (), fast)[0]) - e_rest)[ham]))
+        at_rest[offset] = e_rest
+    assert burst[0.0] < 0.02 and burst[60.0] > 0.1, burst
+    np.testing.assert_allclose(at_rest[0.0], at_rest[60.0], atol=1e-3)

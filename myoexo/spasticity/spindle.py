@@ -364,15 +364,21 @@ def spindle_tsrt_constants(tsrt: TSRTConstants, geometry: SpindleGeometry) -> Sp
 
 
 def spindle_tsrt_terms(
-    theta_deg: np.ndarray, vel_rad_s: np.ndarray, c: SpindleTSRTConstants
+    theta_deg: np.ndarray,
+    vel_rad_s: np.ndarray,
+    c: SpindleTSRTConstants,
+    dynamic_offset_deg: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each muscle's ``"spindle_tsrt"`` excitation at its equivalent seated knee angle
-    *theta_deg* and velocity *vel_rad_s* (module docstring)."""
+    *theta_deg* and velocity *vel_rad_s* (module docstring); with *dynamic_offset_deg* the
+    dynamic threshold of each muscle sits that far from its static one (deg, in the static
+    threshold's own sense), instead of at it."""
     side = c.side
     stretch_speed = np.maximum(side * vel_rad_s, 0.0)
     beyond = theta_deg - c.threshold_deg
     static = 1.0 + side * np.tanh(c.half_k * beyond)
-    dynamic = 1.0 + side * np.tanh(c.half_k * (beyond + side * c.mu_deg_s_rad * stretch_speed))
+    dyn_beyond = beyond if dynamic_offset_deg is None else beyond - dynamic_offset_deg
+    dynamic = 1.0 + side * np.tanh(c.half_k * (dyn_beyond + side * c.mu_deg_s_rad * stretch_speed))
     gate = 0.5 * (1.0 + side * np.tanh(c.half_k_v * (vel_rad_s - c.v_threshold_rad_s)))
     result: np.ndarray = 0.5 * (c.s_theta * static + c.s_v * gate * dynamic)
     return result

@@ -77,15 +77,28 @@ class ToneLevel(TSRTLevel):
     Attributes:
         flexor_tone: Peak excitation of the flexors' length tone (-, 0-1).
         phasic_scale: Factor on the phasic (velocity) term of every muscle (-, 0-2).
+        phasic_threshold_offset_deg: Where the flexors' dynamic threshold sits at rest,
+            from their static one, deg (> 0: further into the motion; 0: at it, as in
+            ``"spindle_tsrt"``). It lets the catch stay inside the range while the static
+            threshold, a steep delayed loop, is moved out of it.
     """
 
     flexor_tone: float = 0.0
     phasic_scale: float = 1.0
+    phasic_threshold_offset_deg: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_parameter("ToneLevel", "flexor_tone", self.flexor_tone, 0.0, 1.0, "-")
         check_parameter("ToneLevel", "phasic_scale", self.phasic_scale, 0.0, 2.0, "-")
+        check_parameter(
+            "ToneLevel",
+            "phasic_threshold_offset_deg",
+            self.phasic_threshold_offset_deg,
+            -100.0,
+            200.0,
+            "deg",
+        )
 
     @classmethod
     def from_tsrt(cls, level: TSRTLevel, **changes: float) -> ToneLevel:
@@ -146,6 +159,7 @@ class SpindleToneConstants(NamedTuple):
 
     tsrt: SpindleTSRTConstants
     tone: np.ndarray
+    dynamic_offset_deg: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -182,7 +196,9 @@ class SpindleToneReflex(SpindleTSRTReflex):
         cal = self.calibration[level]
         tsrt = c._replace(s_v=c.s_v * cal.phasic_scale)
         tone = np.where(c.side < 0.0, cal.flexor_tone, 0.0)
-        return SpindleToneConstants(tsrt=tsrt, tone=tone)
+        offset = cal.phasic_threshold_offset_deg
+        dynamic = None if offset == 0.0 else np.where(c.side < 0.0, offset, 0.0)
+        return SpindleToneConstants(tsrt=tsrt, tone=tone, dynamic_offset_deg=dynamic)
 
     def excite(
         self, constants: Any, memory: Memory, record: SensoryRecord
@@ -191,7 +207,7 @@ class SpindleToneReflex(SpindleTSRTReflex):
         t = c.tsrt
         theta = record.fibre_length * t.deg_per_length + t.theta_offset_deg
         vel = record.lengthening_speed * t.inv_slope
-        e = spindle_tsrt_terms(theta, vel, t)
+        e = spindle_tsrt_terms(theta, vel, t, c.dynamic_offset_deg)
         e += c.tone * 0.5 * (1.0 - np.tanh((theta - self.tone_center_deg) / self.tone_width_deg))
         out: Sequence[float] = e  # type: ignore[assignment]
         return out, memory

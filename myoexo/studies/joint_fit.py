@@ -58,6 +58,7 @@ STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
         "extensor_threshold_shift_deg": (8.0, -100.0, 100.0),
         "flexor_tone": (0.02, 0.0, 1.0),
         "phasic_scale": (0.1, 0.0, 2.0),
+        "phasic_threshold_offset_deg": (8.0, -100.0, 200.0),
     }
 )
 #: The shared velocity slope's first step, 1/(rad/s), and its bounds.
