@@ -243,3 +243,18 @@ def test_the_default_twin_decays_under_a_weak_controller_and_spindle_tone_does_n
     assert not any(t.sustained for lv in (1, 2, 3) for t in default[lv])
     tone = weak_control("spindle_tone")
     assert all(t.sustained for t in tone[2])
+
+
+def test_the_joint_fit_holds_the_weak_controller_row_as_a_constraint() -> None:
+    """A candidate that oscillates under a weak controller loses more than any number of
+    other rows can give it back."""
+    from myoexo.studies.joint_fit import CONSTRAINT_PENALTY, objective
+
+    good = _measures()
+    bad = _measures()
+    bad["weak_control"][2] = [SimpleNamespace(sustained=True)] * 3
+    value, passed = objective(good)
+    bad_value, bad_passed = objective(bad)
+    assert bad_passed == passed - 1
+    assert bad_value < value - CONSTRAINT_PENALTY
+    assert CONSTRAINT_PENALTY > len(ROWS)  # more than every other row together

@@ -40,6 +40,8 @@ from myoexo.studies.pid_check import PIDOutcome, bisect_final_error, pid_outcome
 from myoexo.studies.validate import ValidationConfig, measure_model, score
 
 __all__ = [
+    "CONSTRAINT_PENALTY",
+    "CONSTRAINT_ROWS",
     "FITTED_MODELS",
     "HOLD_PARAMETERS",
     "STEPS",
@@ -67,10 +69,20 @@ VELOCITY_SLOPE_STEP: tuple[float, float, float] = (4.0, 1.0, 100.0)
 _TARGETS_DEG = {2: 6.3, 3: 9.3}
 
 
+#: Rows the fit holds as constraints: each one a candidate misses costs it
+#: :data:`CONSTRAINT_PENALTY` rows, so no number of other rows buys it back. A loop that
+#: decays under a weak controller is what the Ziegler-Nichols tunings need.
+CONSTRAINT_ROWS: tuple[str, ...] = ("pid_weak_control",)
+CONSTRAINT_PENALTY = 100.0
+
+
 def objective(measures: Mapping[str, Any]) -> tuple[float, int]:
     """``(value, rows passed)`` of one candidate's measurements: the rows passed plus a
-    tie-break in ``(-0.3, 0.3)`` (module docstring)."""
-    passed = sum(ok for _, ok in score(measures).values())
+    tie-break in ``(-0.3, 0.3)`` (module docstring), less :data:`CONSTRAINT_PENALTY` per
+    row of :data:`CONSTRAINT_ROWS` it misses."""
+    scores = score(measures)
+    passed = sum(ok for _, ok in scores.values())
+    missed_constraints = sum(not scores[row][1] for row in CONSTRAINT_ROWS if row in scores)
     pid = measures["pid"]
     t = measures["tardieu"]
     vel = [float(t["velocity_nm"][lv]) for lv in VALID_LEVELS]
@@ -83,7 +95,8 @@ def objective(measures: Mapping[str, Any]) -> tuple[float, int]:
         + 0.02 * min(ang[1] - ang[0], ang[2] - ang[1], 20.0)
         - 0.02 * sum(max(0.0, r - 70.0) for r in r1)
     )
-    return passed + 0.3 * math.tanh(soft / 3.0), passed
+    value = passed + 0.3 * math.tanh(soft / 3.0) - CONSTRAINT_PENALTY * missed_constraints
+    return value, passed
 
 
 @dataclass(frozen=True)
