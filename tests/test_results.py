@@ -301,3 +301,11 @@ def test_a_set_of_an_earlier_twin_says_so(tmp_path):
     assert "Measured on an earlier twin" not in render(folder)
     assert earlier_twin_note({"twin_version": TWIN_VERSION}) is None
     assert f"version {TWIN_VERSION - 1}" in earlier_twin_note({"twin_version": TWIN_VERSION - 1})
+    # a set measured with another reflex than today's default says so too
+    from myoexo.spasticity.reflex import DEFAULT_REFLEX
+
+    today = {"twin_version": TWIN_VERSION, "twin": {"reflex": DEFAULT_REFLEX}}
+    assert earlier_twin_note(today) is None
+    other = {"twin_version": TWIN_VERSION, "twin": {"reflex": "stretch"}}
+    note = earlier_twin_note(other)
+    assert note is not None and "Measured with the `stretch` reflex" in note

@@ -336,19 +336,30 @@ def aggregation_lines(folder: str | Path) -> list[str]:
 
 
 def earlier_twin_note(meta: dict[str, Any]) -> str | None:
-    """A warning line for a result set measured on another twin version than today's
-    (:data:`~myoexo.model.TWIN_VERSION`; a set that records none was measured on version 1);
-    ``None`` for a set of today's twin."""
+    """A warning line for a result set measured on another twin than today's default: another
+    twin version (:data:`~myoexo.model.TWIN_VERSION`; a set that records none was measured
+    on version 1) or another reflex model than the default
+    (:data:`~myoexo.spasticity.reflex.DEFAULT_REFLEX`); ``None`` for a set of today's
+    default twin."""
     from myoexo.model import TWIN_VERSION
+    from myoexo.spasticity.reflex import DEFAULT_REFLEX
 
+    notes = []
     version = recorded_twin_version(meta)
-    if version == TWIN_VERSION:
-        return None
-    return (
-        f"**Measured on an earlier twin** (version {version}; today's default twin is version "
-        f"{TWIN_VERSION}, CHANGELOG.md): these numbers are not those of today's twin until the "
-        "set is re-run."
-    )
+    if version != TWIN_VERSION:
+        notes.append(
+            f"**Measured on an earlier twin** (version {version}; today's default twin is "
+            f"version {TWIN_VERSION}, CHANGELOG.md): these numbers are not those of today's twin "
+            "until the set is re-run."
+        )
+    reflex = (meta.get("twin") or {}).get("reflex")
+    if reflex is not None and reflex != DEFAULT_REFLEX:
+        notes.append(
+            f"**Measured with the `{reflex}` reflex** (today's default twin's is "
+            f"`{DEFAULT_REFLEX}`, CHANGELOG.md): these numbers are not those of today's default "
+            "twin until the set is re-run."
+        )
+    return " ".join(notes) or None
 
 
 def render(folder: str | Path, label: str | None = None) -> str:
