@@ -252,9 +252,10 @@ class ZieglerNicholsResult:
         }
 
 
-def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
+def make_tuning_env(settings: ZieglerNicholsSettings, reflex: Any = None) -> Any:
     """The level's env; with ``nominal_subject`` its reflex keeps Table I's values; with a
-    ``latency_s`` its sensors are that late (and exact)."""
+    ``latency_s`` its sensors are that late (and exact). *reflex*: the reflex model (a
+    registered name or a model; default: the envs' default)."""
     from myoexo.envs import make_env
     from myoexo.envs.robustness import RobustnessParams
 
@@ -263,6 +264,8 @@ def make_tuning_env(settings: ZieglerNicholsSettings) -> Any:
         for name in ("episode_duration_s", "target_angle_deg")
         if (value := getattr(settings, name)) is not None
     }
+    if reflex is not None:
+        task["reflex"] = reflex
     robustness = None
     if settings.latency_s > 0.0:
         robustness = dataclasses.replace(RobustnessParams.nominal(), latency_s=settings.latency_s)

@@ -197,26 +197,24 @@ class HoldParameter:
         half_bracket: The bisection's bracket is the fitted value +- this.
         tol: The bisection stops once the bracket is this narrow.
         digits: Decimals the result is rounded to.
-        low: Lowest value the field takes.
-        high: Highest value the field takes.
+
+    The bracket stays within the field's bounds in :data:`STEPS`.
     """
 
     name: str
     half_bracket: float
     tol: float
     digits: int
-    low: float
-    high: float
 
 
-_THRESHOLD = HoldParameter("flexor_threshold_shift_deg", 15.0, 0.1, 2, -50.0, 150.0)
+_THRESHOLD = HoldParameter("flexor_threshold_shift_deg", 15.0, 0.1, 2)
 #: Each fitted model's hold parameter: the flexors' static threshold, or (``spindle_tone``)
 #: the flexors' length tone, which holds the knee without the threshold's clonus.
 HOLD_PARAMETERS: Mapping[str, HoldParameter] = MappingProxyType(
     {
         "tsrt": _THRESHOLD,
         "spindle_tsrt": _THRESHOLD,
-        "spindle_tone": HoldParameter("flexor_tone", 0.1, 0.002, 3, 0.0, 1.0),
+        "spindle_tone": HoldParameter("flexor_tone", 0.1, 0.002, 3),
     }
 )
 
@@ -329,10 +327,8 @@ def calibrate_tsrt(
             trial[level] = dataclasses.replace(levels[level], **{hold.name: value})
             return pid_outcome(level, _model(trial, base), pid_subjects, root_seed)
 
-        bracket = (
-            max(current - hold.half_bracket, hold.low),
-            min(current + hold.half_bracket, hold.high),
-        )
+        _, low, high = STEPS[hold.name]
+        bracket = (max(current - hold.half_bracket, low), min(current + hold.half_bracket, high))
         value, fit_outcomes[level] = bisect_final_error(
             outcome, bracket, target, hold.tol, level, hold.name
         )

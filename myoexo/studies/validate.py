@@ -393,8 +393,6 @@ def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
     every gain of :data:`WEAK_CONTROL_GAINS` on every loop of :data:`WEAK_CONTROL_LOOPS`, on
     the level's nominal subject (as the tuning runs them)."""
     from myoexo.control import ziegler_nichols as zn
-    from myoexo.envs.registration import make_env
-    from myoexo.envs.robustness import RobustnessParams
 
     trials: dict[int, list[Any]] = {}
     for level in VALID_LEVELS:
@@ -403,10 +401,7 @@ def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
             settings = zn.ZieglerNicholsSettings(
                 level=level, feedback=feedback, latency_s=latency_s
             )
-            robustness = None
-            if latency_s > 0.0:
-                robustness = dataclasses.replace(RobustnessParams.nominal(), latency_s=latency_s)
-            env = make_env(level, subject_noise=False, reflex=reflex, robustness=robustness)
+            env = zn.make_tuning_env(settings, reflex)
             try:
                 trials[level] += [zn.p_only_trial(env, kp, settings) for kp in WEAK_CONTROL_GAINS]
             finally:
