@@ -128,11 +128,33 @@ def test_the_phasic_scale_scales_the_velocity_term_only(geometry) -> None:
     np.testing.assert_allclose(phasic_half, 0.5 * phasic_full, atol=1e-6)
 
 
+def test_the_background_tone_adds_its_excitation_to_every_muscle_at_any_state(geometry) -> None:
+    """The background tone is the same constant on flexors and extensors, stretched or not,
+    at rest or moving: it closes no loop."""
+    model, _ = build_model(TwinParams(scene=False))
+    levels = {lv: ToneLevel.from_tsrt(c) for lv, c in SPINDLE_TSRT_CALIBRATION.levels.items()}
+    records = [_record(model, angle) for angle in (10.0, 45.0, 80.0)]
+    records.append(_record(model, 30.0, -2.0 * np.asarray(geometry.slope_per_rad)))
+    excitation = {}
+    for tone in (0.0, 0.07):
+        level = dataclasses.replace(levels[3], background_tone=tone)
+        reflex = SpindleToneReflex(
+            calibration=ToneCalibration(levels=MappingProxyType({**levels, 3: level})),
+            geometry=geometry,
+        )
+        c = reflex.subject_constants(3, LEVELS[3], None, 0.01)
+        excitation[tone] = [np.asarray(reflex.excite(c, (), r)[0]) for r in records]
+    for plain, toned in zip(excitation[0.0], excitation[0.07], strict=True):
+        assert toned.shape == (len(SPASTIC_MUSCLES),)
+        np.testing.assert_allclose(toned - plain, 0.07, atol=1e-12)
+
+
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
         ({"flexor_tone": 1.5}, r"ToneLevel.flexor_tone = 1.5 .*\[0(\.0)?, 1(\.0)?\]"),
         ({"phasic_scale": -0.1}, r"ToneLevel.phasic_scale = -0.1 .*\[0(\.0)?, 2(\.0)?\]"),
+        ({"background_tone": 0.6}, r"ToneLevel.background_tone = 0.6 .*\[0(\.0)?, 0.5\]"),
         (
             {"phasic_threshold_offset_deg": 250.0},
             r"ToneLevel.phasic_threshold_offset_deg = 250.0 .*\[-100(\.0)?, 200(\.0)?\] deg",

@@ -63,6 +63,8 @@ def _measures(**overrides: dict[int, float]) -> dict:
     supine = pendulum.loc[[0]].copy()
     # the weak P controllers: every trial decays
     weak = {lv: [SimpleNamespace(sustained=False)] * 3 for lv in levels}
+    # the constant exo commands: the knee rests at every level
+    rest = {lv: [0.1, 0.0, 0.0] for lv in levels}
     out = {
         "tardieu": tardieu,
         "mas": mas,
@@ -70,6 +72,7 @@ def _measures(**overrides: dict[int, float]) -> dict:
         "pendulum_supine": supine,
         "pid": pid,
         "weak_control": weak,
+        "rest": rest,
     }
     for key, values in overrides.items():
         test, column = key.split(".")
@@ -132,6 +135,19 @@ def test_a_twin_that_oscillates_under_a_weak_controller_misses_the_row() -> None
     m["weak_control"][2] = sustained
     value, ok = score(m)["pid_weak_control"]
     assert not ok and value == "sustained in 1 / 0 / 1 / 0 of 3"
+    assert sum(not ok for _, ok in score(m).values()) == 1  # only that row
+
+
+def test_a_knee_that_keeps_swinging_under_a_constant_command_misses_the_rest_row() -> None:
+    """The rest row reads the largest range over the commands at each level; a swing at a
+    spastic level misses it, level 0's is reported only."""
+    m = _measures()
+    m["rest"][0] = [0.9, 0.0, 0.0]
+    value, ok = score(m)["constant_command_rest"]
+    assert ok and value == "0.90 / 0.10 / 0.10 / 0.10"
+    m["rest"][3] = [1.27, 1.07, 0.0]  # spindle_tone's first fit at level 3, root 2
+    value, ok = score(m)["constant_command_rest"]
+    assert not ok and value.endswith("/ 1.27")
     assert sum(not ok for _, ok in score(m).values()) == 1  # only that row
 
 

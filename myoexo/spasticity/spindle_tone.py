@@ -1,5 +1,5 @@
-"""``"spindle_tone"``: ``"spindle_tsrt"`` with a length tone on each flexor and a phasic
-scale per level.
+"""``"spindle_tone"``: ``"spindle_tsrt"`` with a length tone on each flexor, a background
+tone on every spastic muscle and a phasic scale per level.
 
 ``"spindle_tsrt"`` (:mod:`myoexo.spasticity.spindle`) holds the study's PID short at levels
 2-3 with its tonic term, a steep sigmoid of each flexor's length (Table I's slope ``k``, 0.2
@@ -20,7 +20,16 @@ not a threshold that chatters. Reclined for the pendulum test (hip 40 deg) the h
 are slack, so their equivalent seated angle is flexed and their tone falls away, as the
 spindle reading has it for every term.
 
-Its per-level parameters (:class:`ToneLevel`: ``"spindle_tsrt"``'s and the two above) are
+The **background tone** is a constant excitation of every spastic muscle, flexors and
+extensors alike: the raised muscle tone of spastic legs at rest (De Groote et al. 2018, PLoS
+One 13:e0205763, who needed it beside short-range stiffness and feedback gains to reproduce
+spastic pendulum traces). It closes no loop; its work is the active muscles' force-velocity
+damping. Without it the spastic knee is damped only as lightly as the healthy one (Kim et
+al. 1996's pendulum asks that of the passive knee; Lebiedowska and Fisk 1999 found the
+passive viscosity of spastic knees unchanged), except past the phasic threshold, and a
+constant exo command leaves it swinging for seconds.
+
+Its per-level parameters (:class:`ToneLevel`: ``"spindle_tsrt"``'s and the three above) are
 fitted by ``myoexo twin calibrate --reflex spindle_tone`` (:mod:`myoexo.studies.joint_fit`,
 the same joint fit as ``"spindle_tsrt"``'s, with the flexor tone of levels 2-3 as the value
 the PID's final error is bisected on) and written to the package's fit
@@ -81,11 +90,13 @@ class ToneLevel(TSRTLevel):
             from their static one, deg (> 0: further into the motion; 0: at it, as in
             ``"spindle_tsrt"``). It lets the catch stay inside the range while the static
             threshold, a steep delayed loop, is moved out of it.
+        background_tone: Constant excitation of every spastic muscle (-, 0-0.5).
     """
 
     flexor_tone: float = 0.0
     phasic_scale: float = 1.0
     phasic_threshold_offset_deg: float = 0.0
+    background_tone: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -99,6 +110,7 @@ class ToneLevel(TSRTLevel):
             200.0,
             "deg",
         )
+        check_parameter("ToneLevel", "background_tone", self.background_tone, 0.0, 0.5, "-")
 
     @classmethod
     def from_tsrt(cls, level: TSRTLevel, **changes: float) -> ToneLevel:
@@ -154,18 +166,21 @@ SPINDLE_TONE_CALIBRATION = _package_fit()
 
 class SpindleToneConstants(NamedTuple):
     """A subject's constants of the ``"spindle_tone"`` reflex: ``"spindle_tsrt"``'s (with
-    the phasic gains scaled) and each muscle's tone amplitude (0 for the muscles flexion
-    lengthens)."""
+    the phasic gains scaled), each muscle's tone amplitude (0 for the muscles flexion
+    lengthens), the flexors' dynamic-threshold offset (``None``: 0) and the background
+    tone."""
 
     tsrt: SpindleTSRTConstants
     tone: np.ndarray
     dynamic_offset_deg: np.ndarray | None
+    background_tone: float = 0.0
 
 
 @dataclass(frozen=True)
 class SpindleToneReflex(SpindleTSRTReflex):
-    """``"spindle_tone"``: ``"spindle_tsrt"`` with a broad length tone on each flexor and a
-    phasic scale per level (module docstring).
+    """``"spindle_tone"``: ``"spindle_tsrt"`` with a broad length tone on each flexor, a
+    background tone on every spastic muscle and a phasic scale per level (module
+    docstring).
 
     Attributes:
         delay_s: Transmission delay, s (the stretch reflex's 20 ms).
@@ -198,7 +213,12 @@ class SpindleToneReflex(SpindleTSRTReflex):
         tone = np.where(c.side < 0.0, cal.flexor_tone, 0.0)
         offset = cal.phasic_threshold_offset_deg
         dynamic = None if offset == 0.0 else np.where(c.side < 0.0, offset, 0.0)
-        return SpindleToneConstants(tsrt=tsrt, tone=tone, dynamic_offset_deg=dynamic)
+        return SpindleToneConstants(
+            tsrt=tsrt,
+            tone=tone,
+            dynamic_offset_deg=dynamic,
+            background_tone=cal.background_tone,
+        )
 
     def excite(
         self, constants: Any, memory: Memory, record: SensoryRecord
@@ -209,6 +229,8 @@ class SpindleToneReflex(SpindleTSRTReflex):
         vel = record.lengthening_speed * t.inv_slope
         e = spindle_tsrt_terms(theta, vel, t, c.dynamic_offset_deg)
         e += c.tone * 0.5 * (1.0 - np.tanh((theta - self.tone_center_deg) / self.tone_width_deg))
+        if c.background_tone:
+            e += c.background_tone
         out: Sequence[float] = e  # type: ignore[assignment]
         return out, memory
 

@@ -61,6 +61,7 @@ STEPS: Mapping[str, tuple[float, float, float]] = MappingProxyType(
         "flexor_tone": (0.02, 0.0, 1.0),
         "phasic_scale": (0.1, 0.0, 2.0),
         "phasic_threshold_offset_deg": (8.0, -100.0, 200.0),
+        "background_tone": (0.02, 0.0, 0.5),
     }
 )
 #: The shared velocity slope's first step, 1/(rad/s), and its bounds.
@@ -71,8 +72,9 @@ _TARGETS_DEG = {2: 6.3, 3: 9.3}
 
 #: Rows the fit holds as constraints: each one a candidate misses costs it
 #: :data:`CONSTRAINT_PENALTY` rows, so no number of other rows buys it back. A loop that
-#: decays under a weak controller is what the Ziegler-Nichols tunings need.
-CONSTRAINT_ROWS: tuple[str, ...] = ("pid_weak_control",)
+#: decays under a weak controller is what the Ziegler-Nichols tunings need; a knee that
+#: rests under a constant command is what the strap-lag reading needs.
+CONSTRAINT_ROWS: tuple[str, ...] = ("pid_weak_control", "constant_command_rest")
 CONSTRAINT_PENALTY = 100.0
 
 

@@ -127,7 +127,8 @@ class ValidationConfig:
 
 Measures = Mapping[str, Any]
 """One model's measurements: ``pid`` (level -> PIDOutcome), ``weak_control`` (level -> the
-P-only trials of :func:`weak_control`) and per-level mean tables of the
+P-only trials of :func:`weak_control`), ``rest`` (level -> the knee's ranges of
+:func:`constant_command_rest`) and per-level mean tables of the
 clinical tests (``tardieu``, ``mas``, ``pendulum``, and ``pendulum_supine`` at level 0:
 pandas, indexed by level)."""
 
@@ -232,6 +233,21 @@ def _weak_control(m: Measures) -> tuple[str, bool]:
     return f"sustained in {_fmt(sustained, 0)} of {n}", not any(sustained[1:])
 
 
+#: The ``constant_command_rest`` row: the exo commands held (fraction of the motor's
+#: limit; negative extends), the run, the window read at its end, and the range within which the knee counts as at rest. Level 0 is reported, not
+#: held to it: the healthy knee is as lightly damped as Kim's pendulum asks, and in the exo
+#: it rings for seconds.
+REST_COMMANDS: tuple[float, ...] = (-0.3, -0.5, -0.8)
+REST_DURATION_S = 8.0
+REST_WINDOW_S = 2.0
+REST_BAND_DEG = 0.5
+
+
+def _rest(m: Measures) -> tuple[str, bool]:
+    ranges = [max(m["rest"][lv]) for lv in VALID_LEVELS]
+    return _fmt(ranges, 2), all(r < REST_BAND_DEG for r in ranges[1:])
+
+
 def _catch_inside(m: Measures) -> tuple[str, bool]:
     t = m["tardieu"]
     values = [float(t["r1_deg"][lv]) for lv in (1, 2, 3)]
@@ -307,6 +323,13 @@ ROWS: tuple[ValidationRow, ...] = (
                   "on the knee read 10 ms late (the package's three tunings), nominal subject; "
                   "trials sustained per level", "none at levels 1-3 (level 0, without a "
                   "reflex, reported)", "study", _weak_control),
+    ValidationRow("constant_command_rest", "PID", "held by a constant exo command, with no "
+                  "controller, the knee comes to rest (the strap-lag reading and the encoder "
+                  "guard read the resting knee): its range (deg) over the last "
+                  f"{REST_WINDOW_S:g} s of {REST_DURATION_S:g} s, the largest over commands "
+                  f"{' / '.join(f'{c:g}' for c in REST_COMMANDS)}, the root's first subject",
+                  f"< {REST_BAND_DEG:g} deg at levels 1-3 (level 0, without a reflex, "
+                  "reported)", "study", _rest),
     ValidationRow("pid_misalignment", "straps", "the exo stays aligned with the knee under the "
                   "paper's PID: largest misalignment (deg) over the subjects, levels 0-3",
                   f"<= {_MISALIGNMENT_BOUND_DEG:g} deg at every level", "straps",
@@ -409,6 +432,31 @@ def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
     return trials
 
 
+def constant_command_rest(reflex: str | ReflexModel, root_seed: int) -> dict[int, list[float]]:
+    """Level -> the knee's range (deg) over the last :data:`REST_WINDOW_S` of a
+    :data:`REST_DURATION_S` run at each constant command of :data:`REST_COMMANDS`, on the
+    root's first subject of the level."""
+    from myoexo.envs import make_env
+
+    ranges: dict[int, list[float]] = {}
+    for level in VALID_LEVELS:
+        ranges[level] = []
+        for command in REST_COMMANDS:
+            env = make_env(level, reflex=reflex, episode_duration_s=REST_DURATION_S)
+            try:
+                env.reset(seed=subject_seed(level, 0, root_seed))
+                dt = float(env.unwrapped.dt)  # type: ignore[attr-defined]
+                steps, window = round(REST_DURATION_S / dt), round(REST_WINDOW_S / dt)
+                action = np.array([command], dtype=np.float32)
+                knee = np.empty(steps)
+                for i in range(steps):
+                    knee[i] = env.step(action)[4]["knee_angle_deg"]
+            finally:
+                env.close()
+            ranges[level].append(float(np.ptp(knee[-window:])))
+    return ranges
+
+
 def measure_model(
     reflex: str | ReflexModel,
     config: ValidationConfig = ValidationConfig(),
@@ -427,6 +475,7 @@ def measure_model(
     t0 = time.perf_counter()
     pid = {lv: pid_outcome(lv, model, config.pid_subjects, config.root_seed) for lv in VALID_LEVELS}
     weak = weak_control(model)
+    rest = constant_command_rest(model, config.root_seed)
     tables: dict[str, list[pd.DataFrame]] = {
         "tardieu": [],
         "mas": [],
@@ -447,7 +496,7 @@ def measure_model(
         tables["pendulum_supine"].append(
             run_pendulum(supine, reflex=model, subjects=subjects, twin=freed).table()
         )
-    out: dict[str, Any] = {"pid": pid, "weak_control": weak}
+    out: dict[str, Any] = {"pid": pid, "weak_control": weak, "rest": rest}
     for test, frames in tables.items():
         df = pd.concat(frames, ignore_index=True).drop(columns=["reflex"])
         out[test] = df.groupby("level").mean(numeric_only=True)
