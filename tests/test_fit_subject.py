@@ -13,6 +13,7 @@ import pytest
 
 from myoexo.clinical.recording import Recording, SensorNoise, record_from_twin, write_recording
 from myoexo.clinical.tardieu import TardieuParams
+from myoexo.spasticity import DEFAULT_REFLEX
 from myoexo.studies import fit_subject as fs
 
 SEED = 7
@@ -104,7 +105,7 @@ def test_the_twin_replays_a_noise_free_recording_exactly(tmp_path):
         write_recording(record_from_twin("pendulum", 3, SEED, noise=QUIET), tmp_path / "p.csv"),
     ]
     targets = fs.read_targets(paths)
-    objective = fs.SubjectObjective(targets, 3, "spindle", _settings(tmp_path))
+    objective = fs.SubjectObjective(targets, 3, DEFAULT_REFLEX, _settings(tmp_path))
     truth = fs._truth(targets)
     assert truth is not None
     evaluation = objective(truth)
@@ -124,7 +125,7 @@ def test_a_fit_lowers_the_objective_and_reports_what_it_found(recordings, tmp_pa
     assert report["objective"]["fitted"] < report["objective"]["start"]
     assert json.loads(settings.out.read_text()) == json.loads(json.dumps(report))
     assert not fs.partial_path(settings.out).exists()
-    assert report["level"] == 2 and report["reflex"] == "spindle"
+    assert report["level"] == 2 and report["reflex"] == DEFAULT_REFLEX
     assert set(report["subject"]) == {f.name for f in dataclasses.fields(fs.SpasticityParams)}
     rows = {r["name"]: r for r in report["parameters"]}
     assert list(rows) == list(names)

@@ -39,9 +39,10 @@ def _run(params: PersistentParams, vel: float, steps: int, r0: float = 0.0) -> f
     return r
 
 
-def test_presets_list_the_persistent_model_and_the_default_is_spindle() -> None:
+def test_presets_list_the_persistent_model_and_the_default_is_spindle_tone() -> None:
     assert "persistent" in reflex_names()
-    assert DEFAULT_REFLEX == "spindle" and SpasticityStage().reflex_name == "spindle"
+    assert DEFAULT_REFLEX == "spindle_tone"
+    assert SpasticityStage().reflex_name == "spindle_tone"
     cfg = get_reflex("persistent")
     assert isinstance(cfg, PersistentReflex)
     assert cfg.after_discharge.gain(0) == 0.0

@@ -16,7 +16,7 @@ from myoexo.clinical.tardieu import TardieuParams
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import EvaluationConfig
 from myoexo.model.passive_knee import PassiveKneeScaler
-from myoexo.spasticity import SpasticityParams
+from myoexo.spasticity import DEFAULT_REFLEX, SpasticityParams
 from myoexo.spasticity.levels import LEVELS
 from myoexo.spasticity.personal import PersonalSubject, from_unit, load_subject, to_unit
 from myoexo.studies import fit_subject as fs
@@ -44,7 +44,7 @@ def report_path(tmp_path_factory):
 def test_the_report_reads_back_as_the_fitted_person(report_path):
     report = json.loads(report_path.read_text())
     person = load_subject(report_path)
-    assert person.level == 2 and person.reflex == "spindle" and person.names == NAMES
+    assert person.level == 2 and person.reflex == DEFAULT_REFLEX and person.names == NAMES
     subject, stiffness, damping = person.point()
     assert dataclasses.asdict(subject) == pytest.approx(report["subject"])
     assert stiffness == pytest.approx(report["passive_knee"]["stiffness_scale"])
@@ -69,7 +69,7 @@ def test_draws_vary_the_fitted_parameters_inside_their_bounds(report_path):
 
 
 def test_a_subject_known_exactly_draws_nothing():
-    truth = PersonalSubject.of(2, LEVELS[2], reflex="spindle", stiffness_scale=1.5)
+    truth = PersonalSubject.of(2, LEVELS[2], reflex=DEFAULT_REFLEX, stiffness_scale=1.5)
     rng = np.random.default_rng(0)
     state = rng.bit_generator.state
     assert truth.draw(rng) == (LEVELS[2], 1.5, 1.0)
@@ -143,7 +143,7 @@ def test_the_env_runs_the_person_and_draws_from_the_fit(report_path):
 def test_the_env_refuses_another_level_or_reflex(report_path):
     with pytest.raises(ValueError, match=r"level 2's reflex calibration.*MyoExoKnee-v2"):
         gym.make("MyoExoKnee-v3", subject=str(report_path))
-    with pytest.raises(ValueError, match="fitted with the 'spindle' reflex"):
+    with pytest.raises(ValueError, match=f"fitted with the '{DEFAULT_REFLEX}' reflex"):
         gym.make("MyoExoKnee-v2", subject=str(report_path), reflex="stretch")
 
 

@@ -29,6 +29,7 @@ from myoexo.clinical.recording import (
     recording_text,
     write_recording,
 )
+from myoexo.spasticity import DEFAULT_REFLEX
 
 ROOT = Path(__file__).resolve().parents[1]
 STRETCH_HEAD = "# test: stretch\n# speed: fast\n# sampling_hz: 100\n"
@@ -282,7 +283,7 @@ def test_a_synthetic_pendulum_starts_near_extension_and_swings():
     # how it was made, the truth a fit is held against
     meta = rec.metadata
     assert (meta["synthetic_level"], meta["synthetic_subject_seed"]) == ("0", "3")
-    assert meta["synthetic_reflex"] == "spindle" and meta["device"] == "exo"
+    assert meta["synthetic_reflex"] == DEFAULT_REFLEX and meta["device"] == "exo"
     assert rec.synthetic_subject() == draw_subjects((0,), 3)[0]
     assert meta["synthetic_noise"] == SensorNoise().text()
 

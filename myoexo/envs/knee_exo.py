@@ -146,8 +146,10 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             population's subject; the env's level must be the one its fit used, and the
             reflex model the one it was fitted with. ``None``: the population.
         reflex: Reflex model: a registered name (:func:`~myoexo.spasticity.reflex_names`;
-            ``"spindle"``, the default: the calibrated stretch reflex read on each muscle's
-            own fibre length and speed, 20 ms delay; ``"stretch"``, the same on the knee
+            ``"spindle_tone"``, the default: the tonic-stretch-reflex-threshold reading on
+            each muscle's own fibre length and speed with a flexor length tone and a
+            background tone, 20 ms delay; ``"spindle"``, the calibrated stretch reflex read
+            on each muscle's own fibre length and speed; ``"stretch"``, the same on the knee
             angle; ``"uniform"``, the paper's ``SC_total`` on all 11 muscles, no delay;
             ``"persistent"``, with the flexors' after-discharge; ``"tsrt"``; any the user
             registered) or a :class:`~myoexo.spasticity.ReflexModel` instance.

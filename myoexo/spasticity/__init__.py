@@ -38,8 +38,11 @@ The package, one module per part (each name is re-exported here):
 * :mod:`~myoexo.spasticity.reflex`: the built-in models (``"stretch"``, ``"uniform"``,
   ``"persistent"``), their calibration data (:data:`CALIBRATION`, :data:`PERSISTENT`) and
   their torch twins;
-* :mod:`~myoexo.spasticity.spindle`: ``"spindle"``, the envs' default, the stretch reflex
-  read on each muscle's own fibre length and lengthening speed (:class:`SpindleReflex`);
+* :mod:`~myoexo.spasticity.spindle`: ``"spindle"``, the stretch reflex read on each
+  muscle's own fibre length and lengthening speed (:class:`SpindleReflex`), and
+  ``"spindle_tsrt"``, the tonic-stretch-reflex-threshold reading on the same state;
+* :mod:`~myoexo.spasticity.spindle_tone`: ``"spindle_tone"``, the envs' default:
+  ``"spindle_tsrt"`` with a flexor length tone, a background tone and a phasic scale;
 * :mod:`~myoexo.spasticity.delay`: the transmission delay line (of sensory records);
 * :mod:`~myoexo.spasticity.stage`: :class:`SpasticityStage`, the reflex as a stage of
   MyoSuite's muscle-command pipeline (:mod:`myosuite.envs.muscle_stages`), and

@@ -17,7 +17,8 @@ and ``above = 1 - below``. Two readings of who receives it (docs/reference.md se
     all 11 spastic muscles receive the whole ``SC_total``: flexors and the stronger
     extensors co-contract at every state.
 ``"stretch"`` (the clinical stretch reflex, Lance 1980; on the muscles' own state it is
-    ``"spindle"``, the default, :mod:`myoexo.spasticity.spindle`)
+    ``"spindle"``, :mod:`myoexo.spasticity.spindle`; the default, ``"spindle_tone"``, is
+    the tonic-stretch-reflex-threshold reading on that state)
     each group answers its own stretch. Knee extension (``theta`` falling, ``v < 0``)
     stretches the flexors (hamstrings, gastrocnemii), flexion stretches the extensors
     (vasti, rectus femoris; gracilis as the paper groups it)::
@@ -666,10 +667,11 @@ BUILTIN_REFLEXES: Mapping[str, ReflexModel] = MappingProxyType(
     }
 )
 
-#: The name of the envs' default reflex model: ``"spindle"`` (:mod:`myoexo.spasticity.spindle`,
-#: registered when :mod:`myoexo.spasticity` is imported), chosen by the validation page's rule
-#: (docs/validation.md): it passes the study's PID table and the most clinical rows.
-DEFAULT_REFLEX = "spindle"
+#: The name of the envs' default reflex model: ``"spindle_tone"``
+#: (:mod:`myoexo.spasticity.spindle_tone`, registered when :mod:`myoexo.spasticity` is
+#: imported), chosen by the validation page's rule (docs/validation.md): of the models that
+#: pass the study's PID block on both roots, it passes the most clinical rows.
+DEFAULT_REFLEX = "spindle_tone"
 
 for _name, _model in BUILTIN_REFLEXES.items():
     register_reflex(_name, _model)

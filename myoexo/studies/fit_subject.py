@@ -12,8 +12,8 @@ replays match the recordings::
 record of the reflex, :class:`~myoexo.spasticity.SpasticityParams`, is what varies from one
 subject to the next in the twin (:func:`~myoexo.spasticity.sample_subject`): the windows of
 the angle and velocity terms, their two gains and the sigmoid slope, seven numbers. The
-default reflex (``"spindle"``) maps them onto each muscle's fibre state with the level's
-calibration (the flexors' threshold shift and the group gains of ``myoexo twin calibrate``):
+default reflex (``"spindle_tone"``) maps them onto each muscle's fibre state with the
+level's calibration (its fitted per-level parameters, ``myoexo twin calibrate``):
 the calibration and the 20 ms transmission delay belong to the model and the level, not to
 a subject, so they are not fitted; the level is ``--level`` (by default the recordings'
 ``synthetic_level``, else their MAS grade 0-3). The passive knee is the twin's, not a

@@ -233,10 +233,10 @@ def _weak_control(m: Measures) -> tuple[str, bool]:
     return f"sustained in {_fmt(sustained, 0)} of {n}", not any(sustained[1:])
 
 
-#: The ``constant_command_rest`` row: the exo commands held (fraction of the motor's
-#: limit; negative extends), the run, the window read at its end, and the range within which the knee counts as at rest. Level 0 is reported, not
-#: held to it: the healthy knee is as lightly damped as Kim's pendulum asks, and in the exo
-#: it rings for seconds.
+#: The ``constant_command_rest`` row: the exo commands held (fraction of the motor's limit;
+#: negative extends), the run, the window read at its end, and the range within which the
+#: knee counts as at rest. Level 0 is reported, not held to it: the healthy knee is as
+#: lightly damped as Kim's pendulum asks, and in the exo it rings for seconds.
 REST_COMMANDS: tuple[float, ...] = (-0.3, -0.5, -0.8)
 REST_DURATION_S = 8.0
 REST_WINDOW_S = 2.0
