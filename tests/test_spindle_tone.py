@@ -19,6 +19,7 @@ from myoexo.spasticity.spindle import SPINDLE_TSRT_CALIBRATION, SpindleTSRTRefle
 from myoexo.spasticity.spindle_tone import (
     SpindleToneReflex,
     ToneCalibration,
+    ToneIndividual,
     ToneLevel,
 )
 from myoexo.studies.joint_fit import calibrate_tsrt
@@ -221,3 +222,30 @@ def test_the_phasic_threshold_offset_keeps_the_catch_with_the_static_threshold_o
         at_rest[offset] = e_rest
     assert burst[0.0] < 0.02 and burst[60.0] > 0.1, burst
     np.testing.assert_allclose(at_rest[0.0], at_rest[60.0], atol=1e-3)
+
+
+def test_each_subject_draws_its_own_tones_without_moving_the_resets_stream() -> None:
+    """A subject's flexor and background tones are the level's times its own factors (10 %
+    SD); the nominal subject (``None``) keeps the level's; the reset's generator draws the
+    same afterwards as if no factor had been drawn."""
+    reflex = get_reflex("spindle_tone")
+    level = dataclasses.replace(reflex.calibration[2], flexor_tone=0.3, background_tone=0.05)
+    levels = {**reflex.calibration.levels, 2: level}
+    model = dataclasses.replace(
+        reflex, calibration=ToneCalibration(levels=MappingProxyType(levels))
+    )
+    rng = np.random.default_rng(11)
+    individuals = [model.draw_individual(rng, 0.1) for _ in range(200)]
+    assert rng.standard_normal() == np.random.default_rng(11).standard_normal()
+    factors = np.array(individuals)
+    assert np.all(factors >= 0.0)
+    assert abs(factors.mean() - 1.0) < 0.03 and 0.07 < factors.std() < 0.13
+    assert abs(np.corrcoef(factors.T)[0, 1]) < 0.25  # two factors of their own
+    own = ToneIndividual(1.2, 0.5)
+    c = model.subject_constants(2, LEVELS[2], own, 0.01)
+    nominal = model.subject_constants(2, LEVELS[2], None, 0.01)
+    flexors = nominal.tone > 0.0
+    np.testing.assert_allclose(nominal.tone[flexors], 0.3)
+    np.testing.assert_allclose(c.tone[flexors], 0.36)
+    assert np.all(c.tone[~flexors] == 0.0)
+    assert nominal.background_tone == 0.05 and c.background_tone == pytest.approx(0.025)

@@ -88,6 +88,7 @@ from myoexo.spasticity.registry import (
     calibration_from_dict,
     calibration_to_dict,
     check_parameter,
+    individual_factors,
     register_reflex,
 )
 from myoexo.spasticity.tsrt import TSRTReflex
@@ -591,14 +592,8 @@ class PersistentReflex(UniformReflex):
 
     def draw_individual(self, rng: Any, rel_std: float) -> float:
         """``max(0, 1 + rel_std z)``, the factor of the subject's gain, ``z`` from
-        ``rng.spawn(1)[0]`` (*rng*'s own stream is not advanced)."""
-        try:
-            child = rng.spawn(1)[0]
-        except (AttributeError, TypeError, ValueError):  # a generator without a seed sequence
-            z = float(rng.standard_normal())
-        else:
-            z = float(child.standard_normal())
-        return max(0.0, 1.0 + rel_std * z)
+        ``rng.spawn(1)[0]`` (*rng*'s own stream is not advanced; :func:`individual_factors`)."""
+        return float(individual_factors(rng, rel_std, 1)[0])
 
     def subject_constants(
         self, level: int, subject: SpasticityParams, individual: Any, control_period_s: float

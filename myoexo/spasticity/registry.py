@@ -68,6 +68,21 @@ def check_parameter(owner: str, name: str, value: Any, low: float, high: float, 
         raise ValueError(f"{owner}.{name} = {value!r} is outside [{low}, {high}] {unit}")
 
 
+def individual_factors(rng: Any, rel_std: float, size: int) -> np.ndarray:
+    """*size* factors ``max(0, 1 + rel_std z)`` of a subject's own parameters, ``z`` standard
+    normal from ``rng.spawn(1)[0]``, so *rng*'s own stream is not advanced (a generator
+    without a seed sequence is drawn from directly): the draw of
+    :meth:`ReflexModel.draw_individual`."""
+    try:
+        child = rng.spawn(1)[0]
+    except (AttributeError, TypeError, ValueError):  # a generator without a seed sequence
+        z = np.asarray(rng.standard_normal(size), dtype=float)
+    else:
+        z = np.asarray(child.standard_normal(size), dtype=float)
+    factors: np.ndarray = np.maximum(0.0, 1.0 + rel_std * z)
+    return factors
+
+
 @dataclass(frozen=True)
 class ReflexModel(abc.ABC):
     """Base of every reflex model: a frozen dataclass of the model's parameters.

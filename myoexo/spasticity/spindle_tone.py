@@ -29,6 +29,11 @@ al. 1996's pendulum asks that of the passive knee; Lebiedowska and Fisk 1999 fou
 passive viscosity of spastic knees unchanged), except past the phasic threshold, and a
 constant exo command leaves it swinging for seconds.
 
+Each subject draws its own tones: the level's flexor and background tones times factors
+``max(0, 1 + 0.1 z)`` (the 10 % of the subject draw on Table I's parameters,
+:class:`ToneIndividual`), so the hold they make varies from subject to subject as the
+thresholds' does.
+
 Its per-level parameters (:class:`ToneLevel`: ``"spindle_tsrt"``'s and the three above) are
 fitted by ``myoexo twin calibrate --reflex spindle_tone`` (:mod:`myoexo.studies.joint_fit`,
 the same joint fit as ``"spindle_tsrt"``'s, with the flexor tone of levels 2-3 as the value
@@ -51,6 +56,7 @@ from myoexo.spasticity.registry import (
     Memory,
     calibration_from_dict,
     check_parameter,
+    individual_factors,
     register_reflex,
 )
 from myoexo.spasticity.spindle import (
@@ -70,6 +76,7 @@ __all__ = [
     "SpindleToneConstants",
     "SpindleToneReflex",
     "ToneCalibration",
+    "ToneIndividual",
     "ToneLevel",
 ]
 
@@ -164,6 +171,14 @@ def _package_fit() -> ToneCalibration:
 SPINDLE_TONE_CALIBRATION = _package_fit()
 
 
+class ToneIndividual(NamedTuple):
+    """A subject's own factors on its level's tones (:meth:`SpindleToneReflex.draw_individual`;
+    ``None`` in their place: 1, the level's nominal tones)."""
+
+    flexor_tone_factor: float
+    background_tone_factor: float
+
+
 class SpindleToneConstants(NamedTuple):
     """A subject's constants of the ``"spindle_tone"`` reflex: ``"spindle_tsrt"``'s (with
     the phasic gains scaled), each muscle's tone amplitude (0 for the muscles flexion
@@ -204,20 +219,28 @@ class SpindleToneReflex(SpindleTSRTReflex):
             "SpindleToneReflex", "tone_width_deg", self.tone_width_deg, 1.0, 90.0, "deg"
         )
 
+    def draw_individual(self, rng: Any, rel_std: float) -> ToneIndividual:
+        """The subject's factors on its level's flexor and background tones,
+        ``max(0, 1 + rel_std z)`` each (:func:`~myoexo.spasticity.registry.individual_factors`:
+        *rng*'s own stream is not advanced)."""
+        flexor, background = individual_factors(rng, rel_std, 2)
+        return ToneIndividual(float(flexor), float(background))
+
     def subject_constants(
         self, level: int, subject: Any, individual: Any, control_period_s: float
     ) -> Any:
-        c = super().subject_constants(level, subject, individual, control_period_s)
+        c = super().subject_constants(level, subject, None, control_period_s)
         cal = self.calibration[level]
+        own = ToneIndividual(1.0, 1.0) if individual is None else individual
         tsrt = c._replace(s_v=c.s_v * cal.phasic_scale)
-        tone = np.where(c.side < 0.0, cal.flexor_tone, 0.0)
+        tone = np.where(c.side < 0.0, cal.flexor_tone * own.flexor_tone_factor, 0.0)
         offset = cal.phasic_threshold_offset_deg
         dynamic = None if offset == 0.0 else np.where(c.side < 0.0, offset, 0.0)
         return SpindleToneConstants(
             tsrt=tsrt,
             tone=tone,
             dynamic_offset_deg=dynamic,
-            background_tone=cal.background_tone,
+            background_tone=cal.background_tone * own.background_tone_factor,
         )
 
     def excite(
