@@ -35,10 +35,12 @@ def test_planning_leaves_the_env_untouched_and_is_deterministic():
 
 
 def test_oracle_extends_at_least_as_far_as_the_pid_at_level_3():
-    """At level 3 the PID saturates the motor; the oracle, planning on the true twin,
-    cannot do worse than hold the full torque either (1.5-s episodes)."""
+    """At level 3 the PID saturates the motor; the oracle, planning on the true twin with
+    its default horizon, cannot do worse than hold the full torque either (1.5-s episodes).
+    The tests' cheap planner (a 60 ms horizon) is too myopic for this: it backs off once
+    and ends 0.8 deg further than the PID on this subject."""
     env = make_env(3, episode_duration_s=1.5)
-    oracle = run_episode(env, OracleMPC.from_env(env, **FAST), seed=1)
+    oracle = run_episode(env, OracleMPC.from_env(env), seed=1)
     pid = run_episode(env, PID.from_env(env), seed=1)
     assert oracle.metrics.abs_final_error_deg <= pid.metrics.abs_final_error_deg + 0.5
     assert oracle.metrics.peak_exo_torque_nm == pytest.approx(100.0, abs=1.0)
