@@ -432,28 +432,31 @@ def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
     return trials
 
 
+def _constant(command: float) -> Callable[[np.ndarray], float]:
+    return lambda _obs: command
+
+
 def constant_command_rest(reflex: str | ReflexModel, root_seed: int) -> dict[int, list[float]]:
     """Level -> the knee's range (deg) over the last :data:`REST_WINDOW_S` of a
-    :data:`REST_DURATION_S` run at each constant command of :data:`REST_COMMANDS`, on the
+    :data:`REST_DURATION_S` episode at each constant command of :data:`REST_COMMANDS`, on the
     root's first subject of the level."""
+    from myoexo.control.policy import CallableController
+    from myoexo.control.rollout import rollout
     from myoexo.envs import make_env
 
     ranges: dict[int, list[float]] = {}
     for level in VALID_LEVELS:
+        env = make_env(level, reflex=reflex, episode_duration_s=REST_DURATION_S)
+        window = round(REST_WINDOW_S / float(env.unwrapped.dt))  # type: ignore[attr-defined]
+        seed = subject_seed(level, 0, root_seed)
         ranges[level] = []
-        for command in REST_COMMANDS:
-            env = make_env(level, reflex=reflex, episode_duration_s=REST_DURATION_S)
-            try:
-                env.reset(seed=subject_seed(level, 0, root_seed))
-                dt = float(env.unwrapped.dt)  # type: ignore[attr-defined]
-                steps, window = round(REST_DURATION_S / dt), round(REST_WINDOW_S / dt)
-                action = np.array([command], dtype=np.float32)
-                knee = np.empty(steps)
-                for i in range(steps):
-                    knee[i] = env.step(action)[4]["knee_angle_deg"]
-            finally:
-                env.close()
-            ranges[level].append(float(np.ptp(knee[-window:])))
+        try:
+            for command in REST_COMMANDS:
+                hold = CallableController(_constant(command), name=f"constant {command:g}")
+                knee = rollout(env, hold, seed, ("knee_angle_deg",)).signals["knee_angle_deg"]
+                ranges[level].append(float(np.ptp(knee[-window:])))
+        finally:
+            env.close()
     return ranges
 
 
