@@ -249,3 +249,43 @@ def test_each_subject_draws_its_own_tones_without_moving_the_resets_stream() -> 
     np.testing.assert_allclose(c.tone[flexors], 0.36)
     assert np.all(c.tone[~flexors] == 0.0)
     assert nominal.background_tone == 0.05 and c.background_tone == pytest.approx(0.025)
+
+
+def test_the_excitation_is_the_documented_formula(geometry) -> None:
+    """``excite`` (the expanded kernel) equals the module docstring's formula, term by term,
+    at random fibre lengths and speeds, with a tone, a dynamic-threshold offset and a
+    background tone."""
+    levels = {lv: ToneLevel.from_tsrt(c) for lv, c in SPINDLE_TSRT_CALIBRATION.levels.items()}
+    level = dataclasses.replace(
+        levels[2],
+        flexor_tone=0.3,
+        phasic_scale=0.7,
+        phasic_threshold_offset_deg=20.0,
+        background_tone=0.04,
+    )
+    reflex = SpindleToneReflex(
+        calibration=ToneCalibration(levels=MappingProxyType({**levels, 2: level})),
+        geometry=geometry,
+    )
+    c = reflex.subject_constants(2, LEVELS[2], ToneIndividual(1.1, 0.9), 0.01)
+    t = c.tsrt
+    rng = np.random.default_rng(3)
+    model, _ = build_model(TwinParams(scene=False))
+    for knee_deg in (5.0, 35.0, 70.0):
+        record = _record(model, knee_deg, rng.normal(0.0, 1.0, len(SPASTIC_MUSCLES)))
+        theta = record.fibre_length * t.deg_per_length + t.theta_offset_deg
+        vel = record.lengthening_speed * t.inv_slope
+        side = t.side
+        beyond = theta - t.threshold_deg
+        static = 1.0 + side * np.tanh(t.half_k * beyond)
+        stretch = np.maximum(side * vel, 0.0)
+        offset = np.where(side < 0.0, 20.0, 0.0)
+        dynamic = 1.0 + side * np.tanh(
+            t.half_k * (beyond - offset + side * t.mu_deg_s_rad * stretch)
+        )
+        gate = 0.5 * (1.0 + side * np.tanh(t.half_k_v * (vel - t.v_threshold_rad_s)))
+        tone = c.tone * 0.5 * (1.0 - np.tanh((theta - 45.0) / 30.0))
+        expected = 0.5 * (t.s_theta * static + t.s_v * gate * dynamic) + tone + 0.04 * 0.9
+        got, memory = reflex.excite(c, (), record)
+        assert memory == ()
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)

@@ -39,6 +39,28 @@ def test_step_is_raw_physics_with_the_stage_ctrl() -> None:
     np.testing.assert_array_equal(a.qvel, b.qvel)
 
 
+def test_the_force_knee_angle_is_the_knee_angle_the_last_timestep_started_from() -> None:
+    """The knee-angle sensor gives, after a control period, the knee angle of the state its
+    last physics timestep started from: what stepping ``frame_skip - 1`` timesteps and
+    reading ``qpos`` gives, bit for bit."""
+    model, _ = build_model(TwinParams(scene=False))
+    a, b = mujoco.MjData(model), mujoco.MjData(model)
+    for data in (a, b):
+        pose_twin(model, data, knee_angle_deg=70.0)
+    twin = Twin(model, SpasticityStage(3, subject_noise=False), 0.01, data=a)
+    knee = model.joint("knee_angle_r").qposadr[0]
+    for k in range(30):
+        ctrl = twin.apply_command(-0.3 - 0.2 * math.cos(k / 5.0)).copy()
+        assert not twin.advance() and not twin.braking
+        b.ctrl[:] = ctrl
+        mujoco.mj_step(model, b, twin.frame_skip - 1)
+        before_last = b.qpos[knee]
+        mujoco.mj_step(model, b)
+        assert twin.force_knee_angle_rad == before_last
+        assert twin.force_knee_angle_rad != a.qpos[knee]
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+
+
 def test_named_quantities_are_the_envs() -> None:
     env = make_env(2, seed=0)
     env.reset(seed=4)

@@ -513,8 +513,8 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
 
         Physics: :meth:`Twin.step <myoexo.envs.twin.Twin.step>`, exactly ``mj_step(model, data,
         frame_skip)`` with this step's ``ctrl``
-        (run as ``frame_skip - 1`` substeps and a last one, to note the knee angle in
-        between; the state trajectory is bit-identical to raw ``mj_step``; near the flexion
+        (the knee angle the last substep started from is read from the twin's knee-angle
+        sensor; the state trajectory is bit-identical to raw ``mj_step``; near the flexion
         stop the drive's end-stop protection may set the motor's command of each substep,
         ``info["drive_braking"]``), and no extra
         ``mj_forward``: the returned quantities are what the state and the last substep

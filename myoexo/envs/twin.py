@@ -39,7 +39,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from myoexo.model import EXO_ACTUATOR, EXO_JOINT, KNEE_JOINT, strap_knee_torque
+from myoexo.model import EXO_ACTUATOR, EXO_JOINT, KNEE_ANGLE_SENSOR, KNEE_JOINT, strap_knee_torque
 from myoexo.model.drive import stop_protection
 from myoexo.model.joint_torque import CoupledJointTorque
 from myoexo.spasticity import SensoryRecord, SpasticityStage
@@ -119,6 +119,16 @@ class Twin:
             (int(model.sensor(name).adr[0]), int(model.sensor(name).dim[0]))
             for name in ("thigh_cuff_force", "shank_cuff_force")
         )
+        # the knee angle each mj_step started from (-1: a model without the sensor, stepped
+        # to the period's last timestep and read there)
+        self._knee_sensor = next(
+            (
+                int(model.sensor_adr[i])
+                for i in range(model.nsensor)
+                if model.sensor(i).name == KNEE_ANGLE_SENSOR
+            ),
+            -1,
+        )
         self._ctrl = np.zeros(model.nu)
         #: The drive's end-stop protection (``None``: the model's drive has none).
         self.protection = stop_protection(model)
@@ -166,14 +176,18 @@ class Twin:
 
     def advance(self) -> bool:
         """Run one control period of physics with the ``ctrl`` in place (``frame_skip`` steps,
-        the last one alone, to note :attr:`force_knee_angle_rad`; one at a time, each with
-        the drive's command, when the drive protects its stops). Returns whether MuJoCo
+        :attr:`force_knee_angle_rad` read from the knee-angle sensor, which MuJoCo computes
+        at the start of each; one at a time, each with the drive's command, when the drive
+        protects its stops). Returns whether MuJoCo
         found the simulation unstable and reset its data (the time went back); the data then
         holds the reset state, forward-computed."""
         m, d = self.model, self.data
         t_expected_s = d.time + self.dt
         if self._protected:
             self._advance_protected()
+        elif self._knee_sensor >= 0:
+            mujoco.mj_step(m, d, self.frame_skip)
+            self.force_knee_angle_rad = d.sensordata.item(self._knee_sensor)
         else:
             if self.frame_skip > 1:
                 mujoco.mj_step(m, d, self.frame_skip - 1)

@@ -18,6 +18,7 @@ actuator force in Nm, positive = flexion); sensors ``exo_knee_pos``, ``exo_knee_
 from myoexo.model.build import (
     HOME_KEY,
     HOME_KNEE_ANGLE_DEG,
+    KNEE_ANGLE_SENSOR,
     build_leg_model,
     build_model,
     knee_axis_fit,
@@ -47,6 +48,7 @@ __all__ = [
     "HIP_JOINTS",
     "HOME_KEY",
     "HOME_KNEE_ANGLE_DEG",
+    "KNEE_ANGLE_SENSOR",
     "KNEE_JOINT",
     "STRAP_EQUALITY",
     "TWIN_VERSION",

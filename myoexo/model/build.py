@@ -34,6 +34,7 @@ from myoexo.model.scene import add_cameras, add_scene
 __all__ = [
     "HOME_KEY",
     "HOME_KNEE_ANGLE_DEG",
+    "KNEE_ANGLE_SENSOR",
     "build_leg_model",
     "build_model",
     "knee_axis_fit",
@@ -43,6 +44,10 @@ __all__ = [
 #: Keyframe of both models: seated, knee at :data:`HOME_KNEE_ANGLE_DEG`, at rest.
 HOME_KEY = "seated_90"
 HOME_KNEE_ANGLE_DEG = 90.0
+#: The twin's knee-angle sensor: after ``mj_step`` it holds the knee angle of the state the
+#: step started from, where the step's forces were computed (:class:`~myoexo.envs.twin.Twin`
+#: reads it instead of stopping before the control period's last timestep).
+KNEE_ANGLE_SENSOR = "knee_angle"
 
 
 def _check_bodies(spec: mujoco.MjSpec, params: TwinParams) -> None:
@@ -138,6 +143,12 @@ def build_model(params: TwinParams | None = None) -> tuple[mujoco.MjModel, mujoc
     spec.add_numeric(
         name=STOP_PROTECTION_NUMERIC,
         data=[params.exo_stop_braking_fraction, params.exo_stop_contact_speed_rad_s],
+    )
+    spec.add_sensor(
+        name=KNEE_ANGLE_SENSOR,
+        type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+        objtype=mujoco.mjtObj.mjOBJ_JOINT,
+        objname=KNEE_JOINT,
     )
     model = compile_quietly(spec)
     if model.actuator(model.nu - 1).name != EXO_ACTUATOR:

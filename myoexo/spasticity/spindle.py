@@ -87,11 +87,13 @@ __all__ = [
     "SpindleGeometry",
     "SpindleReflex",
     "SpindleTSRTConstants",
+    "SpindleTSRTKernel",
     "SpindleTSRTReflex",
     "spindle_constants",
     "spindle_geometry",
     "spindle_tsrt_constants",
-    "spindle_tsrt_terms",
+    "spindle_tsrt_excitation",
+    "spindle_tsrt_kernel",
 ]
 
 #: The package's fit of the ``"spindle"`` reflex: its geometry and its per-level parameters
@@ -363,25 +365,114 @@ def spindle_tsrt_constants(tsrt: TSRTConstants, geometry: SpindleGeometry) -> Sp
     )
 
 
-def spindle_tsrt_terms(
-    theta_deg: np.ndarray,
-    vel_rad_s: np.ndarray,
+class SpindleTSRTKernel(NamedTuple):
+    """A subject's ``"spindle_tsrt"``-family excitation as a few array operations per step
+    (:func:`spindle_tsrt_kernel`; evaluated by :func:`spindle_tsrt_excitation`).
+
+    With ``x = [L, s, 1]`` (fibre lengths, lengthening speeds, one), ``y = weights @ x``
+    holds five rows of ``n`` entries: the static, gate, length-tone and dynamic arguments of
+    the tanh terms and each muscle's signed speed ``side v``. The stretch speed ``max(0,
+    side v)`` times ``speed_gain`` joins the dynamic argument; with ``t = tanh`` of the first
+    four rows, the excitation is ``base + mix @ t + phasic * t_gate * t_dynamic``.
+    """
+
+    weights: np.ndarray
+    speed_gain: np.ndarray
+    mix: np.ndarray
+    base: np.ndarray
+    phasic: np.ndarray
+    n_muscles: int
+
+
+#: The constant input of a kernel's affine map (``x = [L, s, 1]``).
+_ONE = np.ones(1)
+
+
+def spindle_tsrt_kernel(
     c: SpindleTSRTConstants,
     dynamic_offset_deg: np.ndarray | None = None,
+    length_tone: np.ndarray | None = None,
+    tone_center_deg: float = 45.0,
+    tone_width_deg: float = 30.0,
+    background_tone: float = 0.0,
+) -> SpindleTSRTKernel:
+    """The kernel of each muscle's excitation at its equivalent seated knee angle
+    ``theta_i = L_i deg_per_length_i + theta_offset_deg_i`` and velocity ``v_i = s_i
+    inv_slope_i`` (module docstring)::
+
+        e_i = 0.5 [ s_theta (1 + side tanh(half_k beyond))
+                    + s_v gate dynamic ]
+              + length_tone 0.5 (1 - tanh((theta_i - tone_center_deg) / tone_width_deg))
+              + background_tone
+        beyond  = theta_i - threshold_deg
+        dynamic = 1 + side tanh(half_k (beyond - dynamic_offset_deg
+                                        + side mu_deg_s_rad max(0, side v_i)))
+        gate    = 0.5 (1 + side tanh(half_k_v (v_i - v_threshold_rad_s)))
+
+    expanded (``side**2 = 1``) into the affine map, the tanh and the one product of
+    :class:`SpindleTSRTKernel`. *dynamic_offset_deg*: each muscle's dynamic threshold apart
+    from its static one (``None``: 0); *length_tone*: each muscle's tone amplitude (``None``:
+    0); *background_tone*: a constant excitation of every muscle."""
+    a = np.asarray(c.deg_per_length, dtype=np.float64)
+    n = len(a)
+    b = np.asarray(c.theta_offset_deg, dtype=np.float64)
+    inv_slope = np.asarray(c.inv_slope, dtype=np.float64)
+    side = np.asarray(c.side, dtype=np.float64)
+    hk, hkv = float(c.half_k), float(c.half_k_v)
+    beyond_offset = b - c.threshold_deg
+    offset = np.zeros(n) if dynamic_offset_deg is None else np.asarray(dynamic_offset_deg)
+    tone = np.zeros(n) if length_tone is None else np.asarray(length_tone, dtype=np.float64)
+    s_theta = np.asarray(c.s_theta, dtype=np.float64)
+    s_v = np.asarray(c.s_v, dtype=np.float64)
+    # rows of y = weights @ [L, s, 1]: (length coefficient, speed coefficient, constant)
+    rows: tuple[tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float], ...] = (
+        (hk * a, 0.0, hk * beyond_offset),  # static argument
+        (0.0, hkv * inv_slope, -hkv * c.v_threshold_rad_s),  # gate argument
+        (a / tone_width_deg, 0.0, (b - tone_center_deg) / tone_width_deg),  # tone argument
+        (hk * a, 0.0, hk * (beyond_offset - offset)),  # dynamic argument, before the speed
+        (0.0, side * inv_slope, 0.0),  # side v: the stretch speed before its max(0, .)
+    )
+    weights = np.zeros((5 * n, 2 * n + 1))
+    diagonal = np.arange(n)
+    for r, (length, speed, constant) in enumerate(rows):
+        weights[r * n + diagonal, diagonal] = length
+        weights[r * n + diagonal, n + diagonal] = speed
+        weights[r * n : (r + 1) * n, 2 * n] = constant
+    mix = np.zeros((n, 4 * n))
+    for r, coefficient in enumerate(
+        (0.5 * s_theta * side, 0.25 * s_v * side, -0.5 * tone, 0.25 * s_v * side)
+    ):
+        mix[diagonal, r * n + diagonal] = coefficient
+    return SpindleTSRTKernel(
+        weights=weights,
+        speed_gain=hk * side * np.asarray(c.mu_deg_s_rad, dtype=np.float64),
+        mix=mix,
+        base=0.5 * s_theta + 0.25 * s_v + 0.5 * tone + float(background_tone),
+        phasic=0.25 * s_v,
+        n_muscles=n,
+    )
+
+
+def spindle_tsrt_excitation(
+    kernel: SpindleTSRTKernel, fibre_length: np.ndarray, lengthening_speed: np.ndarray
 ) -> np.ndarray:
-    """Each muscle's ``"spindle_tsrt"`` excitation at its equivalent seated knee angle
-    *theta_deg* and velocity *vel_rad_s* (module docstring); with *dynamic_offset_deg* the
-    dynamic threshold of each muscle sits that far from its static one (deg, in the static
-    threshold's own sense), instead of at it."""
-    side = c.side
-    stretch_speed = np.maximum(side * vel_rad_s, 0.0)
-    beyond = theta_deg - c.threshold_deg
-    static = 1.0 + side * np.tanh(c.half_k * beyond)
-    dyn_beyond = beyond if dynamic_offset_deg is None else beyond - dynamic_offset_deg
-    dynamic = 1.0 + side * np.tanh(c.half_k * (dyn_beyond + side * c.mu_deg_s_rad * stretch_speed))
-    gate = 0.5 * (1.0 + side * np.tanh(c.half_k_v * (vel_rad_s - c.v_threshold_rad_s)))
-    result: np.ndarray = 0.5 * (c.s_theta * static + c.s_v * gate * dynamic)
-    return result
+    """Each muscle's excitation (:func:`spindle_tsrt_kernel`) at its normalised fibre length
+    and lengthening speed: two small matrix products, one tanh, a handful of array
+    operations."""
+    n = kernel.n_muscles
+    y = kernel.weights @ np.concatenate((fibre_length, lengthening_speed, _ONE))
+    stretch = y[4 * n :]
+    np.maximum(stretch, 0.0, out=stretch)
+    stretch *= kernel.speed_gain
+    dynamic = y[3 * n : 4 * n]
+    dynamic += stretch
+    t = np.tanh(y[: 4 * n])
+    e: np.ndarray = kernel.mix @ t
+    e += kernel.base
+    product = t[n : 2 * n] * t[3 * n :]
+    product *= kernel.phasic
+    e += product
+    return e
 
 
 def _package_tsrt_fit() -> TSRTCalibration:
@@ -415,18 +506,19 @@ class SpindleTSRTReflex(TSRTReflex):
 
     def subject_constants(
         self, level: int, subject: Any, individual: Any, control_period_s: float
-    ) -> SpindleTSRTConstants:
+    ) -> Any:
+        return spindle_tsrt_kernel(self.muscle_constants(level, subject))
+
+    def muscle_constants(self, level: int, subject: Any) -> SpindleTSRTConstants:
+        """Each muscle's :class:`SpindleTSRTConstants` of a subject at *level*."""
         geometry = self.geometry or _measured_geometry()
         return spindle_tsrt_constants(tsrt_constants(subject, self.calibration[level]), geometry)
 
     def excite(
         self, constants: Any, memory: Memory, record: SensoryRecord
     ) -> tuple[Sequence[float], Memory]:
-        c: SpindleTSRTConstants = constants
-        theta = record.fibre_length * c.deg_per_length + c.theta_offset_deg
-        vel = record.lengthening_speed * c.inv_slope
-        e: Sequence[float] = spindle_tsrt_terms(theta, vel, c)  # type: ignore[assignment]
-        return e, memory
+        e = spindle_tsrt_excitation(constants, record.fibre_length, record.lengthening_speed)
+        return e, memory  # type: ignore[return-value]
 
     # on the muscles' own state only: the group step and its torch twin refuse
     step = ReflexModel.step

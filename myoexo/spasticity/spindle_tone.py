@@ -62,8 +62,10 @@ from myoexo.spasticity.registry import (
 from myoexo.spasticity.spindle import (
     SPINDLE_TSRT_CALIBRATION,
     SpindleTSRTConstants,
+    SpindleTSRTKernel,
     SpindleTSRTReflex,
-    spindle_tsrt_terms,
+    spindle_tsrt_excitation,
+    spindle_tsrt_kernel,
 )
 from myoexo.spasticity.tsrt import TSRTCalibration, TSRTLevel
 
@@ -182,13 +184,15 @@ class ToneIndividual(NamedTuple):
 class SpindleToneConstants(NamedTuple):
     """A subject's constants of the ``"spindle_tone"`` reflex: ``"spindle_tsrt"``'s (with
     the phasic gains scaled), each muscle's tone amplitude (0 for the muscles flexion
-    lengthens), the flexors' dynamic-threshold offset (``None``: 0) and the background
-    tone."""
+    lengthens), the flexors' dynamic-threshold offset (``None``: 0), the background tone
+    and the excitation's kernel made of them all
+    (:func:`~myoexo.spasticity.spindle.spindle_tsrt_kernel`)."""
 
     tsrt: SpindleTSRTConstants
     tone: np.ndarray
     dynamic_offset_deg: np.ndarray | None
-    background_tone: float = 0.0
+    background_tone: float
+    kernel: SpindleTSRTKernel
 
 
 @dataclass(frozen=True)
@@ -228,34 +232,25 @@ class SpindleToneReflex(SpindleTSRTReflex):
 
     def subject_constants(
         self, level: int, subject: Any, individual: Any, control_period_s: float
-    ) -> Any:
-        c = super().subject_constants(level, subject, None, control_period_s)
+    ) -> SpindleToneConstants:
+        c = self.muscle_constants(level, subject)
         cal = self.calibration[level]
         own = ToneIndividual(1.0, 1.0) if individual is None else individual
         tsrt = c._replace(s_v=c.s_v * cal.phasic_scale)
         tone = np.where(c.side < 0.0, cal.flexor_tone * own.flexor_tone_factor, 0.0)
         offset = cal.phasic_threshold_offset_deg
         dynamic = None if offset == 0.0 else np.where(c.side < 0.0, offset, 0.0)
-        return SpindleToneConstants(
-            tsrt=tsrt,
-            tone=tone,
-            dynamic_offset_deg=dynamic,
-            background_tone=cal.background_tone * own.background_tone_factor,
+        background = cal.background_tone * own.background_tone_factor
+        kernel = spindle_tsrt_kernel(
+            tsrt, dynamic, tone, self.tone_center_deg, self.tone_width_deg, background
         )
+        return SpindleToneConstants(tsrt, tone, dynamic, background, kernel)
 
     def excite(
         self, constants: Any, memory: Memory, record: SensoryRecord
     ) -> tuple[Sequence[float], Memory]:
-        c: SpindleToneConstants = constants
-        t = c.tsrt
-        theta = record.fibre_length * t.deg_per_length + t.theta_offset_deg
-        vel = record.lengthening_speed * t.inv_slope
-        e = spindle_tsrt_terms(theta, vel, t, c.dynamic_offset_deg)
-        e += c.tone * 0.5 * (1.0 - np.tanh((theta - self.tone_center_deg) / self.tone_width_deg))
-        if c.background_tone:
-            e += c.background_tone
-        out: Sequence[float] = e  # type: ignore[assignment]
-        return out, memory
+        e = spindle_tsrt_excitation(constants.kernel, record.fibre_length, record.lengthening_speed)
+        return e, memory  # type: ignore[return-value]
 
 
 register_reflex("spindle_tone", SpindleToneReflex())
