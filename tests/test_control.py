@@ -418,3 +418,18 @@ def test_only_the_controllers_on_the_knee_declare_the_knee_angle_sensor(spec, re
 
     controller = build_controller(parse_controller_spec(spec), _Env())
     assert declared_sensors(controller) == ({KNEE_ANGLE_SENSOR} if reads_knee else frozenset())
+
+
+def test_constant_controller_holds_its_command_and_refuses_one_out_of_range() -> None:
+    from myoexo.control import ConstantController
+
+    hold = ConstantController(-0.4)
+    hold.reset(3)
+    first = hold.act(np.zeros(5))
+    first[0] = 0.9  # a fresh array each step: changing one leaves the command alone
+    np.testing.assert_array_equal(hold.act(np.ones(5)), np.array([-0.4], dtype=np.float32))
+    assert hold.name == "constant -0.4"
+    with pytest.raises(ValueError, match=r"command = 1.5 is outside \[-1, 1\]"):
+        ConstantController(1.5)
+    with pytest.raises(ValueError, match="nan"):
+        ConstantController(float("nan"))

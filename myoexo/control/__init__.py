@@ -21,7 +21,12 @@ action``): it sees the observation and the record of its sensors (:class:`Measur
 
 from myoexo.control.impedance import ImpedanceConfig, ImpedanceController
 from myoexo.control.pid import ANTI_WINDUP_SCHEMES, PID, PIDConfig, PIDGains
-from myoexo.control.policy import CallableController, SB3Controller, as_controller
+from myoexo.control.policy import (
+    CallableController,
+    ConstantController,
+    SB3Controller,
+    as_controller,
+)
 from myoexo.control.protocol import Controller, declared_sensors
 from myoexo.control.specs import ControllerSpec, build_controller, parse_controller_spec
 from myoexo.envs.sensors import (
@@ -36,6 +41,7 @@ __all__ = [
     "KNEE_ANGLE_SENSOR",
     "PID",
     "CallableController",
+    "ConstantController",
     "Controller",
     "ControllerSpec",
     "ImpedanceConfig",

@@ -4,6 +4,8 @@
   ``predict(obs, deterministic=...) -> (action, state)``), e.g. ``SAC.load("model.zip")``.
 * :class:`CallableController`: any ``callable(obs) -> action`` (a torch module wrapper, an
   ONNX session wrapper, a hand-written law).
+* :class:`ConstantController`: one command held for the whole episode (the rest and
+  strap-lag measurements).
 * :func:`as_controller`: picks the right one.
 * :class:`GentleController`: a policy trained over the gentleness range (the env's
   ``gentleness=``) at one weight, which it appends to the observation.
@@ -58,6 +60,37 @@ class CallableController:
         """``fn(obs)``, clipped to [-1, 1]."""
         del measurements
         return _to_action(self.fn(obs), self.name)
+
+
+class ConstantController:
+    """Hold one exo command for the whole episode.
+
+    Args:
+        command: The normalized command, in [-1, 1].
+
+    Raises:
+        ValueError: If *command* is not a finite number in [-1, 1].
+    """
+
+    def __init__(self, command: float) -> None:
+        value = float(command)
+        if not (ACTION_LOW <= value <= ACTION_HIGH):
+            raise ValueError(
+                f"ConstantController command = {command!r} is outside [{ACTION_LOW:g}, "
+                f"{ACTION_HIGH:g}]"
+            )
+        self.command = value
+        self.name = f"constant {value:g}"
+        self._action = np.array([value], dtype=np.float32)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Stateless: nothing to clear."""
+        del seed
+
+    def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
+        """The command (a fresh array)."""
+        del obs, measurements
+        return self._action.copy()
 
 
 class SB3Controller:

@@ -118,31 +118,36 @@ class StrapLagFit:
 
 def fit_strap_lag(settings: StrapLagSettings, log: Any = None) -> StrapLagFit:
     """Hold every subject at every command and fit the lag (module docstring)."""
+    from myoexo.control.policy import ConstantController
+    from myoexo.control.rollout import rollout
     from myoexo.envs import make_env
     from myoexo.evaluation.config import subject_seed
 
     commands, lags = [], []
+    channels = ("knee_vel_rad_s", "misalignment_deg")
     for level in settings.levels:
         env = make_env(level)
-        base: Any = env.unwrapped  # a MyoExoKneeEnv
-        dt = float(base.dt)
+        dt = float(env.unwrapped.dt)  # type: ignore[attr-defined]
         steps = round(settings.hold_s / dt)
         window = round(settings.rest_window_s / dt)
+        episode = int(env.unwrapped.episode_steps)  # type: ignore[attr-defined]
         try:
             for index in range(settings.subjects):
                 seed = subject_seed(level, index, settings.root_seed)
                 for command in settings.commands:
-                    env.reset(seed=seed)
-                    action = np.array([command], dtype=np.float32)
-                    for step in range(steps):
-                        _, _, _, truncated, info = env.step(action)
-                        if truncated:
-                            break
-                        if step >= steps - window and (
-                            abs(info["knee_vel_rad_s"]) < settings.rest_speed_rad_s
-                        ):
-                            commands.append(command)
-                            lags.append(info["misalignment_deg"])
+                    hold = rollout(
+                        env, ConstantController(command), seed, channels, until_s=steps * dt
+                    )
+                    # the window's steps (signals: the reset, then one sample per step); a
+                    # step that truncated the episode does not count
+                    ended = hold.unstable or hold.n_steps < steps or hold.n_steps >= episode
+                    last = hold.n_steps - 1 if ended else hold.n_steps
+                    first = steps - window + 1
+                    speed = hold.signals["knee_vel_rad_s"][first : last + 1]
+                    lag = hold.signals["misalignment_deg"][first : last + 1]
+                    at_rest = np.abs(speed) < settings.rest_speed_rad_s
+                    commands.extend([command] * int(at_rest.sum()))
+                    lags.extend(lag[at_rest].tolist())
             if log is not None:
                 log(f"level {level}: {len(lags)} samples at rest so far")
         finally:

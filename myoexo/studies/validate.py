@@ -432,15 +432,11 @@ def weak_control(reflex: str | ReflexModel) -> dict[int, list[Any]]:
     return trials
 
 
-def _constant(command: float) -> Callable[[np.ndarray], float]:
-    return lambda _obs: command
-
-
 def constant_command_rest(reflex: str | ReflexModel, root_seed: int) -> dict[int, list[float]]:
     """Level -> the knee's range (deg) over the last :data:`REST_WINDOW_S` of a
     :data:`REST_DURATION_S` episode at each constant command of :data:`REST_COMMANDS`, on the
     root's first subject of the level."""
-    from myoexo.control.policy import CallableController
+    from myoexo.control.policy import ConstantController
     from myoexo.control.rollout import rollout
     from myoexo.envs import make_env
 
@@ -452,7 +448,7 @@ def constant_command_rest(reflex: str | ReflexModel, root_seed: int) -> dict[int
         ranges[level] = []
         try:
             for command in REST_COMMANDS:
-                hold = CallableController(_constant(command), name=f"constant {command:g}")
+                hold = ConstantController(command)
                 knee = rollout(env, hold, seed, ("knee_angle_deg",)).signals["knee_angle_deg"]
                 ranges[level].append(float(np.ptp(knee[-window:])))
         finally:
