@@ -592,7 +592,7 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
     from myoexo.control.specs import build_controller, parse_controller_spec
     from myoexo.envs import make_env
     from myoexo.envs.options import TwinOptions
-    from myoexo.studies.distill import DistillConfig, Episodes, distill
+    from myoexo.studies.distill import DistillConfig, Episodes, distill, load_teacher
 
     short = TwinOptions().replace(episode_duration_s=0.2)
     tiny = dict(rounds=2, episodes_per_round=3, levels=(1,), n_frames=3, stride=1, hidden=(8,))
@@ -606,7 +606,9 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
     assert len(set(per_episode.tolist())) == per_episode.size  # one draw per episode
     assert np.all((per_episode >= 0.0) & (per_episode <= 1.0))
     student = load_student(tmp_path / "run" / "student")
-    assert student.gentleness_input and student.metadata["default_gentleness"] == 0.0
+    teacher_weight = load_teacher("residual").metadata["default_gentleness"]
+    assert student.gentleness_input
+    assert student.metadata["default_gentleness"] == teacher_weight
     env = make_env(1, obs_preset="exo")
     try:
         at_default = build_controller(
@@ -617,7 +619,8 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
         )
     finally:
         env.close()
-    assert isinstance(at_default, GentleController) and at_default.gentleness == 0.0
+    assert isinstance(at_default, GentleController)
+    assert at_default.gentleness == teacher_weight
     assert isinstance(at_half, GentleController) and at_half.gentleness == 0.5
 
 

@@ -17,7 +17,9 @@ from myoexo.control.residual import (
 )
 from myoexo.control.specs import build_controller, parse_controller_spec, with_residual_base
 from myoexo.envs import make_env
+from myoexo.policies import load_policy
 from myoexo.runtime.fields import FieldError
+from myoexo.spasticity import DEFAULT_REFLEX
 from myoexo.training import get_preset
 
 BASE = "pid:reference=minjerk,ramp_s=0.6"
@@ -209,17 +211,19 @@ def test_the_shipped_residual_policy_is_refused_without_the_env_it_runs_on():
 
 def test_the_shipped_residual_policy_records_how_it_was_chosen():
     from myoexo.model import TWIN_VERSION
-    from myoexo.policies import load_policy
 
     actor = load_policy("residual")
     meta = actor.metadata
     assert meta["residual"] == {"base": "pid:reference=minjerk,ramp_s=0.6", "scale": 0.5}
     assert meta["ship_seed"] in meta["training_seeds"] and len(meta["training_seeds"]) == 5
     assert "closest_seed" in meta["ship_rule"]
-    assert meta["default_gentleness"] == 0.0
-    # trained on twin 3; twin 4 only adds the drive's end-stop protection, which no nominal
-    # episode of it reaches (tests/test_drive.py), and an evaluation says so with a warning
-    assert meta["twin_version"] == 3 < TWIN_VERSION
+    # the default weight is the gentleness study's, recorded with it (selection root)
+    record = meta["gentleness_record"]
+    assert meta["default_gentleness"] == record["default_gentleness"]
+    assert record["root_seed"] == 1 and record["subjects"] > 0
+    # trained on today's default twin
+    assert meta["twin_version"] == TWIN_VERSION
+    assert meta["twin"]["reflex"] == DEFAULT_REFLEX
     assert meta["selection_root_seed"] == 1
     assert actor.check_reference() < 1e-5
 
@@ -233,7 +237,8 @@ def test_the_shipped_residual_policy_runs_on_its_base_at_its_weight():
         gentle = myoexo.load_policy("residual@0.5", env)
     finally:
         env.close()
-    assert isinstance(controller, GentleController) and controller.gentleness == 0.0
+    default = load_policy("residual").metadata["default_gentleness"]
+    assert isinstance(controller, GentleController) and controller.gentleness == default
     assert isinstance(gentle, GentleController) and gentle.gentleness == 0.5
     inner = controller.controller
     assert isinstance(inner, ResidualController) and inner.scale == 0.5

@@ -65,6 +65,26 @@ def test_the_tail_names_the_worst_subject_and_counts_against_the_pids_worst():
     ]
 
 
+def test_a_subject_at_the_pids_own_worst_error_is_not_beyond_it():
+    """Where the motor holds every controller at the PID's worst subject's angle, another
+    controller ending there to within the tables' 0.01 deg is at the bound; 0.02 deg further
+    is beyond."""
+    worst = 20.606952
+    table = _table(
+        [
+            ("pid", 2, 0, worst, False),
+            ("pid", 2, 1, 3.0, False),
+            ("rl", 2, 0, worst + 0.0011, False),  # the same angle, to 0.01 deg
+            ("rl", 2, 1, 3.0, False),
+            ("far", 2, 0, worst + 0.02, False),
+            ("far", 2, 1, 3.0, False),
+        ]
+    )
+    risk = tail_risk(table).set_index(["controller", "level"])
+    assert risk.loc[("rl", 2)].catastrophic == 0 and risk.loc[("rl", 2)].failures == 1
+    assert risk.loc[("far", 2)].catastrophic == 1
+
+
 def test_verdicts_follow_the_whole_interval():
     assert verdict(11.0, 14.0, 10.6) == "met"
     assert verdict(5.0, 9.0, 10.6) == "missed"

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -191,9 +192,14 @@ def test_a_policy_of_an_earlier_twin_is_evaluated_with_a_warning():
         resolve_controllers(["sac"], log=lambda _: None, twin=TwinOptions())
 
 
-def test_a_policy_of_twin_3_is_evaluated_on_twin_4_with_a_warning():
+def test_a_policy_of_another_twin_is_evaluated_with_a_warning():
     from myoexo.envs.options import TwinOptions
     from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
 
-    with pytest.warns(TwinMismatchWarning, match="trained on twin version 3"):
+    # student_smooth: distilled on twin 4 with the "spindle" reflex
+    with pytest.warns(TwinMismatchWarning, match=r"trained on \[reflex=spindle\]"):
+        resolve_controllers(["student_smooth"], log=lambda _: None, twin=TwinOptions())
+    # the shipped residual was trained on today's default twin: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TwinMismatchWarning)
         resolve_controllers(["residual"], log=lambda _: None, twin=TwinOptions())

@@ -138,8 +138,7 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         ("student_exo_3seeds",),
     ),
     Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
-    Block("myoexo/policies/MODEL_CARD_residual.md", "eval_1000_twin3", ("res_sel",)),
-    Block("myoexo/policies/MODEL_CARD_residual.md", "eval_200_twin3_perturbed", ("res_sel",)),
+    Block("myoexo/policies/MODEL_CARD_residual.md", "eval_1000_tone", ("res_tone_5seeds",)),
     Block(
         "myoexo/policies/MODEL_CARD_student_residual.md",
         "eval_1000_twin3",
