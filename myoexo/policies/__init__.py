@@ -5,8 +5,8 @@ name                    files (``<stem>.npz/json``)  observation
 ======================  ===========================  ===========================================
 ``residual``            ``residual_knee_exo``        ``obs_preset="full"`` and a gentleness
                                                      weight: a correction on the minimum-jerk
-                                                     PID, trained on twin version 3 (the
-                                                     teacher of ``student_smooth``); it runs
+                                                     PID, trained on today's default twin
+                                                     (version 4, ``spindle_tone``); it runs
                                                      on its base, built on an env
                                                      (``myoexo.load_policy("residual", env)``);
                                                      ``MODEL_CARD_residual.md``
@@ -23,9 +23,10 @@ name                    files (``<stem>.npz/json``)  observation
                                                      ``MODEL_CARD_student_exo.md``
 ``student_smooth``      ``student_smooth``           ``obs_preset="exo"`` and a gentleness
                                                      weight: the same sensors and memory,
-                                                     distilled from ``residual`` on the current
-                                                     twin (version 4) with a temporal smoothness
-                                                     term, the weight its last input;
+                                                     distilled from the ``residual`` of twin
+                                                     version 3 on twin version 4 (``spindle``)
+                                                     with a temporal smoothness term, the
+                                                     weight its last input;
                                                      ``MODEL_CARD_student_smooth.md``
 ======================  ===========================  ===========================================
 
