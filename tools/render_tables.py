@@ -139,7 +139,9 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     ),
     Block("myoexo/policies/MODEL_CARD_sac_exo.md", "eval_100_perturbed", ("sac_exo",)),
     Block("myoexo/policies/MODEL_CARD_residual.md", "eval_1000_tone", ("res_tone_5seeds",)),
-    Block("myoexo/policies/MODEL_CARD_residual.md", "eval_200_tone_perturbed", ("res_tone_5seeds",)),
+    Block(
+        "myoexo/policies/MODEL_CARD_residual.md", "eval_200_tone_perturbed", ("res_tone_5seeds",)
+    ),
     Block(
         "myoexo/policies/MODEL_CARD_student_residual.md",
         "eval_1000_twin3",
