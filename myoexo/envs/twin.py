@@ -119,16 +119,8 @@ class Twin:
             (int(model.sensor(name).adr[0]), int(model.sensor(name).dim[0]))
             for name in ("thigh_cuff_force", "shank_cuff_force")
         )
-        # the knee angle each mj_step started from (-1: a model without the sensor, stepped
-        # to the period's last timestep and read there)
-        self._knee_sensor = next(
-            (
-                int(model.sensor_adr[i])
-                for i in range(model.nsensor)
-                if model.sensor(i).name == KNEE_ANGLE_SENSOR
-            ),
-            -1,
-        )
+        # the knee angle each mj_step started from
+        self._knee_sensor = int(model.sensor(KNEE_ANGLE_SENSOR).adr[0])
         self._ctrl = np.zeros(model.nu)
         #: The drive's end-stop protection (``None``: the model's drive has none).
         self.protection = stop_protection(model)
@@ -185,14 +177,9 @@ class Twin:
         t_expected_s = d.time + self.dt
         if self._protected:
             self._advance_protected()
-        elif self._knee_sensor >= 0:
+        else:
             mujoco.mj_step(m, d, self.frame_skip)
             self.force_knee_angle_rad = d.sensordata.item(self._knee_sensor)
-        else:
-            if self.frame_skip > 1:
-                mujoco.mj_step(m, d, self.frame_skip - 1)
-            self.force_knee_angle_rad = d.qpos.item(self._knee_q)
-            mujoco.mj_step(m, d)
         unstable = d.time < t_expected_s - self._half_timestep_s
         if unstable:
             mujoco.mj_forward(m, d)

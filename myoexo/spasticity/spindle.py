@@ -83,6 +83,7 @@ __all__ = [
     "SPINDLE_FIT",
     "SPINDLE_TSRT_CALIBRATION",
     "SPINDLE_TSRT_FIT",
+    "LengthTone",
     "SpindleConstants",
     "SpindleGeometry",
     "SpindleReflex",
@@ -384,6 +385,15 @@ class SpindleTSRTKernel(NamedTuple):
     n_muscles: int
 
 
+class LengthTone(NamedTuple):
+    """A tone on each muscle's own length (:func:`spindle_tsrt_kernel`): its amplitude per
+    muscle, and the equivalent seated knee angle (deg) and half-width (deg) of its sigmoid."""
+
+    amplitude: np.ndarray
+    center_deg: float
+    width_deg: float
+
+
 #: The constant input of a kernel's affine map (``x = [L, s, 1]``).
 _ONE = np.ones(1)
 
@@ -391,9 +401,7 @@ _ONE = np.ones(1)
 def spindle_tsrt_kernel(
     c: SpindleTSRTConstants,
     dynamic_offset_deg: np.ndarray | None = None,
-    length_tone: np.ndarray | None = None,
-    tone_center_deg: float = 45.0,
-    tone_width_deg: float = 30.0,
+    length_tone: LengthTone | None = None,
     background_tone: float = 0.0,
 ) -> SpindleTSRTKernel:
     """The kernel of each muscle's excitation at its equivalent seated knee angle
@@ -402,7 +410,7 @@ def spindle_tsrt_kernel(
 
         e_i = 0.5 [ s_theta (1 + side tanh(half_k beyond))
                     + s_v gate dynamic ]
-              + length_tone 0.5 (1 - tanh((theta_i - tone_center_deg) / tone_width_deg))
+              + amplitude_i 0.5 (1 - tanh((theta_i - center_deg) / width_deg))
               + background_tone
         beyond  = theta_i - threshold_deg
         dynamic = 1 + side tanh(half_k (beyond - dynamic_offset_deg
@@ -411,8 +419,8 @@ def spindle_tsrt_kernel(
 
     expanded (``side**2 = 1``) into the affine map, the tanh and the one product of
     :class:`SpindleTSRTKernel`. *dynamic_offset_deg*: each muscle's dynamic threshold apart
-    from its static one (``None``: 0); *length_tone*: each muscle's tone amplitude (``None``:
-    0); *background_tone*: a constant excitation of every muscle."""
+    from its static one (``None``: 0); *length_tone*: the tone on each muscle's length
+    (``None``: none); *background_tone*: a constant excitation of every muscle."""
     a = np.asarray(c.deg_per_length, dtype=np.float64)
     n = len(a)
     b = np.asarray(c.theta_offset_deg, dtype=np.float64)
@@ -421,14 +429,21 @@ def spindle_tsrt_kernel(
     hk, hkv = float(c.half_k), float(c.half_k_v)
     beyond_offset = b - c.threshold_deg
     offset = np.zeros(n) if dynamic_offset_deg is None else np.asarray(dynamic_offset_deg)
-    tone = np.zeros(n) if length_tone is None else np.asarray(length_tone, dtype=np.float64)
+    Row = tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float]
+    tone_row: Row
+    if length_tone is None:  # no tone: its tanh argument and weight are 0
+        tone, tone_row = np.zeros(n), (0.0, 0.0, 0.0)
+    else:
+        tone = np.asarray(length_tone.amplitude, dtype=np.float64)
+        width = length_tone.width_deg
+        tone_row = (a / width, 0.0, (b - length_tone.center_deg) / width)
     s_theta = np.asarray(c.s_theta, dtype=np.float64)
     s_v = np.asarray(c.s_v, dtype=np.float64)
     # rows of y = weights @ [L, s, 1]: (length coefficient, speed coefficient, constant)
-    rows: tuple[tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float], ...] = (
+    rows: tuple[Row, ...] = (
         (hk * a, 0.0, hk * beyond_offset),  # static argument
         (0.0, hkv * inv_slope, -hkv * c.v_threshold_rad_s),  # gate argument
-        (a / tone_width_deg, 0.0, (b - tone_center_deg) / tone_width_deg),  # tone argument
+        tone_row,  # tone argument
         (hk * a, 0.0, hk * (beyond_offset - offset)),  # dynamic argument, before the speed
         (0.0, side * inv_slope, 0.0),  # side v: the stretch speed before its max(0, .)
     )

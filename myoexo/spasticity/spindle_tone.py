@@ -61,6 +61,7 @@ from myoexo.spasticity.registry import (
 )
 from myoexo.spasticity.spindle import (
     SPINDLE_TSRT_CALIBRATION,
+    LengthTone,
     SpindleTSRTConstants,
     SpindleTSRTKernel,
     SpindleTSRTReflex,
@@ -241,9 +242,8 @@ class SpindleToneReflex(SpindleTSRTReflex):
         offset = cal.phasic_threshold_offset_deg
         dynamic = None if offset == 0.0 else np.where(c.side < 0.0, offset, 0.0)
         background = cal.background_tone * own.background_tone_factor
-        kernel = spindle_tsrt_kernel(
-            tsrt, dynamic, tone, self.tone_center_deg, self.tone_width_deg, background
-        )
+        shape = LengthTone(tone, self.tone_center_deg, self.tone_width_deg)
+        kernel = spindle_tsrt_kernel(tsrt, dynamic, shape, background)
         return SpindleToneConstants(tsrt, tone, dynamic, background, kernel)
 
     def excite(
