@@ -498,6 +498,47 @@ def test_ship_students_picks_a_typical_seed_and_groups_the_copies(tmp_path):
     assert {parse_controller_spec(str(p)).seed_group for p in copies} == {"student_3seeds"}
 
 
+def test_ship_students_takes_the_default_weight_of_a_gentleness_record(tmp_path):
+    """`--ship --gentleness-record DIR`: every student written (the shipped one and the seed
+    copies) runs at the record's default weight, not its teacher's; students without a
+    gentleness input refuse a record."""
+    import json
+
+    from myoexo.control.specs import parse_controller_spec, spec_gentleness
+    from myoexo.envs.options import TwinOptions
+    from myoexo.studies.distill import DistillConfig, distill, ship_students
+
+    def tiny(seed: int, gentle: bool) -> Path:
+        cfg = DistillConfig(
+            rounds=1, episodes_per_round=2, levels=(0,), n_frames=2, stride=1, hidden=(4,),
+            epochs_first=1, selection_subjects=1, seed=seed, teacher="residual",
+            gentleness_input=gentle, twin=TwinOptions().replace(episode_duration_s=0.1),
+        )  # fmt: skip
+        run = tmp_path / f"{'g' if gentle else 'p'}{seed}"
+        distill(cfg, run, log=lambda m: None)
+        return run
+
+    record = tmp_path / "record"
+    record.mkdir()
+    (record / "gentleness.json").write_text(json.dumps({"default_gentleness": 0.5, "root_seed": 1}))
+    gentle = [tiny(s, True) for s in (0, 1)]
+    teacher_default = load_student(gentle[0] / "student").metadata["default_gentleness"]
+    assert teacher_default != 0.5
+    chosen = ship_students(
+        gentle, stem=tmp_path / "shipped", seed_copies=tmp_path / "copies",
+        log=lambda m: None, gentleness_record=record,
+    )  # fmt: skip
+    assert chosen.metadata["default_gentleness"] == 0.5
+    assert load_student(tmp_path / "shipped").metadata["gentleness_record"]["root_seed"] == 1
+    for copy in sorted((tmp_path / "copies").glob("*.npz")):
+        assert spec_gentleness(parse_controller_spec(str(copy))) == 0.5
+    with pytest.raises(ValueError, match="no gentleness record"):
+        ship_students(gentle, log=lambda m: None, gentleness_record=tmp_path)
+    plain = [tiny(s, False) for s in (0, 1)]
+    with pytest.raises(ValueError, match="not trained with a gentleness weight"):
+        ship_students(plain, log=lambda m: None, gentleness_record=record)
+
+
 def test_a_residual_teacher_labels_what_it_commands_on_its_base():
     """`--teacher residual`: the expert runs the shipped residual policy on its base (the
     minimum-jerk PID, reading its sensors from the step's info) at its default weight, so its

@@ -926,6 +926,7 @@ def ship_students(
     stem: str | Path | None = None,
     seed_copies: str | Path | None = None,
     log: Callable[[str], None] = print,
+    gentleness_record: str | Path | None = None,
 ) -> StudentController:
     """Choose one of several distillation seeds' students by :data:`SHIP_RULE`.
 
@@ -934,13 +935,19 @@ def ship_students(
     ``distill_seeds``, ``ship_seed`` and ``ship_rule`` in its metadata and is written into
     the package as *name* (:func:`myoexo.load_policy`) and/or to *stem*; *seed_copies*
     receives every seed's student under :func:`seed_copy_stem`, to evaluate them together.
+    With *gentleness_record* (a ``myoexo policy gentleness`` record, its folder or its
+    ``gentleness.json``), every student written takes that record's default weight as its
+    own (:func:`~myoexo.training.export.record_default_gentleness`; without it a student
+    runs at its teacher's default).
 
     Raises:
-        ValueError: fewer than two runs, a run without a student, or two runs of one seed.
+        ValueError: fewer than two runs, a run without a student, two runs of one seed, or
+            a gentleness record for students without a gentleness input (or no record).
     """
     import pandas as pd
 
     from myoexo.policies import shipped_path
+    from myoexo.training.export import record_default_gentleness
     from myoexo.training.seeds import closest_seed
 
     if len(run_dirs) < 2:
@@ -954,6 +961,8 @@ def ship_students(
         seed = int(student.metadata["distill_config"]["seed"])
         if seed in students:
             raise ValueError(f"two runs of distillation seed {seed}: {list(map(str, run_dirs))}")
+        if gentleness_record is not None:
+            record_default_gentleness(student, Path(gentleness_record), str(run_dir))
         students[seed] = (student, int(student.metadata["round"]))
         for key, value in student.metadata["selection_scores"].items():
             if key != "score":
@@ -1013,6 +1022,12 @@ class DistillRun:
         "continue the run in DIR with its saved settings (--rounds: raise their number)",
         metavar="DIR",
     )
+    gentleness_record: str | None = option(
+        None,
+        "with --ship: the default weight of every student written is that of this `myoexo "
+        "policy gentleness` record (its folder or gentleness.json), not the teacher's",
+        metavar="DIR",
+    )
     export: str | None = option(None, "write the selected student to STEM", metavar="STEM")
     onnx: str | None = option(None, "write the selected student as ONNX", metavar="FILE")
     quiet: bool = option(False, "no per-epoch lines", short="q")
@@ -1043,7 +1058,12 @@ def run(args: argparse.Namespace) -> int:
 
     if options.ship:
         chosen = ship_students(
-            options.ship, options.name, options.export, options.seed_copies, log=log
+            options.ship,
+            options.name,
+            options.export,
+            options.seed_copies,
+            log=log,
+            gentleness_record=options.gentleness_record,
         )
         if options.onnx:
             print(f"onnx: {export_student_onnx(chosen, options.onnx)}")

@@ -25,6 +25,7 @@ from myoexo.control.residual import RESIDUAL_KEY, ResidualConfig
 from myoexo.envs.options import TwinOptions
 from myoexo.model import recorded_twin_version
 from myoexo.policies.actor import MLPActor, save_actor
+from myoexo.policies.student import StudentController
 from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 from myoexo.training import checkpoints as ck
 
@@ -297,10 +298,11 @@ def read_gentleness_record(path: Path) -> dict[str, Any]:
     return dict(record)
 
 
-def record_default_gentleness(actor: MLPActor, path: Path, source: str) -> None:
+def record_default_gentleness(actor: MLPActor | StudentController, path: Path, source: str) -> None:
     """Make the default weight of the gentleness record at *path* (a ``gentleness.json`` or
-    its folder) *actor*'s own: its metadata gains ``default_gentleness`` and the record, and
-    the record's subjects become its selection root (evaluations there are refused).
+    its folder) *actor*'s own (an exported policy or a distilled student): its metadata gains
+    ``default_gentleness`` and the record, and the record's subjects become its selection
+    root (evaluations there are refused).
 
     Raises:
         ValueError: *actor* was not trained over the gentleness range (*source* names it), or
