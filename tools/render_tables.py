@@ -191,6 +191,14 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         )
         for page in ("myoexo/policies/MODEL_CARD_student_smooth.md", "docs/results.md")
     ),
+    GoalsBlock(
+        "docs/results.md",
+        "student_tone_5seeds@0.5",
+        "eval_1000_tone",
+        "eval_200_tone_perturbed",
+        teacher="res_tone_5seeds",
+        device_baseline="pid:tuned=exo",
+    ),
     *(
         GoalsBlock(
             "myoexo/policies/MODEL_CARD_student_exo.md",
