@@ -64,6 +64,42 @@ def test_a_result_set_holds_the_tables_inputs_and_its_provenance(evaluation, tmp
     assert command_of(load_config(evaluation)).endswith("--episode-duration-s 0.5")
 
 
+def test_a_set_states_the_peak_reduction_the_references_hold_allows(evaluation, tmp_path):
+    """The hold bound: at level 2 the reference's mean torque over the end of its episodes,
+    from its traces, against its mean peak; a peak claim above the bound reads "out of
+    reach" in the tables, one below it keeps its verdict."""
+    import numpy as np
+
+    from myoexo.evaluation.bound import HOLD_WINDOW_S
+    from myoexo.evaluation.storage import load_table, load_traces
+
+    dest = collect(evaluation, tmp_path / "set")
+    meta = json.loads((dest / "meta.json").read_text())
+    (bound,) = meta["hold_bounds"]  # level 2 only
+    traces = load_traces(evaluation, "pid", 2)
+    end = traces.time_s >= traces.time_s[-1] - HOLD_WINDOW_S + 1e-9
+    hold = float(traces["interaction_torque_nm"][:, end].mean())
+    table = load_table(evaluation)
+    peak = float(
+        table[(table.controller == "pid") & (table.level == 2)].peak_interaction_torque_nm.mean()
+    )
+    assert bound["level"] == 2 and bound["subjects"] == 3
+    assert np.isclose(bound["hold_torque_nm"], hold) and np.isclose(
+        bound["reference_peak_nm"], peak
+    )
+    assert np.isclose(bound["peak_reduction_bound_pct"], 100 * (1 - hold / peak))
+    assert "`myoexo.evaluation.bound.hold_bounds`" in render(dest)
+    for value, reads in ((1.0, "(>= 8.8: out of reach, at most 1.0)"), (50.0, "(>= 8.8: ")):
+        meta["hold_bounds"][0]["peak_reduction_bound_pct"] = value
+        (dest / "meta.json").write_text(json.dumps(meta))
+        (level_2,) = [line for line in render(dest).splitlines() if line.startswith("| 2 |")]
+        assert reads in level_2
+        assert ("out of reach" in level_2) == (value < 8.8)
+    meta.pop("hold_bounds")  # a set collected before the bound: its tables as they were
+    (dest / "meta.json").write_text(json.dumps(meta))
+    assert "out of reach" not in render(dest) and "hold_bounds" not in render(dest)
+
+
 def _evaluation(out: Path, controllers: tuple[str, ...], subjects: int = 3) -> Path:
     config = EvaluationConfig(
         controllers=controllers,
@@ -96,6 +132,7 @@ def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, 
     assert "Commands: `myoexo evaluate --controllers pid sac" in render(dest)
     collect(later, dest, update=True)  # again: replaced, not repeated
     assert len(pd.read_csv(dest / "summary.csv")) == len(summary)
+    assert json.loads((dest / "meta.json").read_text())["commands"] == meta["commands"]
     with pytest.raises(ValueError, match="subjects_per_level"):
         collect(_evaluation(tmp_path / "fewer", ("pid", "sac"), subjects=2), dest, update=True)
     other = tmp_path / "other"

@@ -1,4 +1,16 @@
-"""Each controller's distance to the achievable bound (the oracle, :mod:`myoexo.control.oracle`).
+"""What a controller can reach at most: the distance to the oracle (:mod:`myoexo.control.oracle`)
+and the bound the reference's hold torque sets on the peak reduction.
+
+**Hold bound.** Where the motor stalls against the reflex (level 2: the knee ends short of the
+target), the strap carries the hold at the end of the episode. A controller that ends where
+the reference ends holds the same torque there, so its peak interaction torque (over the
+whole episode) is at least that hold: its peak reduction against the reference (in % of the
+reference's mean peak) is at most ``100 (1 - mean hold / mean reference peak)``
+(:func:`hold_bounds`, from the reference's stored traces). It binds at the levels where the
+study's claims keep a controller at the reference's own final error
+(:data:`HOLD_BOUND_LEVELS`); the result tables then say "out of reach" for a claim above it.
+
+**Distance to the oracle.**
 
 The oracle is slow, so it usually runs on the first few subjects of a level while the other
 controllers run on many; the distance is taken on the subjects both have (subject *i* is the
@@ -11,10 +23,60 @@ same person for every controller of an evaluation with the same root seed and tw
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 #: Controller labels that are the bound (``oracle`` or ``oracle:<options>``).
 BOUND_PREFIX = "oracle"
+
+#: The end of an episode over which the reference's hold torque is averaged, s.
+HOLD_WINDOW_S = 0.5
+
+#: Levels where the study's claims keep a controller at the reference's own final error
+#: (level 2: "no worse than the PID"), so the reference's hold bounds its peak reduction.
+#: Not levels 0-1 (within 1 deg of the target) nor 3 (within 11.45 deg: a controller may end
+#: further out than the PID and hold less).
+HOLD_BOUND_LEVELS: tuple[int, ...] = (2,)
+
+
+def hold_bounds(
+    eval_dir: str | Path, reference: str, levels: Sequence[int], window_s: float = HOLD_WINDOW_S
+) -> list[dict[str, float]]:
+    """Per level of *levels* in :data:`HOLD_BOUND_LEVELS`, the hold bound of the module
+    docstring, from the reference's stored traces in the evaluation folder *eval_dir*:
+    ``level``, ``subjects``, ``window_s``, ``hold_torque_nm`` (the mean over subjects of the
+    interaction torque over the last *window_s*), ``reference_peak_nm`` (the reference's
+    mean peak on the same subjects) and ``peak_reduction_bound_pct``. A level without traces
+    is left out.
+    """
+    import numpy as np
+
+    from myoexo.evaluation.storage import load_table, load_traces
+
+    table = load_table(eval_dir)
+    rows = []
+    for level in sorted(set(int(v) for v in levels) & set(HOLD_BOUND_LEVELS)):
+        try:
+            traces = load_traces(eval_dir, reference, level)
+        except ValueError:  # the evaluation stored no traces
+            continue
+        end = np.asarray(traces.time_s) >= traces.time_s[-1] - window_s + 1e-9
+        hold = traces["interaction_torque_nm"][:, end].mean(axis=1)
+        ref = table[(table.controller == reference) & (table.level == level)]
+        peak = ref.set_index("subject").loc[traces.subjects, "peak_interaction_torque_nm"]
+        hold_nm, peak_nm = float(hold.mean()), float(peak.mean())
+        rows.append(
+            {
+                "level": level,
+                "subjects": len(hold),
+                "window_s": float(window_s),
+                "hold_torque_nm": hold_nm,
+                "reference_peak_nm": peak_nm,
+                "peak_reduction_bound_pct": 100.0 * (1.0 - hold_nm / peak_nm),
+            }
+        )
+    return rows
 
 
 def bound_label(labels: Any) -> str | None:

@@ -33,6 +33,7 @@ from typing import Any
 
 from myoexo.control.specs import seeds_folder_of_spec
 from myoexo.envs.options import TwinOptions
+from myoexo.evaluation.bound import hold_bounds
 from myoexo.evaluation.config import EVALUATION_ROOT_SEED, load_config
 from myoexo.evaluation.criteria import (
     DeployableGoals,
@@ -151,6 +152,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
         "twin_version": recorded_twin_version(config),
         "episodes": len(table),
         "versions": config.get("versions", {}),
+        "hold_bounds": hold_bounds(eval_dir, reference, levels),
     }
     dest = Path(dest)
     if update:
@@ -213,7 +215,8 @@ def _updated(
         merged[name] = pd.concat([kept, new[new.controller.isin(added)]], ignore_index=True)
     meta = {
         **meta,
-        "commands": [*old["commands"], *meta["commands"]],
+        "hold_bounds": meta["hold_bounds"] or old.get("hold_bounds", []),
+        "commands": [*old["commands"], *(c for c in meta["commands"] if c not in old["commands"])],
         "episodes": int(merged["summary.csv"].n.sum()),
     }
     return merged, meta
@@ -258,11 +261,22 @@ def _read(folder: Path) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
     )
 
 
-def _judged(row: Any, name: str, target: float | None, higher: bool, digits: int = 1) -> str:
-    """``value [low, high]`` and, against *target*, the verdict by the interval."""
+def _judged(
+    row: Any,
+    name: str,
+    target: float | None,
+    higher: bool,
+    digits: int = 1,
+    reachable: float | None = None,
+) -> str:
+    """``value [low, high]`` and, against *target*, the verdict by the interval; "out of
+    reach" where *reachable* (the most any controller can reach, :mod:`~myoexo.evaluation.bound`)
+    falls short of a target to exceed."""
     cell = _ci_of(row, name, digits)
     if target is None:
         return cell
+    if higher and reachable is not None and reachable < target:
+        return f"{cell} (>= {target:g}: out of reach, at most {reachable:.1f})"
     call = verdict(row[f"{name}_low"], row[f"{name}_high"], target, higher_is_better=higher)
     return f"{cell} ({'>=' if higher else '<'} {target:g}: {call})"
 
@@ -276,6 +290,7 @@ def headline_table(folder: str | Path, controller: str) -> str:
     s = summary.set_index(["controller", "level"])
     k = risk.set_index(["controller", "level"])
     r = red[red.controller == controller].set_index("level")
+    bounds = {int(b["level"]): b["peak_reduction_bound_pct"] for b in meta.get("hold_bounds", [])}
     rows = []
     for level in sorted(r.index):
         paper = PAPER_RESULTS[int(level)]
@@ -289,7 +304,14 @@ def headline_table(folder: str | Path, controller: str) -> str:
                 f"{fmt_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
                 f"{fmt_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
                 str(int(k.loc[(controller, level), "catastrophic"])),
-                _judged(row, "peak_reduction_pct", paper.peak_reduction_pct, True),
+                _judged(
+                    row,
+                    "peak_reduction_pct",
+                    paper.peak_reduction_pct,
+                    True,
+                    1,
+                    bounds.get(int(level)),
+                ),
                 _judged(row, "rms_reduction_pct", paper.rms_reduction_pct, True),
                 _judged(row, "settling_ratio", 1.0, False, 2),
                 f"{row.reference_settled_pct:.0f} / {row.other_settled_pct:.0f}",
@@ -362,6 +384,26 @@ def earlier_twin_note(meta: dict[str, Any]) -> str | None:
     return " ".join(notes) or None
 
 
+def hold_bound_line(meta: dict[str, Any]) -> str:
+    """The sentence that states a set's hold bounds (:func:`~myoexo.evaluation.bound.hold_bounds`;
+    empty for a set without one)."""
+    bounds = meta.get("hold_bounds") or []
+    if not bounds:
+        return ""
+    ref = meta["reference"]
+    each = "; ".join(
+        f"level {b['level']}: {b['hold_torque_nm']:.1f} Nm held against a mean peak of "
+        f"{b['reference_peak_nm']:.1f} Nm, so at most {b['peak_reduction_bound_pct']:.1f} %"
+        for b in bounds
+    )
+    return (
+        f"What the motor allows (`myoexo.evaluation.bound.hold_bounds`): where the study keeps "
+        f"a controller at `{ref}`'s final error, it holds `{ref}`'s torque at the end (the mean "
+        f"over the last {bounds[0]['window_s']:g} s of `{ref}`'s episodes), so its peak is at "
+        f'least that: {each}. A peak claim above it reads "out of reach".'
+    )
+
+
 def render(folder: str | Path, label: str | None = None) -> str:
     """The Markdown of a result set: provenance (*label*: how the set's folder is named in
     it, default its path), one table per controller, the study's aggregation, the tail."""
@@ -380,6 +422,8 @@ def render(folder: str | Path, label: str | None = None) -> str:
     ]
     if (note := earlier_twin_note(meta)) is not None:
         parts.append(note)
+    if line := hold_bound_line(meta):
+        parts.append(line)
     for controller in dict.fromkeys(red.controller):
         parts.append(f"**`{controller}`** against `{meta['reference']}` on the same subjects:")
         parts.append(headline_table(folder, controller))
