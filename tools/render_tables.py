@@ -142,6 +142,13 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     Block(
         "myoexo/policies/MODEL_CARD_residual.md", "eval_200_tone_perturbed", ("res_tone_5seeds",)
     ),
+    Block("myoexo/policies/MODEL_CARD_residual.md", "eval_1000_tone_perturbed", ("residual",)),
+    Block("myoexo/policies/MODEL_CARD_student_smooth.md", "eval_1000_tone", ("student_smooth",)),
+    Block(
+        "myoexo/policies/MODEL_CARD_student_smooth.md",
+        "eval_1000_tone_perturbed",
+        ("student_smooth",),
+    ),
     Block(
         "myoexo/policies/MODEL_CARD_student_residual.md",
         "eval_1000_twin3",
