@@ -41,10 +41,15 @@ HOLD_BOUND_LEVELS: tuple[int, ...] = (2,)
 
 
 def hold_bounds(
-    eval_dir: str | Path, reference: str, levels: Sequence[int], window_s: float = HOLD_WINDOW_S
+    eval_dir: str | Path,
+    table: Any,
+    reference: str,
+    levels: Sequence[int],
+    window_s: float = HOLD_WINDOW_S,
 ) -> list[dict[str, float]]:
     """Per level of *levels* in :data:`HOLD_BOUND_LEVELS`, the hold bound of the module
-    docstring, from the reference's stored traces in the evaluation folder *eval_dir*:
+    docstring, from the reference's stored traces in the evaluation folder *eval_dir* and its
+    episodes in *table* (that folder's :func:`~myoexo.evaluation.storage.load_table`):
     ``level``, ``subjects``, ``window_s``, ``hold_torque_nm`` (the mean over subjects of the
     interaction torque over the last *window_s*), ``reference_peak_nm`` (the reference's
     mean peak on the same subjects) and ``peak_reduction_bound_pct``. A level without traces
@@ -52,9 +57,8 @@ def hold_bounds(
     """
     import numpy as np
 
-    from myoexo.evaluation.storage import load_table, load_traces
+    from myoexo.evaluation.storage import load_traces
 
-    table = load_table(eval_dir)
     rows = []
     for level in sorted(set(int(v) for v in levels) & set(HOLD_BOUND_LEVELS)):
         try:

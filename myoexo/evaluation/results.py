@@ -152,7 +152,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
         "twin_version": recorded_twin_version(config),
         "episodes": len(table),
         "versions": config.get("versions", {}),
-        "hold_bounds": hold_bounds(eval_dir, reference, levels),
+        "hold_bounds": hold_bounds(eval_dir, table, reference, levels),
     }
     dest = Path(dest)
     if update:
