@@ -397,6 +397,10 @@ class LengthTone(NamedTuple):
 #: The constant input of a kernel's affine map (``x = [L, s, 1]``).
 _ONE = np.ones(1)
 
+#: One row of a kernel's affine map: its (length, speed, constant) coefficients, each a
+#: per-muscle array or a scalar.
+_Row = tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float]
+
 
 def spindle_tsrt_kernel(
     c: SpindleTSRTConstants,
@@ -429,8 +433,7 @@ def spindle_tsrt_kernel(
     hk, hkv = float(c.half_k), float(c.half_k_v)
     beyond_offset = b - c.threshold_deg
     offset = np.zeros(n) if dynamic_offset_deg is None else np.asarray(dynamic_offset_deg)
-    Row = tuple[np.ndarray | float, np.ndarray | float, np.ndarray | float]
-    tone_row: Row
+    tone_row: _Row
     if length_tone is None:  # no tone: its tanh argument and weight are 0
         tone, tone_row = np.zeros(n), (0.0, 0.0, 0.0)
     else:
@@ -440,7 +443,7 @@ def spindle_tsrt_kernel(
     s_theta = np.asarray(c.s_theta, dtype=np.float64)
     s_v = np.asarray(c.s_v, dtype=np.float64)
     # rows of y = weights @ [L, s, 1]: (length coefficient, speed coefficient, constant)
-    rows: tuple[Row, ...] = (
+    rows: tuple[_Row, ...] = (
         (hk * a, 0.0, hk * beyond_offset),  # static argument
         (0.0, hkv * inv_slope, -hkv * c.v_threshold_rad_s),  # gate argument
         tone_row,  # tone argument
