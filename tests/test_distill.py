@@ -160,6 +160,42 @@ def test_the_smoothness_term_makes_the_students_command_change_less_between_step
     assert errors[5.0] < 0.15, errors
 
 
+def test_an_output_reach_above_one_lets_the_student_hold_the_motors_limit(tmp_path, env_exo):
+    """With a tanh head the command approaches the teacher's saturated label and never
+    reaches it; a head spanning [-1.1, 1.1] (clipped to the motor's range) commands the limit
+    exactly where the label does and keeps the labels inside the range."""
+    from myoexo.studies.distill import DistillConfig, Episodes, train_student
+
+    rng = np.random.default_rng(1)
+    n = 600
+    frames = rng.normal(size=(n, FRAME_DIM)).astype(np.float32)
+    labels = np.clip(1.6 * frames[:, 0], -1.0, 1.0).astype(np.float32)  # saturates often
+    data = Episodes(frames, labels, np.array([0]), np.zeros(n, np.int32))
+    saturated = np.abs(labels) >= 1.0
+    inside = ~saturated
+    reached, errors = {}, {}
+    for reach in (1.0, 1.1):
+        config = DistillConfig(n_frames=1, hidden=(32,), batch_size=64, lr=3e-3, output_reach=reach)
+        student, _ = train_student(config, data, 60, None, seed=0, log=lambda _: None)
+        assert student.actor.action_high[0] == pytest.approx(reach)
+        command = np.array(
+            [np.clip(student.actor.act(f.astype(np.float64))[0], -1.0, 1.0) for f in frames]
+        )
+        reached[reach] = float(np.mean(np.abs(command[saturated]) == 1.0))
+        errors[reach] = float(np.mean(np.abs(command[inside] - labels[inside])))
+    assert reached[1.0] == 0.0 and reached[1.1] > 0.5, reached
+    assert errors[1.1] < 0.1, errors
+    # the stored student and its ONNX file keep the reach and the clip
+    save_student(student, tmp_path / "s")
+    loaded = load_student(tmp_path / "s")
+    assert loaded.actor.action_high[0] == pytest.approx(1.1)
+    student.bind_obs_keys(EXO_PRESET_KEYS)
+    episodes = [_episode_obs(env_exo, seed=s, steps=10) for s in (0, 1)]
+    assert _onnx_parity(student, episodes, tmp_path / "s.onnx") <= 1e-5
+    with pytest.raises(ValueError, match="output_reach"):
+        DistillConfig(output_reach=0.9)
+
+
 def test_frame_indices_refuses_unknown_layouts():
     with pytest.raises(ValueError, match="lacks"):
         frame_indices(["exo_angle_rad", "time_frac"])

@@ -378,6 +378,8 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
         obs_var=actor.obs_var,
         epsilon=actor.epsilon,
         clip_obs=actor.clip_obs,
+        action_low=actor.action_low,
+        action_high=actor.action_high,
     )
     if "reference" not in meta:
         rng = np.random.default_rng(0)
@@ -392,6 +394,8 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
         obs_var=actor.obs_var,
         epsilon=actor.epsilon,
         clip_obs=actor.clip_obs,
+        action_low=actor.action_low,
+        action_high=actor.action_high,
         metadata=meta,
     )
     return save_actor(actor, path_stem)

@@ -97,6 +97,8 @@ from myoexo.training.checkpoints import CONFIG_FILE
 DATASET_FILE = "dataset.npz"
 HISTORY_FILE = "history.json"
 BEST_STEM = "student"
+#: A teacher label at or beyond this magnitude commands the motor's limit (labels are clipped).
+LIMIT_LABEL = 1.0 - 1e-6
 
 
 @dataclass(frozen=True)
@@ -152,6 +154,14 @@ class DistillConfig:
         "command between consecutive control steps of an episode, added to the imitation "
         "loss (CAPS, Mysore et al. 2021; 0: imitation alone)",
         low=0.0,
+    )
+    output_reach: float = option(
+        1.0,
+        "the student's tanh head spans [-reach, reach] and its command is then clipped to "
+        "[-1, 1]: above 1 a finite output holds the motor's limit where the teacher does "
+        "(1: the tanh alone, which approaches the limit but never reaches it)",
+        low=1.0,
+        high=2.0,
     )
     teacher: str = option(
         "sac",
@@ -568,7 +578,8 @@ def train_student(
     seed: int,
     log: Callable[[str], None] = print,
 ) -> tuple[StudentController, dict[str, float]]:
-    """Fit the student to the teacher's labels (MSE on the tanh output), warm-started
+    """Fit the student to the teacher's labels (MSE on the head's output, ``output_reach x
+    tanh``; a label at the motor's limit counts only a command short of it), warm-started
     from ``previous`` (its input normalization is recomputed on the aggregated data, and
     its first layer re-expressed so that the warm start is the same function)."""
     import torch
@@ -606,6 +617,7 @@ def train_student(
         else None
     )
     index = torch.as_tensor(data.stack_index(config.n_frames, config.stride))
+    reach = float(config.output_reach)
     labels = torch.as_tensor(data.labels, dtype=torch.float32)
     # each step's next step in the same episode (the last step of an episode: itself)
     following = np.arange(1, labels.numel() + 1)
@@ -616,7 +628,13 @@ def train_student(
         x = frames[index[rows]].flatten(1)
         if z_weight is not None:
             x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
-        return torch.tanh(module(x)).squeeze(1)
+        return reach * torch.tanh(module(x)).squeeze(1)
+
+    def imitation_error(pred: Any, target: Any) -> Any:
+        # a label at the motor's limit is met by any command at or beyond it (then clipped)
+        err = pred - target
+        err = torch.where((target >= LIMIT_LABEL) & (err > 0.0), torch.zeros_like(err), err)
+        return torch.where((target <= -LIMIT_LABEL) & (err < 0.0), torch.zeros_like(err), err)
 
     opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     n = labels.numel()
@@ -632,10 +650,12 @@ def train_student(
         for k in range(steps_per_epoch):
             rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
             pred = command(rows)
-            mse = torch.mean((pred - labels[rows]) ** 2)
+            mse = torch.mean(imitation_error(pred, labels[rows]) ** 2)
             loss = mse
-            if config.smoothness_weight > 0.0:
-                step = command(next_row[rows]) - pred
+            if config.smoothness_weight > 0.0:  # on the executed (clipped) command
+                step = torch.clamp(command(next_row[rows]), -1.0, 1.0) - torch.clamp(
+                    pred, -1.0, 1.0
+                )
                 loss = mse + config.smoothness_weight * torch.mean(step**2)
             opt.zero_grad(set_to_none=True)
             loss.backward()
@@ -650,7 +670,14 @@ def train_student(
         (lin.weight.detach().double().numpy(), lin.bias.detach().double().numpy())
         for lin in linears
     ]
-    actor = MLPActor(weights, activation=config.activation, obs_mean=mean, obs_var=var)
+    actor = MLPActor(
+        weights,
+        activation=config.activation,
+        obs_mean=mean,
+        obs_var=var,
+        action_low=-reach,
+        action_high=reach,
+    )
     student = StudentController(actor, config.n_frames, config.stride, gentleness_input=weighted)
     return student, {"train_mse": loss_value}
 
