@@ -575,3 +575,89 @@ def test_a_budget_stop_leaves_a_checkpoint_past_the_budget(tmp_path):
     running = checkpointer(1.0)
     assert running._on_step() is True and not running.budget_spent
     assert len(running.saved) == 1 and running.saved[0][1] < 2.0  # the cadence checkpoint
+
+
+def test_the_training_vector_env_steps_as_sb3s_and_hands_on_each_steps_own_info():
+    """FreshInfoVecEnv gives DummyVecEnv's observations, rewards, dones and infos (episode
+    ends, terminal observations and resets included) without its deep copy; the infos of
+    two steps are distinct objects."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from myoexo.training.plumbing import FreshInfoVecEnv
+    from myoexo.training.train import make_env_fn
+
+    twin = get_preset("cpu").twin.replace(episode_duration_s=0.05)  # 5 steps per episode
+    venvs = [
+        cls([make_env_fn(ENV_ID, i, twin) for i in range(2)])
+        for cls in (DummyVecEnv, FreshInfoVecEnv)
+    ]
+    for venv in venvs:
+        venv.seed(3)
+    first = [venv.reset() for venv in venvs]
+    np.testing.assert_array_equal(first[0], first[1])
+    rng = np.random.default_rng(0)
+    previous = None
+    ends = 0
+    for _ in range(12):
+        action = rng.uniform(-1, 1, (2, 1)).astype(np.float32)
+        (o0, r0, d0, i0), (o1, r1, d1, i1) = (venv.step(action) for venv in venvs)
+        np.testing.assert_array_equal(o0, o1)
+        np.testing.assert_array_equal(r0, r1)
+        np.testing.assert_array_equal(d0, d1)
+        for a, b in zip(i0, i1, strict=True):
+            assert a.keys() == b.keys()
+            assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+            assert a["knee_angle_deg"] == b["knee_angle_deg"]
+            if "terminal_observation" in a:
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+                assert (a["episode"]["r"], a["episode"]["l"]) == (
+                    b["episode"]["r"],
+                    b["episode"]["l"],
+                )
+        ends += int(d1.sum())
+        if previous is not None:
+            assert all(p is not n for p, n in zip(previous, i1, strict=True))
+            assert all(
+                p["obs_dict"] is not n["obs_dict"] for p, n in zip(previous, i1, strict=True)
+            )
+        previous = i1
+    assert ends >= 4  # every env ended two episodes and was reset
+    for venv in venvs:
+        venv.close()
+
+
+def test_the_jax_learners_replay_buffer_samples_what_sb3s_does():
+    """NumpySampleReplayBuffer's samples equal ReplayBuffer's for the same draws, and the
+    JAX learners get it by default."""
+    pytest.importorskip("sbx")
+    from gymnasium import spaces
+    from stable_baselines3.common.buffers import ReplayBuffer
+
+    from myoexo.training.plumbing import NumpySampleReplayBuffer
+    from myoexo.training.train import build_model, make_vec_env
+
+    obs_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
+    act_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+    buffers = [
+        cls(100, obs_space, act_space, n_envs=2) for cls in (ReplayBuffer, NumpySampleReplayBuffer)
+    ]
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        obs, nxt = rng.normal(size=(2, 5)), rng.normal(size=(2, 5))
+        act, rew = rng.uniform(-1, 1, (2, 1)), rng.normal(size=2)
+        done = rng.random(2) < 0.1
+        for buf in buffers:
+            buf.add(obs, nxt, act, rew, done, [{}, {}])
+    samples = []
+    for buf in buffers:
+        np.random.seed(7)  # noqa: NPY002 (SB3 samples from numpy's global RNG)
+        samples.append(buf.sample(16))
+    for a, b in zip(*samples, strict=True):
+        assert (a is None) == (b is None)
+        if a is not None:
+            np.testing.assert_array_equal(a.numpy(), b.numpy())
+    preset = get_preset("cpu", algorithm="sbx_sac")
+    venv = make_vec_env(preset.replace(n_envs=1), seed=0)
+    model = build_model(preset, venv)
+    assert isinstance(model.replay_buffer, NumpySampleReplayBuffer)
+    venv.close()

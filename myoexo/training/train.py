@@ -136,17 +136,21 @@ def residual_env(env: Any, residual: ResidualConfig) -> Any:
 
 
 def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
-    """The training envs: ``n_envs`` copies in a Dummy/SubprocVecEnv, seeded ``seed + i``
-    (default: the config's seed), wrapped in ``VecNormalize`` (observations and/or rewards)
-    if the config says so."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+    """The training envs: ``n_envs`` copies in a vector env (``"dummy"``:
+    :class:`~myoexo.training.plumbing.FreshInfoVecEnv`, SB3's ``DummyVecEnv`` without its
+    copy of every info; ``"subproc"``: ``SubprocVecEnv``), seeded ``seed + i`` (default: the
+    config's seed), wrapped in ``VecNormalize`` (observations and/or rewards) if the config
+    says so."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    from myoexo.training.plumbing import FreshInfoVecEnv
 
     subproc = config.vec_env == "subproc"
     fns: list[Callable[[], Any]] = [
         _EnvFactory(config.env_id, i, config.twin, in_worker=subproc, residual=config.residual)
         for i in range(config.n_envs)
     ]
-    venv: Any = DummyVecEnv(fns) if config.vec_env == "dummy" else SubprocVecEnv(fns)
+    venv: Any = FreshInfoVecEnv(fns) if config.vec_env == "dummy" else SubprocVecEnv(fns)
     venv.seed(config.seed if seed is None else seed)
     if config.normalize_obs or config.normalize_reward:
         venv = VecNormalize(
@@ -181,7 +185,9 @@ def _activation(name: str, framework: str) -> Any:
 def build_model(config: TrainConfig, venv: Any) -> Any:
     """An untrained agent of the config's algorithm: its class (SB3's SAC or PPO, SBX's SAC,
     TQC or CrossQ) given ``algorithm_kwargs`` as they are, the config's networks (PPO:
-    ``net_arch_qf`` is its value network) and seed, on the CPU.
+    ``net_arch_qf`` is its value network) and seed, on the CPU. A JAX learner samples from a
+    :class:`~myoexo.training.plumbing.NumpySampleReplayBuffer` unless ``algorithm_kwargs``
+    names a ``replay_buffer_class``.
 
     Raises:
         FieldError: An argument the class does not take, or arguments that do not fit
@@ -190,10 +196,15 @@ def build_model(config: TrainConfig, venv: Any) -> Any:
     algorithm = get_algorithm(config.algorithm)
     config.resolved_kwargs()  # every argument one the class takes
     critic = "vf" if algorithm.on_policy else "qf"
+    kwargs = dict(config.algorithm_kwargs)
+    if algorithm.framework == "jax" and not algorithm.on_policy:
+        from myoexo.training.plumbing import NumpySampleReplayBuffer
+
+        kwargs.setdefault("replay_buffer_class", NumpySampleReplayBuffer)
     return algorithm.load_class()(
         "MlpPolicy",
         venv,
-        **config.algorithm_kwargs,
+        **kwargs,
         policy_kwargs={
             "net_arch": {"pi": list(config.net_arch_pi), critic: list(config.net_arch_qf)},
             "activation_fn": _activation(config.activation, algorithm.framework),
