@@ -198,13 +198,16 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         )
         for page in ("myoexo/policies/MODEL_CARD_student_smooth.md", "docs/results.md")
     ),
-    GoalsBlock(
-        "docs/results.md",
-        "student_tone_5seeds@0.5",
-        "eval_1000_tone",
-        "eval_200_tone_perturbed",
-        teacher="res_tone_5seeds",
-        device_baseline="pid:tuned=exo",
+    *(
+        GoalsBlock(
+            "docs/results.md",
+            student,
+            "eval_1000_tone",
+            "eval_200_tone_perturbed",
+            teacher="res_tone_5seeds",
+            device_baseline="pid:tuned=exo",
+        )
+        for student in ("student_tone_5seeds@0.5", "student_guard_5seeds@0.25")
     ),
     *(
         GoalsBlock(
