@@ -380,24 +380,14 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
         clip_obs=actor.clip_obs,
         action_low=actor.action_low,
         action_high=actor.action_high,
+        metadata=meta,
     )
     if "reference" not in meta:
         rng = np.random.default_rng(0)
         mean = np.zeros(actor.obs_dim) if actor.obs_mean is None else actor.obs_mean
         std = np.ones(actor.obs_dim) if actor.obs_var is None else np.sqrt(actor.obs_var)
         x = mean + std * rng.standard_normal((8, actor.obs_dim))
-        meta["reference"] = {"observations": x.tolist(), "actions": actor(x).tolist()}
-    actor = MLPActor(
-        actor.weights,
-        activation=actor.activation,
-        obs_mean=actor.obs_mean,
-        obs_var=actor.obs_var,
-        epsilon=actor.epsilon,
-        clip_obs=actor.clip_obs,
-        action_low=actor.action_low,
-        action_high=actor.action_high,
-        metadata=meta,
-    )
+        actor.metadata["reference"] = {"observations": x.tolist(), "actions": actor(x).tolist()}
     return save_actor(actor, path_stem)
 
 
