@@ -207,7 +207,11 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
             teacher="res_tone_5seeds",
             device_baseline="pid:tuned=exo",
         )
-        for student in ("student_tone_5seeds@0.5", "student_guard_5seeds@0.25")
+        for student in (
+            "student_tone_5seeds@0.5",
+            "student_guard_5seeds@0.25",
+            "student_fine_5seeds@0",
+        )
     ),
     *(
         GoalsBlock(
