@@ -20,7 +20,9 @@ collected DAgger-style:
   the teacher's env would);
 * after each round the student is trained (torch, CPU, warm-started) on the aggregated
   dataset and scored on held-apart selection subjects (root 1, indices ``0..n-1`` per level,
-  nominal and perturbed twins); the best round is the run's student.
+  nominal and perturbed twins; a student with the weight input at ``selection_weights``);
+  the best round is the run's student (``--reselect DIR`` scores a finished run's rounds
+  again under new selection settings).
 
 Run folder (every file written atomically; ``--resume DIR`` continues after the last
 finished round)::
@@ -39,6 +41,7 @@ Examples::
         --teacher-guard --seed 0                                # the shipped recipe, seed 0
     myoexo policy distill --resume runs/distill
     myoexo policy distill --resume runs/distill --rounds 12            # more rounds
+    myoexo policy distill --reselect runs/distill --selection-weights 0 0.5 1  # no training
     myoexo policy distill --ship runs/distill_s0 runs/distill_s1 runs/distill_s2 \
         --name student_exo --seed-copies runs/student_seeds      # the seed rule picks one
 
@@ -182,7 +185,15 @@ class DistillConfig:
         False,
         "the student takes the gentleness weight as an input: each episode draws a weight "
         "uniformly over [0, 1] and the teacher (trained over the weight range) labels at it; "
-        "the student is selected at the teacher's default weight",
+        "the student is selected at --selection-weights (default: the teacher's default weight)",
+    )
+    selection_weights: tuple[float, ...] = option(
+        (),
+        "gentleness weights at which a student with the weight input is selected: each round's "
+        "selection error is its mean over them (none given: the teacher's default weight)",
+        low=0.0,
+        high=1.0,
+        metavar="W",
     )
     root_seed: int = option(
         SELECTION_ROOT_SEED,
@@ -199,7 +210,15 @@ class DistillConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", tuple(self.levels))
         object.__setattr__(self, "hidden", tuple(self.hidden))
+        object.__setattr__(self, "selection_weights", tuple(self.selection_weights))
         check_fields(self)
+        if self.selection_weights and not self.gentleness_input:
+            raise FieldError(
+                "DistillConfig",
+                "selection_weights",
+                self.selection_weights,
+                "is for a student with the weight input (gentleness_input = true)",
+            )
         check_fit_root(self.root_seed, "distillation (it trains and selects the student)")
         if self.subject_offset < self.selection_subjects:
             raise FieldError(
@@ -691,23 +710,25 @@ def selection_scores(
 ) -> dict[str, float]:
     """Mean |final error| (deg) of the student on the selection subjects (root
     ``config.root_seed``, indices ``0..selection_subjects-1``), per level and twin, and
-    ``score``: their mean. A student that takes the gentleness weight runs at *gentleness*
-    (default 0)."""
+    ``score``: their mean. A student that takes the gentleness weight runs at each of
+    ``config.selection_weights`` (the mean over them), or, where none is given, at
+    *gentleness* (the teacher's default weight; 0 if ``None``)."""
     from myoexo.control.rollout import rollout
     from myoexo.evaluation.metrics import episode_metrics
 
-    out: dict[str, float] = {}
-    controller: Any = student
-    if student.gentleness_input:  # at the teacher's default weight
+    controllers: list[Any] = [student]
+    if student.gentleness_input:
         from myoexo.control.policy import GentleController
 
-        controller = GentleController(student, float(gentleness if gentleness is not None else 0))
+        weights = config.selection_weights or (float(gentleness or 0.0),)
+        controllers = [GentleController(student, float(w)) for w in weights]
+    out: dict[str, float] = {}
     for perturbed in (False, True):
         for level in config.levels:
             env = envs.get(level, perturbed)
             student.bind(env)
             errs = []
-            for i in range(config.selection_subjects):
+            for controller, i in itertools.product(controllers, range(config.selection_subjects)):
                 ep = rollout(
                     env,
                     controller,
@@ -857,6 +878,85 @@ def _distill(
             )
     finally:
         envs.close()
+    return history
+
+
+#: The settings :func:`reselect` may change: those of the selection alone.
+RESELECT_FIELDS: tuple[str, ...] = ("selection_weights", "selection_subjects")
+
+
+def reselect(
+    run_dir: str | Path, log: Callable[[str], None] = print, **changes: Any
+) -> dict[str, Any]:
+    """Choose a finished run's student again under new selection settings, without
+    retraining: every saved round is scored again (:func:`selection_scores`) with the run's
+    settings changed by *changes* (only :data:`RESELECT_FIELDS`), and the best round becomes
+    ``student.npz``. The run's ``config.json`` takes the new settings; ``history.json`` keeps
+    each round's earlier scores (``selection_before``) and records the earlier settings and
+    best round under ``reselected``. Returns the history document.
+
+    Raises:
+        ValueError: a change outside :data:`RESELECT_FIELDS`, a folder without a finished
+            round, or settings that select nothing (``selection_subjects = 0``).
+    """
+    bad = sorted(set(changes) - set(RESELECT_FIELDS))
+    if bad:
+        raise ValueError(f"reselect changes {bad}: only {list(RESELECT_FIELDS)} may change")
+    run_dir = Path(run_dir)
+    cfg_path, hist_path = run_dir / CONFIG_FILE, run_dir / HISTORY_FILE
+    if not (cfg_path.is_file() and hist_path.is_file()):
+        raise ValueError(f"{run_dir} holds no distillation run ({CONFIG_FILE}, {HISTORY_FILE})")
+    with FolderLock(run_dir, "distillation folder"):
+        doc = json.loads(cfg_path.read_text())
+        before = DistillConfig.from_json(doc["config"])
+        config = dataclasses.replace(before, **changes)
+        if not config.selection_subjects:
+            raise ValueError("reselect with selection_subjects = 0: nothing to select on")
+        history = json.loads(hist_path.read_text())
+        rounds = [
+            h
+            for h in history["rounds"]
+            if _round_stem(run_dir, h["round"]).with_suffix(".npz").is_file()
+        ]
+        if not rounds:
+            raise ValueError(f"{run_dir} has no finished round to select from")
+        envs = EnvPool(config.twin)
+        try:
+            controller = teacher_controller(
+                config.teacher, load_teacher(config.teacher), envs.get(config.levels[0], False)
+            )
+            default_weight = getattr(controller, "gentleness", None)
+            for h in rounds:
+                t0 = time.time()
+                stem = _round_stem(run_dir, h["round"])
+                student = load_student(stem)
+                scores = selection_scores(student, config, envs, default_weight)
+                h.setdefault("selection_before", h["selection"])
+                h["selection"], h["select_s"] = scores, round(time.time() - t0, 1)
+                student.metadata["selection_scores"] = scores
+                student.metadata["distill_config"] = config.to_json()
+                save_student(student, stem)
+                log(
+                    f"[reselect] round {h['round']}: "
+                    f"{json.dumps({k: round(v, 2) for k, v in scores.items()})}"
+                )
+        finally:
+            envs.close()
+        history["rounds"] = rounds
+        history["reselected"] = {
+            "from": {k: getattr(before, k) for k in RESELECT_FIELDS},
+            "best_round_before": history.get("best_round"),
+            "versions": package_versions(),
+        }
+        history["best_round"] = _best_round(rounds)
+        write_json_atomic(hist_path, history, indent=1)
+        doc["config"] = config.to_json()
+        write_json_atomic(cfg_path, doc, indent=2)
+        _copy_student(_round_stem(run_dir, history["best_round"]), run_dir / BEST_STEM)
+        log(
+            f"[reselect] {run_dir}: best round {history['best_round']} "
+            f"(before: {history['reselected']['best_round_before']})"
+        )
     return history
 
 
@@ -1049,6 +1149,12 @@ class DistillRun:
         "continue the run in DIR with its saved settings (--rounds: raise their number)",
         metavar="DIR",
     )
+    reselect: str | None = option(
+        None,
+        "choose the finished run in DIR's student again, without retraining, at new selection "
+        "settings (--selection-weights, --selection-subjects): every round is scored again",
+        metavar="DIR",
+    )
     gentleness_record: str | None = option(
         None,
         "with --ship: the default weight of every student written is that of this `myoexo "
@@ -1095,7 +1201,20 @@ def run(args: argparse.Namespace) -> int:
         if options.onnx:
             print(f"onnx: {export_student_onnx(chosen, options.onnx)}")
         return 0
-    if options.resume:
+    if options.reselect:
+        typed = [f for f in option_fields(DistillConfig) if hasattr(args, f.name)]
+        other = [flag_of(f) for f in typed if f.name not in RESELECT_FIELDS]
+        if twin_from_args(args) != TwinOptions():
+            other.append("the twin options")
+        if other:
+            raise ValueError(
+                "--reselect keeps the run's settings but --selection-weights and "
+                f"--selection-subjects; drop {', '.join(other)}"
+            )
+        changes = {f.name: getattr(args, f.name) for f in typed}
+        run_dir = Path(options.reselect)
+        reselect(run_dir, log=log, **changes)
+    elif options.resume:
         given = [
             flag_of(f)
             for f in option_fields(DistillConfig)
