@@ -741,3 +741,71 @@ def test_the_shipped_smooth_student_takes_its_weight_and_reaches_the_target_smoo
         return float(np.abs(np.diff(run.signals["command"])).sum())
 
     assert total_variation(episode) < total_variation(pid)
+
+
+def test_reselect_scores_every_round_again_over_the_weight_range(tmp_path):
+    """`--reselect DIR --selection-weights W...`: without retraining, every round of a
+    finished weight-input run is scored again as the mean of its scores at each weight; the
+    best of those rounds becomes the run's student, the earlier scores and settings stay in
+    the history, and only the selection settings may change."""
+    import dataclasses
+
+    from myoexo.envs.options import TwinOptions
+    from myoexo.runtime.fields import FieldError
+    from myoexo.studies.distill import (
+        DistillConfig,
+        EnvPool,
+        distill,
+        load_teacher,
+        main,
+        reselect,
+        selection_scores,
+        teacher_controller,
+    )
+
+    short = TwinOptions().replace(episode_duration_s=0.3)
+    cfg = DistillConfig(
+        rounds=2, episodes_per_round=2, levels=(1,), n_frames=2, stride=1, hidden=(4,),
+        epochs_first=1, epochs=1, selection_subjects=1, teacher="residual",
+        gentleness_input=True, twin=short,
+    )  # fmt: skip
+    with pytest.raises(FieldError, match="selection_weights"):
+        dataclasses.replace(cfg, gentleness_input=False, selection_weights=(0.0,))
+    run = tmp_path / "run"
+    first = distill(cfg, run, log=lambda m: None)
+    before = [h["selection"] for h in first["rounds"]]
+    with pytest.raises(ValueError, match="only"):
+        reselect(run, log=lambda m: None, seed=3)
+    with pytest.raises(ValueError, match="drop --seed"):
+        main(["--reselect", str(run), "--seed", "3"])
+    hist = reselect(run, log=lambda m: None, selection_weights=(0.0, 1.0))
+    assert [h["selection_before"] for h in hist["rounds"]] == before
+    assert list(hist["reselected"]["from"]["selection_weights"]) == []
+    saved = json.loads((run / "config.json").read_text())["config"]
+    assert saved["selection_weights"] == [0.0, 1.0]
+    envs = EnvPool(short)
+    try:
+        teacher = teacher_controller("residual", load_teacher("residual"), envs.get(1, False))
+        for h in hist["rounds"]:
+            student = load_student(run / f"student_round_{h['round']:02d}")
+            per_weight = [
+                selection_scores(
+                    student, dataclasses.replace(cfg, selection_weights=(w,)), envs, None
+                )
+                for w in (0.0, 1.0)
+            ]
+            for key in ("L1", "L1p"):
+                assert h["selection"][key] == pytest.approx(
+                    (per_weight[0][key] + per_weight[1][key]) / 2
+                )
+            assert student.metadata["selection_scores"] == h["selection"]
+        # none given: the teacher's default weight, as before
+        default = selection_scores(student, cfg, envs, teacher.gentleness)
+        assert default == pytest.approx(hist["rounds"][-1]["selection_before"])
+    finally:
+        envs.close()
+    best = min(hist["rounds"], key=lambda h: h["selection"]["score"])["round"]
+    assert hist["best_round"] == best
+    chosen = load_student(run / "student")
+    assert chosen.metadata["round"] == best
+    assert chosen.metadata["distill_config"]["selection_weights"] == [0.0, 1.0]
