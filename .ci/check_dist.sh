@@ -45,7 +45,7 @@ assert not missing, f"the wheel lacks {missing}"
 for required in ("myoexo/assets/exo_knee.xml", "myoexo/assets/fits/pid_tuned_exo.json",
                  "myoexo/policies/sac_knee_exo.npz",
                  "myoexo/policies/student_exo.npz", "myoexo/policies/residual_knee_exo.npz",
-                 "myoexo/policies/student_smooth.npz", "myoexo/policies/MODEL_CARD.md"):
+                 "myoexo/policies/student_fine.npz", "myoexo/policies/MODEL_CARD.md"):
     assert required in names, f"the wheel lacks {required}"
 stray = sorted(n for n in names if not n.startswith(("myoexo/", "myoexo-")))
 assert not stray, f"the wheel holds files outside the package: {stray}"

@@ -701,10 +701,11 @@ def test_a_tiny_distillation_from_the_residual_teacher_with_a_weight_input(tmp_p
     assert isinstance(at_half, GentleController) and at_half.gentleness == 0.5
 
 
-def test_the_shipped_smooth_student_takes_its_weight_and_reaches_the_target_smoothly():
-    """`student_smooth`: distilled from `residual` on the current twin with the temporal
-    smoothness term (five seeds, one shipped by the seed rule) and the weight as its input;
-    built on an env it runs at its default weight, and a full 8-s level-1 episode ends within
+def test_the_shipped_fine_student_takes_its_weight_and_reaches_the_target_smoothly():
+    """`student_fine`: distilled from `residual` on today's twin with the smoothness and
+    fine-positioning terms (five seeds, its round chosen over the weight range, one seed
+    shipped by the seed rule, its default weight from a gentleness record of the selection
+    root); built on an env it runs at that weight, and a full 8-s level-1 episode ends within
     1 deg (its goal) with a command whose total variation is below the paper's PID's on the
     same subject."""
     import myoexo
@@ -712,20 +713,28 @@ def test_the_shipped_smooth_student_takes_its_weight_and_reaches_the_target_smoo
     from myoexo.control.policy import GentleController
     from myoexo.control.rollout import Rollout, rollout
     from myoexo.envs import make_env
+    from myoexo.envs.options import TwinOptions
     from myoexo.model import TWIN_VERSION
 
-    stored = myoexo.load_policy("student_smooth")
+    stored = myoexo.load_policy("student_fine")
     meta = stored.metadata
     assert stored.gentleness_input and meta["teacher"] == "residual"
     assert meta["ship_seed"] in meta["distill_seeds"] and len(meta["distill_seeds"]) == 5
     assert meta["twin_version"] == TWIN_VERSION and meta["selection_root_seed"] == 1
-    assert meta["distill_config"]["smoothness_weight"] == 10.0
-    with pytest.raises(FileNotFoundError, match="student_smooth"):
-        myoexo.load_policy("student_residual")  # retired
+    assert meta["twin"]["reflex"] == TwinOptions().reflex
+    config = meta["distill_config"]
+    assert config["smoothness_weight"] == 10.0 and config["fine_gain"] == 10.0
+    assert len(config["selection_weights"]) > 1
+    record = meta["gentleness_record"]
+    assert record["root_seed"] == 1 and meta["default_gentleness"] == record["default_gentleness"]
+    for retired in ("student_residual", "student_smooth"):
+        with pytest.raises(FileNotFoundError, match="student_fine"):
+            myoexo.load_policy(retired)
     env = make_env(1, obs_preset="exo")
     try:
-        controller = myoexo.load_policy("student_smooth", env)
-        assert isinstance(controller, GentleController) and controller.gentleness == 0.0
+        controller = myoexo.load_policy("student_fine", env)
+        assert isinstance(controller, GentleController)
+        assert controller.gentleness == meta["default_gentleness"]
         with pytest.raises(ValueError, match="gentleness weight last"):
             obs, _ = env.reset(seed=0)
             stored.reset()

@@ -196,9 +196,10 @@ def test_a_policy_of_another_twin_is_evaluated_with_a_warning():
     from myoexo.envs.options import TwinOptions
     from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
 
-    # student_smooth: distilled on twin 4 with the "spindle" reflex
-    with pytest.warns(TwinMismatchWarning, match=r"trained on \[reflex=spindle\]"):
-        resolve_controllers(["student_smooth"], log=lambda _: None, twin=TwinOptions())
+    # student_fine: distilled on today's default twin, evaluated with the "spindle" reflex
+    spindle = TwinOptions().replace(reflex="spindle")
+    with pytest.warns(TwinMismatchWarning, match=r"evaluated on \[reflex=spindle\]"):
+        resolve_controllers(["student_fine"], log=lambda _: None, twin=spindle)
     # the shipped residual was trained on today's default twin: no warning
     with warnings.catch_warnings():
         warnings.simplefilter("error", TwinMismatchWarning)

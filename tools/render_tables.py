@@ -117,6 +117,9 @@ class GoalsBlock:
         return "\n".join([self.start, body, self.end])
 
 
+#: The shipped student's five seeds at its default weight, as the result sets name them.
+FINE = "student_fine_5seeds@0.25"
+
 #: Every generated block outside the result sets' own ``tables.md``.
 BLOCKS: tuple[Block | GoalsBlock, ...] = (
     Block("myoexo/policies/MODEL_CARD.md", "eval_1000_twin3", ("sac",)),
@@ -212,6 +215,19 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
             "student_guard_5seeds@0.25",
             "student_fine_5seeds@0",
         )
+    ),
+    Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone", (FINE,)),
+    Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone_perturbed", (FINE,)),
+    *(
+        GoalsBlock(
+            page,
+            FINE,
+            "eval_1000_tone",
+            "eval_200_tone_perturbed",
+            teacher="res_tone_5seeds",
+            device_baseline="pid:tuned=exo",
+        )
+        for page in ("myoexo/policies/MODEL_CARD_student_fine.md", "docs/results.md")
     ),
     *(
         GoalsBlock(

@@ -21,20 +21,22 @@ name                    files (``<stem>.npz/json``)  observation
                                                      clock: deployable; distilled from ``sac``
                                                      on twin version 1;
                                                      ``MODEL_CARD_student_exo.md``
-``student_smooth``      ``student_smooth``           ``obs_preset="exo"`` and a gentleness
+``student_fine``        ``student_fine``             ``obs_preset="exo"`` and a gentleness
                                                      weight: the same sensors and memory,
-                                                     distilled from the ``residual`` of twin
-                                                     version 3 on twin version 4 (``spindle``)
-                                                     with a temporal smoothness term, the
-                                                     weight its last input;
-                                                     ``MODEL_CARD_student_smooth.md``
+                                                     distilled from ``residual`` on today's
+                                                     default twin with a smoothness term and
+                                                     a fine-positioning term, the weight its
+                                                     last input (default 0.25);
+                                                     ``MODEL_CARD_student_fine.md``
 ======================  ===========================  ===========================================
 
 Retired (their model cards stay as the record of what they measured): ``sac_exo`` (the
 exoskeleton's sensors plus an episode clock) read a clock a device does not have and ended
 20-50 deg off on perturbed level-3 twins, and ``student_exo`` supersedes it;
 ``student_residual`` (distilled on twin version 3, without the smoothness term) had a command
-rougher than the paper's PID's, and ``student_smooth`` supersedes it.
+rougher than the paper's PID's, and ``student_smooth`` superseded it; ``student_smooth``
+(distilled with the earlier ``spindle`` reflex from the ``residual`` of twin version 3)
+settled more slowly than ``student_fine`` on today's twin, which supersedes it.
 
     import gymnasium as gym, myoexo
 
@@ -74,7 +76,7 @@ SHIPPED_POLICIES: dict[str, str] = {
     "sac": SHIPPED_POLICY,
     "student_exo": "student_exo",
     "residual": "residual_knee_exo",
-    "student_smooth": "student_smooth",
+    "student_fine": "student_fine",
 }
 
 __all__ = [

@@ -10,7 +10,7 @@ twin version 3, at its default gentleness weight), the full-state learned policy
 stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
 ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
 (``guard:student_exo``), and the deployable student of ``residual`` distilled on the current
-twin with a smoothness term (``student_smooth``), on
+twin (``student_fine``, at its default gentleness weight), on
 :data:`DEMO_SUBJECTS` subjects per spasticity level 0-3 (the protocol: 1000). Subject *i* of
 a level is the same simulated person for every controller.
 
@@ -57,7 +57,7 @@ DEMO_CONTROLLERS = (
     "guard:sac",
     "student_exo",
     "guard:student_exo",
-    "student_smooth",
+    "student_fine",
 )
 DEMO_OUT = Path("results") / "demo"
 #: Band above the reference PID's mean absolute final error (deg) within which a controller
