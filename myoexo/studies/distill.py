@@ -753,6 +753,15 @@ def _round_stem(run_dir: Path, r: int) -> Path:
     return run_dir / f"student_round_{r:02d}"
 
 
+def _saved_rounds(run_dir: Path, history: dict[str, Any]) -> list[dict[str, Any]]:
+    """The history's rounds whose student file was written (a round cut before it is not)."""
+    return [
+        h
+        for h in history["rounds"]
+        if _round_stem(run_dir, h["round"]).with_suffix(".npz").is_file()
+    ]
+
+
 def distill(
     config: DistillConfig,
     run_dir: str | Path,
@@ -810,11 +819,7 @@ def _distill(
             indent=2,
         )
         history = {"rounds": []}
-    done = [
-        h
-        for h in history["rounds"]
-        if _round_stem(run_dir, h["round"]).with_suffix(".npz").is_file()
-    ]
+    done = _saved_rounds(run_dir, history)
     history["rounds"] = done
     start = len(done)
     data = Episodes.load(data_path) if start and data_path.is_file() else Episodes()
@@ -913,11 +918,7 @@ def reselect(
         if not config.selection_subjects:
             raise ValueError("reselect with selection_subjects = 0: nothing to select on")
         history = json.loads(hist_path.read_text())
-        rounds = [
-            h
-            for h in history["rounds"]
-            if _round_stem(run_dir, h["round"]).with_suffix(".npz").is_file()
-        ]
+        rounds = _saved_rounds(run_dir, history)
         if not rounds:
             raise ValueError(f"{run_dir} has no finished round to select from")
         envs = EnvPool(config.twin)
@@ -1179,6 +1180,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_twin_arguments(parser)
 
 
+def _fixed_settings_given(args: argparse.Namespace, allowed: Sequence[str]) -> list[str]:
+    """The options typed on the command line that set a run's fixed settings: every
+    :class:`DistillConfig` field but *allowed*, and the twin's options."""
+    given = [
+        flag_of(f)
+        for f in option_fields(DistillConfig)
+        if hasattr(args, f.name) and f.name not in allowed
+    ]
+    if twin_from_args(args) != TwinOptions():
+        given.append("the twin options")
+    return given
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``myoexo policy distill``; 0 when every round is done."""
     from myoexo.policies.student import export_student_onnx
@@ -1202,30 +1216,25 @@ def run(args: argparse.Namespace) -> int:
             print(f"onnx: {export_student_onnx(chosen, options.onnx)}")
         return 0
     if options.reselect:
-        typed = [f for f in option_fields(DistillConfig) if hasattr(args, f.name)]
-        other = [flag_of(f) for f in typed if f.name not in RESELECT_FIELDS]
-        if twin_from_args(args) != TwinOptions():
-            other.append("the twin options")
-        if other:
+        fixed = _fixed_settings_given(args, RESELECT_FIELDS)
+        if fixed:
             raise ValueError(
                 "--reselect keeps the run's settings but --selection-weights and "
-                f"--selection-subjects; drop {', '.join(other)}"
+                f"--selection-subjects; drop {', '.join(fixed)}"
             )
-        changes = {f.name: getattr(args, f.name) for f in typed}
+        changes = {
+            f.name: getattr(args, f.name)
+            for f in option_fields(DistillConfig)
+            if hasattr(args, f.name)
+        }
         run_dir = Path(options.reselect)
         reselect(run_dir, log=log, **changes)
     elif options.resume:
-        given = [
-            flag_of(f)
-            for f in option_fields(DistillConfig)
-            if hasattr(args, f.name) and f.name != "rounds"
-        ]
-        if twin_from_args(args) != TwinOptions():
-            given.append("the twin options")
-        if given:
+        fixed = _fixed_settings_given(args, ("rounds",))
+        if fixed:
             raise ValueError(
                 f"--resume keeps the run's saved settings (--rounds raises their number); "
-                f"drop {', '.join(given)}"
+                f"drop {', '.join(fixed)}"
             )
         run_dir = Path(options.resume)
         distill(
