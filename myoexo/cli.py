@@ -62,6 +62,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "myoexo.studies.torque_readings",
         "compare four readings of the interaction torque with the study's numbers",
     ),
+    "twin settling-bound": (
+        "myoexo.studies.settling_bound",
+        "the soonest an open-loop command settles each subject at the PID's final error, and "
+        "at what interaction torque (an oracle on the selection subjects)",
+    ),
     "twin tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "twin strap-lag": (
         "myoexo.studies.strap_lag",

@@ -21,6 +21,7 @@ from myoexo.runtime.fields import Execution, from_options
 from myoexo.studies import calibrate as cal
 from myoexo.studies.demo import DemoConfig
 from myoexo.studies.frontier import FrontierConfig
+from myoexo.studies.settling_bound import SettlingBoundSettings
 from myoexo.studies.strap_lag import StrapLagOutput, StrapLagSettings
 from myoexo.studies.torque_readings import TorqueReadingsConfig
 from myoexo.studies.validate import ValidationConfig, ValidationOutput
@@ -42,6 +43,7 @@ def _parser(module_name: str) -> argparse.ArgumentParser:
         ("myoexo.studies.torque_readings", (TorqueReadingsConfig,)),
         ("myoexo.control.ziegler_nichols", (ZieglerNicholsSettings, TuningOutput)),
         ("myoexo.studies.strap_lag", (StrapLagSettings, StrapLagOutput)),
+        ("myoexo.studies.settling_bound", (SettlingBoundSettings,)),
         ("myoexo.studies.frontier", (FrontierConfig, Execution)),
         ("myoexo.viz.video", (VideoJob, VideoConfig)),
         ("myoexo.evaluation.cli", (EvaluationRunOptions, Execution)),
@@ -100,6 +102,8 @@ BAD = [
     (["twin", "tune-pid", "--write", "no good"], "--write = 'no good' must be a word"),
     (["twin", "tune-pid", "--level", "7"], "argument --level: invalid choice"),
     (["twin", "strap-lag", "--subjects", "0"], "--subjects = 0 is outside [1, 10000]"),
+    (["twin", "settling-bound", "--seed", "0"], "that is the evaluation root"),
+    (["twin", "settling-bound", "--levels", "4"], "argument --levels: invalid choice"),
     (["frontier", "--subjects", "0"], "--subjects = 0 must be >= 1"),
     (["frontier", "--accuracy-deg", "0"], "--accuracy-deg = 0.0 must be > 0 deg"),
     (["frontier", "--workers", "0"], "--workers = 0 must be >= 1"),
