@@ -1222,11 +1222,7 @@ def run(args: argparse.Namespace) -> int:
                 "--reselect keeps the run's settings but --selection-weights and "
                 f"--selection-subjects; drop {', '.join(fixed)}"
             )
-        changes = {
-            f.name: getattr(args, f.name)
-            for f in option_fields(DistillConfig)
-            if hasattr(args, f.name)
-        }
+        changes = {name: getattr(args, name) for name in RESELECT_FIELDS if hasattr(args, name)}
         run_dir = Path(options.reselect)
         reselect(run_dir, log=log, **changes)
     elif options.resume:

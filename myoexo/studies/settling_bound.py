@@ -112,15 +112,11 @@ class SettlingBoundSettings:
     def candidates(self) -> list[tuple[float, float, float, float]]:
         """``(rise_s, brake_start_s, brake_duration_s, brake_command)`` of every candidate;
         the constant push (``(0, 0, 0, -1)``: no rise, no pulse) first."""
-        pulses = [
-            (start, duration, command)
-            for start, duration, command in itertools.product(
-                self.brake_start_s, self.brake_duration_s, self.brake_command
-            )
-        ]
+        pulses = itertools.product(self.brake_start_s, self.brake_duration_s, self.brake_command)
         no_pulse = (0.0, 0.0, PUSH_COMMAND)
         rises = dict.fromkeys((0.0, *self.rise_s))
-        return [(rise, *pulse) for rise in rises for pulse in (no_pulse, *pulses)]
+        shapes = [no_pulse, *pulses]
+        return [(rise, *shape) for rise in rises for shape in shapes]
 
 
 class BrakePulse:
@@ -231,6 +227,7 @@ def _search(job: tuple[SettlingBoundSettings, int, int]) -> dict[str, Any]:
 def settling_bound(settings: SettlingBoundSettings, log: Any = None) -> Any:
     """One row per subject (:func:`search_subject`), every level, on ``settings.workers``
     processes."""
+    import contextlib
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -238,19 +235,16 @@ def settling_bound(settings: SettlingBoundSettings, log: Any = None) -> Any:
 
     jobs = [(settings, lv, i) for lv in settings.levels for i in range(settings.subjects)]
     rows = []
-    if settings.workers == 1:
-        iterator: Any = map(_search, jobs)
-        for row in iterator:
+    with contextlib.ExitStack() as stack:
+        mapper: Any = map
+        if settings.workers > 1:
+            ctx = mp.get_context("spawn")
+            pool = ProcessPoolExecutor(max_workers=settings.workers, mp_context=ctx)
+            mapper = stack.enter_context(pool).map
+        for row in mapper(_search, jobs):
             rows.append(row)
             if log is not None:
                 log(_line(row))
-    else:
-        ctx = mp.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=settings.workers, mp_context=ctx) as pool:
-            for row in pool.map(_search, jobs):
-                rows.append(row)
-                if log is not None:
-                    log(_line(row))
     return pd.DataFrame(rows)
 
 
