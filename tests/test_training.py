@@ -400,12 +400,14 @@ def _assert_newest_checkpoint_acts(run_dir):
 
 
 @pytest.mark.slow
-def test_jax_learner_trains_exports_and_resumes(tmp_path):
-    """SBX's SAC (JAX) goes through the same run folder, checkpoints, resume and export as
-    SB3's; its numpy actor gives the JAX policy's deterministic actions."""
+@pytest.mark.parametrize("algorithm", ["sbx_sac", "sbx_sac_overlap"])
+def test_jax_learner_trains_exports_and_resumes(tmp_path, algorithm):
+    """SBX's SAC (JAX), plain or overlapped, goes through the same run folder, checkpoints,
+    resume and export as SB3's; its numpy actor gives the JAX policy's deterministic
+    actions."""
     pytest.importorskip("sbx")
     run_dir = tmp_path / "sbx"
-    preset = _tiny_preset(algorithm="sbx_sac", eval_levels=(1,), seed=1)
+    preset = _tiny_preset(algorithm=algorithm, eval_levels=(1,), seed=1)
     first = train(preset, run_dir, verbose=0)
     assert first.num_timesteps == 400
     second = resume(run_dir, total_timesteps=600, verbose=0)
@@ -419,7 +421,7 @@ def test_jax_learner_trains_exports_and_resumes(tmp_path):
     obs = rng.standard_normal((16, actor.obs_dim)).astype(np.float32)
     jax_action, _ = model.predict(vn.normalize_obs(obs), deterministic=True)
     np.testing.assert_allclose(actor(obs), jax_action, atol=1e-5)
-    assert actor.metadata["algorithm"] == "sbx_sac"
+    assert actor.metadata["algorithm"] == algorithm
 
 
 def test_the_jax_extra_is_named_when_missing(monkeypatch):

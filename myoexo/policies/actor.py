@@ -41,12 +41,36 @@ def _gelu(x: np.ndarray) -> np.ndarray:
     return 0.5 * x * (1.0 + erf)
 
 
-_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+#: The hidden activations a numpy actor computes, by name.
+ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "gelu": _gelu,
     "relu": lambda x: np.maximum(x, 0.0),
     "tanh": np.tanh,
     "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
 }
+
+
+def sbx_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], str]:
+    """``(layers, activation)`` of an SBX squashed-Gaussian actor, as numpy arrays:
+    ``Dense_0 .. Dense_{n-1}`` hidden, ``Dense_n`` the mean head, ``Dense_{n+1}`` the log-std
+    head (flax kernels are (in, out): transposed to (out, in)). Other layers (CrossQ's batch
+    renormalization) or an approximate GELU raise ``ValueError``: such an actor acts through
+    its model. Reading the parameters waits for an update that is still computing them."""
+    params = policy.actor_state.params
+    if "params" in params:  # SAC / TQC wrap the layers; CrossQ's batch-norm state does not
+        params = params["params"]
+    names = sorted(params, key=lambda k: int(k.rpartition("_")[2]) if k[-1].isdigit() else -1)
+    if not names or any(not n.startswith("Dense_") for n in names):
+        raise ValueError(f"actor layers {sorted(params)} are not a plain MLP")
+    dense = [(np.asarray(params[n]["kernel"]).T, np.asarray(params[n]["bias"])) for n in names]
+    fn = policy.activation_fn
+    base = getattr(fn, "func", fn)
+    activation = getattr(base, "__name__", "")
+    if activation == "gelu" and getattr(fn, "keywords", {}).get("approximate", True):
+        raise ValueError("the actor's GELU is tanh-approximated; the numpy actor's is exact")
+    if activation not in ACTIVATIONS:
+        raise ValueError(f"activation {activation!r} is not supported by the numpy actor")
+    return dense, activation
 
 
 class MLPActor:
@@ -82,8 +106,8 @@ class MLPActor:
         action_high: float | np.ndarray = 1.0,
         metadata: Mapping[str, Any] | None = None,
     ) -> None:
-        if activation not in _ACTIVATIONS:
-            raise ValueError(f"activation = {activation!r}; accepted: {sorted(_ACTIVATIONS)}")
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation = {activation!r}; accepted: {sorted(ACTIVATIONS)}")
         if len(weights) < 1:
             raise ValueError("weights is empty: need at least the mean head")
         self.weights = [
@@ -153,7 +177,7 @@ class MLPActor:
         """Deterministic action(s) in [action_low, action_high], float32, shape
         ``(..., action_dim)``."""
         h = self.normalize(obs)
-        act = _ACTIVATIONS[self.activation]
+        act = ACTIVATIONS[self.activation]
         for w, b in self.weights[:-1]:
             h = act(h @ w.T + b)
         w, b = self.weights[-1]

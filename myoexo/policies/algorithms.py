@@ -5,7 +5,8 @@ A name is accepted in any case (``"sac"``, ``"SAC"``); a controller spec
 ``"sbx_sac:model.zip"`` and a training config's ``algorithm = "sbx_sac"``
 (:class:`~myoexo.training.config.TrainConfig`) both read this table. The table holds the
 learners that trained the shipped policies and the documented comparisons: SB3's SAC and PPO,
-and SBX's SAC, TQC and CrossQ.
+SBX's SAC, TQC and CrossQ, and ``sbx_sac_overlap``: SBX's SAC with the env collecting while
+the updates run (:mod:`myoexo.policies.overlapped_sac`).
 
 The ``sbx_*`` learners are SBX's (stable-baselines3 in JAX, the ``jax`` extra): the same API,
 checkpoints and exports, with jitted updates. JAX on a small machine starts more threads than
@@ -68,6 +69,13 @@ ALGORITHMS: MappingProxyType[str, Algorithm] = MappingProxyType(
             Algorithm("sac", "SAC"),
             Algorithm("ppo", "PPO", on_policy=True),
             Algorithm("sbx_sac", "SAC", "sbx", "jax", framework="jax"),
+            Algorithm(
+                "sbx_sac_overlap",
+                "OverlappedSAC",
+                "myoexo.policies.overlapped_sac",
+                "jax",
+                framework="jax",
+            ),
             Algorithm("sbx_tqc", "TQC", "sbx", "jax", framework="jax"),
             Algorithm("sbx_crossq", "CrossQ", "sbx", "jax", framework="jax"),
         )

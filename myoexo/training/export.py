@@ -24,7 +24,7 @@ import numpy as np
 from myoexo.control.residual import RESIDUAL_KEY, ResidualConfig
 from myoexo.envs.options import TwinOptions
 from myoexo.model import recorded_twin_version
-from myoexo.policies.actor import MLPActor, save_actor
+from myoexo.policies.actor import MLPActor, save_actor, sbx_actor_layers
 from myoexo.policies.student import StudentController
 from myoexo.runtime.fields import add_options, add_positional, check_fields, from_options, option
 from myoexo.training import checkpoints as ck
@@ -47,7 +47,8 @@ def actor_from_sac(
         metadata: Provenance stored with the actor.
     """
     if hasattr(model.policy, "actor_state"):  # SBX (JAX)
-        weights, activation = _jax_actor_layers(model.policy)
+        layers, activation = sbx_actor_layers(model.policy)
+        weights = layers[:-1]  # the log-std head is not part of the deterministic actor
     else:
         weights, activation = _torch_actor_layers(model.policy)
     bounds = {"action_low": model.action_space.low, "action_high": model.action_space.high}
@@ -83,28 +84,6 @@ def _torch_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]
         for lin in [*linears, actor.mu]
     ]
     return weights, acts.pop() if acts else "gelu"
-
-
-def _jax_actor_layers(policy: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], str]:
-    """``(weights, activation)`` of an SBX squashed-Gaussian actor: ``Dense_0 ..
-    Dense_{n-1}`` hidden, ``Dense_n`` the mean, ``Dense_{n+1}`` the log-std (flax kernels
-    are (in, out): transposed). Other layers (CrossQ's batch renormalization) or an
-    approximate GELU raise ``ValueError``: such an actor acts through its model."""
-    params = policy.actor_state.params
-    if "params" in params:  # SAC / TQC wrap the layers; CrossQ's batch-norm state does not
-        params = params["params"]
-    names = sorted(params, key=lambda k: int(k.rpartition("_")[2]) if k[-1].isdigit() else -1)
-    if not names or any(not n.startswith("Dense_") for n in names):
-        raise ValueError(f"actor layers {sorted(params)} are not a plain MLP")
-    dense = [(np.asarray(params[n]["kernel"]).T, np.asarray(params[n]["bias"])) for n in names]
-    fn = policy.activation_fn
-    base = getattr(fn, "func", fn)
-    activation = getattr(base, "__name__", "")
-    if activation == "gelu" and getattr(fn, "keywords", {}).get("approximate", True):
-        raise ValueError("the actor's GELU is tanh-approximated; the numpy actor's is exact")
-    if activation not in ("gelu", "relu", "tanh", "elu"):
-        raise ValueError(f"activation {activation!r} is not supported by the export")
-    return dense[:-1], activation  # the log-std head is not part of the deterministic actor
 
 
 def reference_pairs(
