@@ -2,19 +2,21 @@
 transition, against the arithmetic limit of one core.
 
     python benchmarks/bench_training.py            # SB3 SAC vs SBX (JAX) SAC/TQC/CrossQ
-    python benchmarks/bench_training.py --quick    # SB3 SAC vs SBX SAC, within ~3 minutes
+    python benchmarks/bench_training.py --quick    # SB3 SAC vs SBX SAC, within ~4 minutes
     python benchmarks/bench_training.py --learners sac sbx_sac:16 sbx_tqc
 
 A learner is ``ALGORITHM[:K]``: an algorithm of the training config (``sac``, ``sbx_sac``,
-``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
+``sbx_sac_overlap``, ``sbx_tqc``, ``sbx_crossq``) that trains every ``K`` vector steps with
 ``K x n_envs`` gradient updates, i.e. one update per transition for every ``K`` (default 1;
 a larger ``K`` runs many compiled updates per call). ``sbx_sac:KxN`` trains ``N`` seeds
 together, their updates in one compiled call (``jax.vmap`` over seeds,
 ``SeedBatchedSAC`` of ``seed_batched_sac.py`` beside this script); its rates are
 *seed-updates* per second (every seed's updates counted), the unit that compares it with
 one seed trained alone. Every learner uses the ``cpu`` preset's networks (64-64 GELU),
-batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). Measured in one process, one
-learner after the other:
+batch (256) and env (``MyoExoKneeRandom-v0``, 4 envs). ``sbx_sac_overlap`` collects with a
+numpy copy of the actor while its update call runs (``myoexo/policies/overlapped_sac.py``);
+every timing waits for the last update to finish. Measured in one process, one learner after
+the other:
 
 1. **env**: transitions/s of the vector env under random actions (once: the simulator's
    share);
@@ -43,13 +45,14 @@ FULL_LEARNERS = (
     "sac",
     "sbx_sac",
     "sbx_sac:16",
+    "sbx_sac_overlap:16",
     "sbx_sac:64",
     "sbx_sac:16x2",
     "sbx_sac:16x5",
     "sbx_tqc:16",
     "sbx_crossq:16",
 )
-QUICK_LEARNERS = ("sac", "sbx_sac:16", "sbx_sac:16x5")
+QUICK_LEARNERS = ("sac", "sbx_sac:16", "sbx_sac_overlap:16", "sbx_sac:16x5")
 
 
 def main() -> None:
@@ -99,6 +102,14 @@ def main() -> None:
     best = max(rows, key=lambda r: r["learn_ups"])
     print(f"fastest: {best['learner']}")
     print(f"learner speed-up vs SB3 SAC: {best['learn_ups'] / base['learn_ups']:.2f}x")
+
+
+def wait_for_updates(model: Any) -> None:
+    """Block until a JAX learner's dispatched updates are computed (SB3's are synchronous)."""
+    if hasattr(model.policy, "actor_state"):
+        import jax
+
+        jax.block_until_ready((model.policy.actor_state.params, model.policy.qf_state.params))
 
 
 def matmul_gflops(n: int = 512, repeat: int = 20) -> float:
@@ -158,12 +169,14 @@ def measure(
     t0 = time.perf_counter()
     for _ in range(calls):
         model.train(gradient_steps=chunk, batch_size=kw["batch_size"])
+    wait_for_updates(model)
     ups = calls * chunk / (time.perf_counter() - t0)
 
     model.learn(preset.n_envs * kw["train_freq"], reset_num_timesteps=False)  # warm up learn
     before = model._n_updates
     t0 = time.perf_counter()
     model.learn(learn_steps, callback=RewardTermsCallback(), reset_num_timesteps=False)
+    wait_for_updates(model)
     dt = time.perf_counter() - t0
     learn_sps = learn_steps / dt
     learn_ups = (model._n_updates - before) / dt

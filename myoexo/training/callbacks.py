@@ -2,6 +2,8 @@
 
 * :class:`RewardTermsCallback`: per-episode means of the reward terms (``info["rwd_dict"]``)
   and the paper's episode quantities per level, to the SB3 logger (tensorboard, CSV).
+* :class:`SettlingRewardCallback`: a hindsight reward for settling sooner: once an episode
+  ends, each of its stored transitions before its settling time is charged a penalty.
 * :class:`PaperMetricsEvalCallback`: every ``eval_every_steps``, the deterministic policy on
   a few fixed subjects per level, next to the PID on the same subjects: final error, peak
   and RMS interaction torque (docs/reference.md section 5), and the score that ranks
@@ -34,6 +36,7 @@ from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.criteria import CRITERIA_METRICS
+from myoexo.evaluation.metrics import FINAL_WINDOW_S, SETTLING_THRESHOLD, settling_time
 from myoexo.runtime.files import write_json_atomic
 from myoexo.runtime.lifecycle import StopSignals
 from myoexo.spasticity.levels import VALID_LEVELS
@@ -103,6 +106,75 @@ class RewardTermsCallback(BaseCallback):
         self._count[i] = 0
         self._peak[i] = 0.0
         self._return[i] = 0.0
+
+
+class SettlingRewardCallback(BaseCallback):
+    """A hindsight reward for settling sooner, for an off-policy learner.
+
+    Settling time is the paper's (``myoexo.evaluation.metrics.settling_time``): the knee
+    stays within 2 % of the step around the episode's final angle (its mean over the last
+    0.1 s) from then on, the step measured from the first control step; an episode that
+    never settles counts as settled at its end. No env can reward it at the step it
+    happens, since it depends on how the episode ends; so once an episode of an env has
+    ended, this callback subtracts ``penalty`` from the reward stored in the replay buffer
+    for each of that episode's control steps before its settling time (the episode's sum:
+    ``-penalty x settling steps``), before the next update. The knee angle is read from
+    ``info["error_deg"]`` (knee minus target), the time from ``info["time_s"]``.
+
+    Args:
+        penalty: Charged per control step before settling (> 0).
+        threshold: Band half-width, a fraction of the step.
+    """
+
+    def __init__(
+        self, penalty: float, threshold: float = SETTLING_THRESHOLD, verbose: int = 0
+    ) -> None:
+        super().__init__(verbose)
+        if not penalty > 0.0:
+            raise ValueError(f"penalty = {penalty} must be > 0")
+        self.penalty = float(penalty)
+        self.threshold = float(threshold)
+        self._rows: list[list[int]] = []
+        self._errors: list[list[float]] = []
+        self._times: list[list[float]] = []
+        self._due: list[tuple[int, list[int]]] = []
+
+    def _on_training_start(self) -> None:
+        n = self.training_env.num_envs
+        self._rows = [[] for _ in range(n)]
+        self._errors = [[] for _ in range(n)]
+        self._times = [[] for _ in range(n)]
+        self._due = []
+
+    def _on_step(self) -> bool:
+        buffer = getattr(self.model, "replay_buffer", None)
+        if buffer is None:
+            raise TypeError(f"{type(self.model).__name__} keeps no replay buffer to relabel")
+        row = int(buffer.pos)  # where this step's transitions are stored
+        dones = self.locals["dones"]
+        for i, info in enumerate(self.locals["infos"]):
+            self._rows[i].append(row)
+            self._errors[i].append(float(info["error_deg"]))
+            self._times[i].append(float(info["time_s"]))
+            if dones[i]:
+                steps = self.settling_steps(self._times[i], self._errors[i])
+                self._due.append((i, self._rows[i][:steps]))
+                self._rows[i], self._errors[i], self._times[i] = [], [], []
+        return True
+
+    def settling_steps(self, times_s: list[float], errors_deg: list[float]) -> int:
+        """Control steps of an episode before its settling time (all of them if unsettled)."""
+        t, y = np.asarray(times_s), np.asarray(errors_deg)
+        final = float(np.mean(y[t >= t[-1] - FINAL_WINDOW_S - 1e-12]))
+        ts = settling_time(t, y, self.threshold, y_final=final)
+        return y.size if math.isnan(ts) else int(np.searchsorted(t, ts - 1e-9))
+
+    def _on_rollout_end(self) -> None:
+        """Charge the ended episodes, whose transitions are all stored by now."""
+        rewards = self.model.replay_buffer.rewards  # type: ignore[attr-defined]
+        for i, rows in self._due:
+            rewards[rows, i] -= self.penalty
+        self._due = []
 
 
 @dataclass(frozen=True)

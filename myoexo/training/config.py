@@ -71,6 +71,9 @@ from myoexo.policies.algorithms import ALGORITHMS, get_algorithm
 from myoexo.runtime.fields import FieldError, FieldSpec, check_fields, convert, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
+#: Largest ``settling_penalty`` (per control step; the study's reward terms are of order 1).
+SETTLING_PENALTY_MAX = 10.0
+
 #: Env every preset trains on (level drawn uniformly at every reset, as the paper trains).
 DEFAULT_ENV_ID = "MyoExoKneeRandom-v0"
 
@@ -247,6 +250,13 @@ class TrainConfig:
         low=RESIDUAL_PENALTY_RANGE[0], high=RESIDUAL_PENALTY_RANGE[1],
     )  # fmt: skip
 
+    settling_penalty: float = option(
+        0.0,
+        "hindsight reward: charged per control step before the episode settled (2 % band "
+        "around its own final angle), once it has ended (0: none; off-policy learners only)",
+        low=0.0, high=SETTLING_PENALTY_MAX,
+    )  # fmt: skip
+
     def __post_init__(self) -> None:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             value = getattr(self, name)
@@ -290,6 +300,11 @@ class TrainConfig:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):
                 raise FieldError("TrainConfig", name, (), "is empty")
+        if self.settling_penalty and get_algorithm(self.algorithm).on_policy:
+            raise FieldError(
+                "TrainConfig", "settling_penalty", self.settling_penalty,
+                f"rewrites stored rewards; {self.algorithm} keeps no replay buffer",
+            )  # fmt: skip
 
     # -- changes ---------------------------------------------------------------------------
     def replace(self, **changes: Any) -> TrainConfig:

@@ -343,7 +343,11 @@ def _learn(
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
-    from myoexo.training.callbacks import RewardTermsCallback, StopOnSignalCallback
+    from myoexo.training.callbacks import (
+        RewardTermsCallback,
+        SettlingRewardCallback,
+        StopOnSignalCallback,
+    )
 
     torch.set_num_threads(config.torch_threads)
     session = _next_session(run_dir)
@@ -369,6 +373,11 @@ def _learn(
         if remaining > 0:
             callbacks = [
                 RewardTermsCallback(),
+                *(
+                    [SettlingRewardCallback(config.settling_penalty)]
+                    if config.settling_penalty
+                    else []
+                ),
                 *([evaluator] if evaluator else []),
                 checkpointer,
                 StopOnSignalCallback(stop),
