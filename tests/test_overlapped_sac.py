@@ -59,11 +59,11 @@ def test_the_behaviour_sampler_draws_from_the_jax_actors_distribution(noise):
     mean = np.asarray(dist.distribution.loc)
     std = np.asarray(dist.distribution.stddev())
     expected = np.tanh(mean + noise * std)
-    sampler = BehaviourSampler(*sbx_actor_layers(model.policy), _ConstantNoise(noise))
-    np.testing.assert_allclose(sampler.sample(obs), expected, atol=1e-5)
+    sampler = BehaviourSampler(*sbx_actor_layers(model.policy))
+    np.testing.assert_allclose(sampler.sample(obs, _ConstantNoise(noise)), expected, atol=1e-5)
     if noise == 0.0:  # the deterministic action of the JAX policy
         jax_action, _ = model.predict(obs, deterministic=True)
-        np.testing.assert_allclose(sampler.sample(obs), jax_action, atol=1e-5)
+        np.testing.assert_allclose(sampler.sample(obs, _ConstantNoise(0.0)), jax_action, atol=1e-5)
 
 
 def test_each_chunk_is_collected_with_the_actor_one_update_call_before():

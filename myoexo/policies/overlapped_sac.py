@@ -42,12 +42,9 @@ class BehaviourSampler:
         layers: ``[(W, b), ...]``, ``W`` of shape (out, in): the hidden layers, then the
             mean head, then the log-std head (:func:`~myoexo.policies.actor.sbx_actor_layers`).
         activation: Hidden activation (a key of :data:`~myoexo.policies.actor.ACTIVATIONS`).
-        rng: Source of the Gaussian noise.
     """
 
-    def __init__(
-        self, layers: list[tuple[np.ndarray, np.ndarray]], activation: str, rng: np.random.Generator
-    ) -> None:
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], activation: str) -> None:
         if len(layers) < 2:
             raise ValueError(f"{len(layers)} layers: need the mean and the log-std heads")
         if activation not in ACTIVATIONS:
@@ -55,17 +52,17 @@ class BehaviourSampler:
         self.hidden = layers[:-2]
         self.mean_head, self.log_std_head = layers[-2], layers[-1]
         self.activation = activation
-        self.rng = rng
 
-    def sample(self, obs: np.ndarray) -> np.ndarray:
-        """One action per row of *obs* (observations as the policy sees them), in [-1, 1]."""
+    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """One action per row of *obs* (observations as the policy sees them), in [-1, 1],
+        its Gaussian noise drawn from *rng*."""
         act = ACTIVATIONS[self.activation]
         h = np.asarray(obs, dtype=np.float32)
         for w, b in self.hidden:
             h = act(h @ w.T + b)
         mean = h @ self.mean_head[0].T + self.mean_head[1]
         log_std = np.clip(h @ self.log_std_head[0].T + self.log_std_head[1], *LOG_STD_RANGE)
-        noise = self.rng.standard_normal(mean.shape)
+        noise = rng.standard_normal(mean.shape)
         return np.tanh(mean + np.exp(log_std) * noise).astype(np.float32)
 
 
@@ -74,7 +71,7 @@ class OverlappedSAC(SAC):
 
     Takes SBX SAC's arguments. Saved models are SBX SAC models with two more attributes:
     ``behaviour`` (the :class:`BehaviourSampler` of the next chunk, ``None`` before the
-    first update) and ``behaviour_rng`` (its noise generator).
+    first update) and ``behaviour_rng`` (the generator of its noise, the run's one stream).
     """
 
     def _setup_model(self) -> None:
@@ -99,7 +96,7 @@ class OverlappedSAC(SAC):
         if self.num_timesteps < learning_starts or self.behaviour is None:
             return super()._sample_action(learning_starts, action_noise, n_envs)
         assert isinstance(self._last_obs, np.ndarray), "a flat Box observation"
-        scaled = self.behaviour.sample(self._last_obs)
+        scaled = self.behaviour.sample(self._last_obs, self.behaviour_rng)
         if action_noise is not None:
             scaled = np.clip(scaled + action_noise(), -1.0, 1.0)
         return self.policy.unscale_action(scaled), scaled
@@ -107,7 +104,7 @@ class OverlappedSAC(SAC):
     def train(self, gradient_steps: int, batch_size: int) -> None:
         """Take the behaviour actor from the previous call's parameters (waiting for them),
         log that call's losses, then dispatch ``gradient_steps`` updates without waiting."""
-        self.behaviour = BehaviourSampler(*sbx_actor_layers(self.policy), self.behaviour_rng)
+        self.behaviour = BehaviourSampler(*sbx_actor_layers(self.policy))
         self._record_losses()
         assert self.replay_buffer is not None
         data = self.replay_buffer.sample(batch_size * gradient_steps, env=self._vec_normalize_env)
