@@ -87,24 +87,6 @@ class SeedBatchedSAC:
             self._compiled[key] = jax.jit(jax.vmap(one_seed))
         return self._compiled[key]
 
-    def _sample(self, model: Any, gradient_steps: int, batch_size: int) -> tuple[Any, ...]:
-        """One model's ``gradient_steps`` batches, as SBX's ``SAC.train`` samples them."""
-        data = model.replay_buffer.sample(batch_size * gradient_steps, env=model._vec_normalize_env)
-        if isinstance(data.observations, dict):
-            raise ValueError("SeedBatchedSAC supports flat (Box) observations only")
-        if data.discounts is None:
-            discounts = np.full((batch_size * gradient_steps,), model.gamma, dtype=np.float32)
-        else:
-            discounts = data.discounts.numpy().flatten()
-        return (
-            data.observations.numpy(),
-            data.actions.numpy(),
-            data.next_observations.numpy(),
-            data.dones.numpy().flatten(),
-            data.rewards.numpy().flatten(),
-            discounts,
-        )
-
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
         """``gradient_steps`` updates of every model, in one compiled call.
 
@@ -113,23 +95,15 @@ class SeedBatchedSAC:
         """
         from sbx.common.type_aliases import ReplayBufferSamplesNp
 
+        from myoexo.policies.overlapped_sac import sample_batches, update_learning_rates
+
         jax = self._jax
         batch_size = int(batch_size or self.models[0].batch_size)
         first = self.models[0]
         offset = int((first._n_updates + 1) % first.policy_delay)
         for m in self.models:
-            m._update_learning_rate(
-                m.policy.actor_state.opt_state,
-                learning_rate=m.lr_schedule(m._current_progress_remaining),
-                name="learning_rate_actor",
-            )
-            m._update_learning_rate(
-                m.policy.qf_state.opt_state,
-                learning_rate=m.initial_qf_learning_rate
-                or m.lr_schedule(m._current_progress_remaining),
-                name="learning_rate_critic",
-            )
-        samples = [self._sample(m, gradient_steps, batch_size) for m in self.models]
+            update_learning_rates(m)
+        samples = [sample_batches(m, gradient_steps, batch_size) for m in self.models]
         data = ReplayBufferSamplesNp(*(np.stack(parts) for parts in zip(*samples, strict=True)))
         qf, actor, ent, rng = (
             _stack([getattr_path(m, path) for m in self.models])

@@ -144,3 +144,32 @@ def test_a_nested_observation_space_is_refused():
 
     with pytest.raises(ValueError, match="flat Box observation space"):
         OverlappedSAC("MlpPolicy", sb3_vec_env(_GridEnv, n_envs=1), device="cpu")
+
+
+def test_an_update_call_is_sbx_sacs_update():
+    """Given the same network, replay buffer and batches, one update call of the overlapped
+    learner leaves the parameters SBX's SAC leaves."""
+    import jax
+
+    models = [_model("sbx_sac", seed=2), _model("sbx_sac_overlap", seed=2)]
+    rng = np.random.default_rng(2)
+    venv = models[0].get_env()
+    obs = venv.reset()
+    for _ in range(40):
+        action = rng.uniform(-1.0, 1.0, (venv.num_envs, 1)).astype(np.float32)
+        new_obs, reward, done, infos = venv.step(action)
+        for model in models:
+            model.replay_buffer.add(obs, new_obs, action, reward, done, infos)
+        obs = new_obs
+    leaves = []
+    for model in models:
+        model._vec_normalize_env = None  # the batches as stored: one env stepped both buffers
+        np.random.seed(7)  # noqa: NPY002 - SB3's replay buffer samples from the global one
+        model.train(gradient_steps=8, batch_size=32)
+        leaves.append(
+            jax.tree_util.tree_leaves(
+                (model.policy.actor_state.params, model.policy.qf_state.params)
+            )
+        )
+    for plain, overlapped in zip(*leaves, strict=True):
+        np.testing.assert_array_equal(np.asarray(plain), np.asarray(overlapped))

@@ -35,6 +35,45 @@ from myoexo.policies.actor import ACTIVATIONS, sbx_actor_layers
 LOG_STD_RANGE = (-20.0, 2.0)
 
 
+def update_learning_rates(model: Any) -> None:
+    """Set an SBX SAC model's actor and critic learning rates for its progress, as SBX's
+    ``SAC.train`` does before its updates."""
+    model._update_learning_rate(
+        model.policy.actor_state.opt_state,
+        learning_rate=model.lr_schedule(model._current_progress_remaining),
+        name="learning_rate_actor",
+    )
+    model._update_learning_rate(
+        model.policy.qf_state.opt_state,
+        learning_rate=model.initial_qf_learning_rate
+        or model.lr_schedule(model._current_progress_remaining),
+        name="learning_rate_critic",
+    )
+
+
+def sample_batches(model: Any, gradient_steps: int, batch_size: int) -> ReplayBufferSamplesNp:
+    """``gradient_steps`` batches of an SBX SAC model's replay buffer in one draw, as numpy
+    arrays in the order its jitted update slices them (SBX's ``SAC.train`` sampling; flat
+    ``Box`` observations)."""
+    n = batch_size * gradient_steps
+    data = model.replay_buffer.sample(n, env=model._vec_normalize_env)
+    if isinstance(data.observations, dict):
+        raise ValueError("only flat (Box) observations are supported")
+    discounts = (
+        np.full((n,), model.gamma, dtype=np.float32)
+        if data.discounts is None
+        else data.discounts.numpy().flatten()
+    )
+    return ReplayBufferSamplesNp(
+        data.observations.numpy(),
+        data.actions.numpy(),
+        data.next_observations.numpy(),
+        data.dones.numpy().flatten(),
+        data.rewards.numpy().flatten(),
+        discounts,
+    )
+
+
 class BehaviourSampler:
     """The stochastic actor of an SBX SAC policy in numpy: ``tanh(mean + std * noise)``.
 
@@ -106,34 +145,9 @@ class OverlappedSAC(SAC):
         log that call's losses, then dispatch ``gradient_steps`` updates without waiting."""
         self.behaviour = BehaviourSampler(*sbx_actor_layers(self.policy))
         self._record_losses()
-        assert self.replay_buffer is not None
-        data = self.replay_buffer.sample(batch_size * gradient_steps, env=self._vec_normalize_env)
-        self._update_learning_rate(
-            self.policy.actor_state.opt_state,
-            learning_rate=self.lr_schedule(self._current_progress_remaining),
-            name="learning_rate_actor",
-        )
-        self._update_learning_rate(
-            self.policy.qf_state.opt_state,
-            learning_rate=self.initial_qf_learning_rate
-            or self.lr_schedule(self._current_progress_remaining),
-            name="learning_rate_critic",
-        )
+        batch = sample_batches(self, gradient_steps, batch_size)
+        update_learning_rates(self)
         self._maybe_reset_params()
-        n = batch_size * gradient_steps
-        discounts = (
-            np.full((n,), self.gamma, dtype=np.float32)
-            if data.discounts is None
-            else data.discounts.numpy().flatten()
-        )
-        batch = ReplayBufferSamplesNp(
-            data.observations.numpy(),
-            data.actions.numpy(),
-            data.next_observations.numpy(),
-            data.dones.numpy().flatten(),
-            data.rewards.numpy().flatten(),
-            discounts,
-        )
         (
             self.policy.qf_state,
             self.policy.actor_state,
