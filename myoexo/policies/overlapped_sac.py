@@ -8,7 +8,7 @@ collected step waits behind the update in flight, and each phase waits for the o
 :class:`OverlappedSAC` lets them run at the same time on two cores:
 
 * the update is dispatched and not waited for (its losses are read, and logged, at the next
-  call, when they are done);
+  call, when they are done), and the next call samples its batches before it waits for it;
 * the env is driven by a numpy copy of the actor (:class:`BehaviourSampler`), taken when
   an update call starts from the parameters the previous call left: the actions of a chunk
   come from the actor one training call before the newest, as in an asynchronous
@@ -141,11 +141,12 @@ class OverlappedSAC(SAC):
         return self.policy.unscale_action(scaled), scaled
 
     def train(self, gradient_steps: int, batch_size: int) -> None:
-        """Take the behaviour actor from the previous call's parameters (waiting for them),
-        log that call's losses, then dispatch ``gradient_steps`` updates without waiting."""
+        """Sample the call's batches (while the previous call may still run), take the
+        behaviour actor from the previous call's parameters (waiting for them), log that
+        call's losses, then dispatch ``gradient_steps`` updates without waiting."""
+        batch = sample_batches(self, gradient_steps, batch_size)  # while the last call runs
         self.behaviour = BehaviourSampler(*sbx_actor_layers(self.policy))
         self._record_losses()
-        batch = sample_batches(self, gradient_steps, batch_size)
         update_learning_rates(self)
         self._maybe_reset_params()
         (
