@@ -104,6 +104,14 @@ BAD = [
     (["twin", "strap-lag", "--subjects", "0"], "--subjects = 0 is outside [1, 10000]"),
     (["twin", "settling-bound", "--seed", "0"], "that is the evaluation root"),
     (["twin", "settling-bound", "--levels", "4"], "argument --levels: invalid choice"),
+    (
+        ["policy", "train", "--settling-penalty", "-1"],
+        "--settling-penalty = -1.0 is outside [0, 10]",
+    ),
+    (
+        ["policy", "train", "--preset", "ppo", "--settling-penalty", "1"],
+        "rewrites stored rewards; ppo keeps no replay buffer",
+    ),
     (["frontier", "--subjects", "0"], "--subjects = 0 must be >= 1"),
     (["frontier", "--accuracy-deg", "0"], "--accuracy-deg = 0.0 must be > 0 deg"),
     (["frontier", "--workers", "0"], "--workers = 0 must be >= 1"),
@@ -127,7 +135,8 @@ def test_a_bad_value_is_one_line_naming_the_option_before_any_work(
         code = stop.code
     assert code == 2
     (line,) = capsys.readouterr().err.splitlines()
-    assert line.startswith(f"myoexo {' '.join(argv[: 2 if argv[0] == 'twin' else 1])}: error: ")
+    words = 2 if argv[0] in ("twin", "policy") else 1
+    assert line.startswith(f"myoexo {' '.join(argv[:words])}: error: ")
     assert message in line, line
     assert not list(tmp_path.iterdir())  # nothing written
 
