@@ -119,7 +119,9 @@ class SettlingRewardCallback(BaseCallback):
     ended, this callback subtracts ``penalty`` from the reward stored in the replay buffer
     for each of that episode's control steps before its settling time (the episode's sum:
     ``-penalty x settling steps``), before the next update. The knee angle is read from
-    ``info["error_deg"]`` (knee minus target), the time from ``info["time_s"]``.
+    ``info["error_deg"]`` (knee minus target), the time from ``info["time_s"]``. A run
+    resumed from a checkpoint leaves uncharged the episodes that were running when it
+    stopped (their ends were never seen).
 
     Args:
         penalty: Charged per control step before settling (> 0).
