@@ -818,3 +818,31 @@ def test_reselect_scores_every_round_again_over_the_weight_range(tmp_path):
     chosen = load_student(run / "student")
     assert chosen.metadata["round"] == best
     assert chosen.metadata["distill_config"]["selection_weights"] == [0.0, 1.0]
+
+
+def test_an_exported_actor_teaches_by_the_path_of_its_npz(tmp_path, monkeypatch):
+    """`--teacher STEM.npz` (relative or absolute, with or without `@W`): the exported actor
+    itself, on its base at its weight, as the shipped one of the same files would teach."""
+    import shutil
+
+    from myoexo.envs import make_env
+    from myoexo.policies import shipped_path
+    from myoexo.studies.distill import load_teacher, teacher_controller
+
+    stem = shipped_path("residual")
+    for suffix in (".npz", ".json"):
+        shutil.copy(stem.with_suffix(suffix), tmp_path / f"teacher{suffix}")
+    monkeypatch.chdir(tmp_path)
+    shipped = load_teacher("residual")
+    for name in ("teacher.npz", str(tmp_path / "teacher.npz"), "teacher.npz@0.5"):
+        actor = load_teacher(name)
+        assert actor.metadata == shipped.metadata
+        obs = np.zeros(actor.obs_dim)
+        np.testing.assert_array_equal(actor(obs), shipped(obs))
+    env = make_env(1, episode_duration_s=0.5)
+    try:
+        assert teacher_controller("teacher.npz@0.5", load_teacher("teacher.npz"), env) is not None
+    finally:
+        env.close()
+    with pytest.raises(FileNotFoundError):
+        load_teacher("missing.npz")

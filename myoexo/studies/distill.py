@@ -168,8 +168,9 @@ class DistillConfig:
     )
     teacher: str = option(
         "sac",
-        "shipped full-state policy that labels the states (sac, or residual on its base at its "
-        "default gentleness weight; residual@W at weight W)",
+        "full-state policy that labels the states: a shipped one (sac, or residual on its base "
+        "at its default gentleness weight; residual@W at weight W) or an exported actor's "
+        "STEM.npz (myoexo policy export --out STEM)",
     )
     fine_gain: float = option(
         0.0, "privileged fine-positioning term on the teacher's labels (0: the teacher alone)",
@@ -350,11 +351,17 @@ class Expert:
 
 
 def load_teacher(name: str = "sac") -> MLPActor:
-    """The shipped full-state policy's actor (checked against its reference pairs); *name*
-    may carry a gentleness weight (``residual@0.5``)."""
-    from myoexo.policies import load_policy
+    """The full-state teacher's actor (checked against its reference pairs): a shipped
+    policy by name, or an exported actor by the path of its ``.npz`` (beside its
+    ``.json``, e.g. ``myoexo policy export RUN --out STEM``); *name* may carry a gentleness
+    weight (``residual@0.5``, ``runs/teacher.npz@0.5``)."""
+    from myoexo.policies import load_controller, load_policy
 
-    teacher = load_policy(name.rpartition("@")[0] if "@" in name else name)
+    stem = name.rpartition("@")[0] if "@" in name else name
+    if stem.endswith(".npz"):
+        teacher = load_controller(Path(stem).with_suffix(""))
+    else:
+        teacher = load_policy(stem)
     if not isinstance(teacher, MLPActor):
         raise ValueError(f"teacher {name!r} is not a plain actor ({type(teacher).__name__})")
     if teacher.obs_preset != "full":
