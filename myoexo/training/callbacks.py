@@ -36,7 +36,12 @@ from myoexo.envs.options import TwinOptions
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.criteria import CRITERIA_METRICS
-from myoexo.evaluation.metrics import FINAL_WINDOW_S, SETTLING_THRESHOLD, settling_time
+from myoexo.evaluation.metrics import (
+    FINAL_WINDOW_S,
+    SETTLING_THRESHOLD,
+    final_value,
+    settling_time,
+)
 from myoexo.runtime.files import write_json_atomic
 from myoexo.runtime.lifecycle import StopSignals
 from myoexo.spasticity.levels import VALID_LEVELS
@@ -136,46 +141,46 @@ class SettlingRewardCallback(BaseCallback):
             raise ValueError(f"penalty = {penalty} must be > 0")
         self.penalty = float(penalty)
         self.threshold = float(threshold)
-        self._rows: list[list[int]] = []
+        self._buffer: Any = None
+        self._first_row: list[int] = []  # buffer row of each env's episode's first step
         self._errors: list[list[float]] = []
         self._times: list[list[float]] = []
-        self._due: list[tuple[int, list[int]]] = []
+        self._due: list[tuple[int, np.ndarray]] = []
 
     def _on_training_start(self) -> None:
+        self._buffer = getattr(self.model, "replay_buffer", None)
+        if self._buffer is None:
+            raise TypeError(f"{type(self.model).__name__} keeps no replay buffer to relabel")
         n = self.training_env.num_envs
-        self._rows = [[] for _ in range(n)]
+        self._first_row = [int(self._buffer.pos)] * n
         self._errors = [[] for _ in range(n)]
         self._times = [[] for _ in range(n)]
         self._due = []
 
     def _on_step(self) -> bool:
-        buffer = getattr(self.model, "replay_buffer", None)
-        if buffer is None:
-            raise TypeError(f"{type(self.model).__name__} keeps no replay buffer to relabel")
-        row = int(buffer.pos)  # where this step's transitions are stored
         dones = self.locals["dones"]
         for i, info in enumerate(self.locals["infos"]):
-            self._rows[i].append(row)
             self._errors[i].append(float(info["error_deg"]))
             self._times[i].append(float(info["time_s"]))
             if dones[i]:
                 steps = self.settling_steps(self._times[i], self._errors[i])
-                self._due.append((i, self._rows[i][:steps]))
-                self._rows[i], self._errors[i], self._times[i] = [], [], []
+                rows = (self._first_row[i] + np.arange(steps)) % self._buffer.buffer_size
+                self._due.append((i, rows))
+                # this step's transition goes to the buffer's current row; the next, after it
+                self._first_row[i] = (int(self._buffer.pos) + 1) % self._buffer.buffer_size
+                self._errors[i], self._times[i] = [], []
         return True
 
     def settling_steps(self, times_s: list[float], errors_deg: list[float]) -> int:
         """Control steps of an episode before its settling time (all of them if unsettled)."""
         t, y = np.asarray(times_s), np.asarray(errors_deg)
-        final = float(np.mean(y[t >= t[-1] - FINAL_WINDOW_S - 1e-12]))
-        ts = settling_time(t, y, self.threshold, y_final=final)
+        ts = settling_time(t, y, self.threshold, y_final=final_value(t, y, FINAL_WINDOW_S))
         return y.size if math.isnan(ts) else int(np.searchsorted(t, ts - 1e-9))
 
     def _on_rollout_end(self) -> None:
         """Charge the ended episodes, whose transitions are all stored by now."""
-        rewards = self.model.replay_buffer.rewards  # type: ignore[attr-defined]
         for i, rows in self._due:
-            rewards[rows, i] -= self.penalty
+            self._buffer.rewards[rows, i] -= self.penalty
         self._due = []
 
 
