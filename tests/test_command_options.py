@@ -84,6 +84,9 @@ def test_the_results_sub_commands_are_their_options_classes():
         parser.parse_args(argv[:3])
 
 
+#: A paced residual base on the command line (its durations follow).
+PACED_TRAIN = ["policy", "train", "--residual-base", "pid:reference=minjerk", "--residual-pace-s"]
+
 BAD = [
     (["twin", "calibrate", "--subjects", "1"], "--subjects = 1 must be >= 2"),
     (["twin", "calibrate", "--delay-s", "-0.1"], "--delay-s = -0.1 is outside [0, 1] s"),
@@ -111,6 +114,10 @@ BAD = [
     (
         ["policy", "train", "--preset", "ppo", "--settling-penalty", "1"],
         "rewrites stored rewards; ppo keeps no replay buffer",
+    ),
+    (
+        [*PACED_TRAIN, "0.3", "0.6"],
+        "paces the base by the gentleness weight: train over the weight range",
     ),
     (["frontier", "--subjects", "0"], "--subjects = 0 must be >= 1"),
     (["frontier", "--accuracy-deg", "0"], "--accuracy-deg = 0.0 must be > 0 deg"),

@@ -10,12 +10,19 @@ import pytest
 from myoexo.control import read_sensors
 from myoexo.control.policy import CallableController, GentleController
 from myoexo.control.residual import (
+    PacedBase,
     ResidualConfig,
     ResidualController,
     ResidualWrapper,
+    paced_duration_s,
     residual_command,
 )
-from myoexo.control.specs import build_controller, parse_controller_spec, with_residual_base
+from myoexo.control.specs import (
+    build_controller,
+    parse_controller_spec,
+    residual_base,
+    with_residual_base,
+)
 from myoexo.envs import make_env
 from myoexo.policies import load_policy
 from myoexo.runtime.fields import FieldError
@@ -127,6 +134,85 @@ def test_residual_command_and_config_bounds():
     priced = ResidualConfig(BASE, 0.5, penalty=0.5)
     assert ResidualConfig.from_metadata({"residual": priced.to_dict()}) == priced
     assert "penalty" not in ResidualConfig(BASE, 0.5).to_dict()  # older records unchanged
+
+
+PACED = ResidualConfig("pid:reference=minjerk", 0.5, pace_s=(0.3, 0.6))
+
+
+def test_a_paced_base_runs_the_base_at_the_duration_of_the_episodes_weight():
+    """At weight w the paced base is the PID on a ``0.3 + 0.3 w``-s reference: its commands
+    equal that PID's, episode after episode, each at its own drawn weight."""
+    env = make_env(1, gentleness="random")
+    paced = residual_base(PACED, env)
+    assert isinstance(paced, PacedBase) and paced.sensors == _base(env).sensors
+    durations = []
+    for seed in (0, 1):
+        obs, info = env.reset(seed=seed)
+        weight = float(obs[-1])
+        plain = build_controller(
+            parse_controller_spec(f"pid:reference=minjerk,ramp_s={0.3 + 0.3 * weight!r}"), env
+        )
+        paced.reset(seed)
+        plain.reset(seed)
+        for _ in range(60):
+            measured = read_sensors(info, paced.sensors)
+            u = paced.act(obs, measured)
+            np.testing.assert_array_equal(u, plain.act(obs, measured))
+            obs, _, _, _, info = env.step(u)
+        durations.append(paced.duration_s)
+        assert paced.duration_s == pytest.approx(0.3 + 0.3 * weight)
+    assert durations[0] != durations[1]
+
+
+def test_a_paced_base_follows_the_weight_through_the_wrapper_and_the_controller():
+    """The paced base reads the weight where the training wrapper and the run-time
+    controller both put it: the same knee trace at a fixed weight."""
+
+    def policy(obs):
+        return np.array([0.2 * obs[-1]], np.float32)
+
+    env = make_env(2, gentleness=0.8)
+    wrapped = ResidualWrapper(env, residual_base(PACED, env), 0.5)
+    trained = _knee_trace(wrapped, lambda o, i: policy(o))
+    assert wrapped.base.duration_s == pytest.approx(0.3 + 0.3 * 0.8)
+    plain = make_env(2)
+    controller = GentleController(
+        ResidualController(CallableController(policy), residual_base(PACED, plain), 0.5), 0.8
+    )
+    controller.reset(4)
+    run = _knee_trace(plain, lambda o, i: controller.act(o, read_sensors(i, controller.sensors)))
+    np.testing.assert_array_equal(run, trained)
+
+
+def test_pace_bounds_and_records():
+    assert paced_duration_s((0.3, 0.6), 0.5) == pytest.approx(0.45)
+    with pytest.raises(ValueError, match=r"got 1.5; accepted range \[0, 1\]"):
+        paced_duration_s((0.3, 0.6), 1.5)
+    with pytest.raises(ValueError, match=r"two durations .* in \[0.05, 10\] s"):
+        ResidualConfig("pid:reference=minjerk", pace_s=(0.3, 20.0))
+    with pytest.raises(ValueError, match="sets ramp_s"):
+        ResidualConfig(BASE, pace_s=(0.3, 0.6))
+    assert ResidualConfig("impedance", pace_s=(0.5, 1.0)).paced_spec(0.75) == (
+        "impedance:duration_s=0.75"
+    )
+    assert PACED.paced_spec(0.4) == "pid:reference=minjerk,ramp_s=0.4"
+    assert ResidualConfig.from_metadata({"residual": PACED.to_dict()}) == PACED
+    assert "pace_s" not in ResidualConfig(BASE).to_dict()  # older records unchanged
+
+
+def test_train_config_paces_the_base_only_over_the_weight_range():
+    twin = get_preset("cpu").twin
+    random = twin.replace(gentleness="random")
+    config = get_preset(
+        "cpu", residual_base="pid:reference=minjerk", residual_pace_s=(0.3, 0.6), twin=random
+    )
+    assert config.residual == PACED
+    with pytest.raises(FieldError, match="train over the weight range"):
+        get_preset("cpu", residual_base="pid:reference=minjerk", residual_pace_s=(0.3, 0.6))
+    with pytest.raises(FieldError, match="no residual_base"):
+        get_preset("cpu", residual_pace_s=(0.3, 0.6), twin=random)
+    with pytest.raises(FieldError, match="sets ramp_s"):
+        get_preset("cpu", residual_base=BASE, residual_pace_s=(0.3, 0.6), twin=random)
 
 
 @pytest.mark.parametrize(

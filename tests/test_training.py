@@ -343,6 +343,10 @@ def test_train_cli_arguments(tmp_path, capsys):
         normalize_obs=False,
     )
     assert cli.config_from_args(parser.parse_args([])) == get_preset("cpu")  # nothing given
+    # an option checked against the twin: the twin's options apply with it
+    paced = ["--residual-base", "pid:reference=minjerk", "--residual-pace-s", "0.3", "0.6"]
+    config = cli.config_from_args(parser.parse_args([*paced, "--gentleness", "random"]))
+    assert config.residual_pace_s == (0.3, 0.6) and config.twin.gentleness == "random"
     args = parser.parse_args(["--resume", "runs/x"])
     assert args.resume == "runs/x"
     # a saved config is a base, as a preset is

@@ -17,6 +17,14 @@ In training, a ``penalty`` prices the correction itself: the wrapper's reward is
 minus ``penalty x a^2``, so the policy departs from its base only where that pays on the
 task's own terms (0: the env's reward unchanged).
 
+A **paced base** (``pace_s = (fast, slow)``, for a policy trained over the gentleness range)
+moves its reference in ``fast + w (slow - fast)`` seconds at gentleness weight ``w``: the
+base PID's ``ramp_s`` or the impedance controller's ``duration_s``
+(:data:`PACE_OPTIONS`), set at each episode's first step from the weight, the observation's
+last entry (:class:`PacedBase`). The weight then sets the move's pace, which the classical
+families show to be the first lever between settling time and interaction torque, and the
+policy corrects a base that is already as fast or as gentle as asked.
+
 Two halves of one definition, used in training and at run time:
 
 * :class:`ResidualWrapper`: the training env (a gymnasium wrapper around a MyoExoKnee env);
@@ -28,7 +36,7 @@ Two halves of one definition, used in training and at run time:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,6 +54,12 @@ RESIDUAL_SCALE_RANGE: tuple[float, float] = (0.0, 2.0)
 
 #: Accepted weight of the training penalty on the squared correction, ``[low, high]``.
 RESIDUAL_PENALTY_RANGE: tuple[float, float] = (0.0, 100.0)
+
+#: Accepted reference durations of a paced base, s, ``[low, high]`` (both ends of the pace).
+PACE_RANGE_S: tuple[float, float] = (0.05, 10.0)
+
+#: The option of a base controller spec that a paced base sets: its reference's duration.
+PACE_OPTIONS: Mapping[str, str] = {"pid": "ramp_s", "impedance": "duration_s"}
 
 
 def check_residual_scale(scale: float) -> float:
@@ -72,6 +86,38 @@ def check_residual_penalty(penalty: float) -> float:
     return float(penalty)
 
 
+def check_pace(pace_s: Any) -> tuple[float, float]:
+    """*pace_s* as ``(fast, slow)`` floats, each in :data:`PACE_RANGE_S`.
+
+    Raises:
+        ValueError: It is not two such durations (the message names the value and the range).
+    """
+    low, high = PACE_RANGE_S
+    values = tuple(float(v) for v in pace_s)
+    if len(values) != 2 or not all(math.isfinite(v) and low <= v <= high for v in values):
+        raise ValueError(
+            f"residual pace_s = {tuple(pace_s)!r} must be two durations (at weights 0 and 1) "
+            f"in [{low:g}, {high:g}] s"
+        )
+    return values[0], values[1]
+
+
+def paced_duration_s(pace_s: tuple[float, float], weight: float) -> float:
+    """The base's reference duration at gentleness weight *weight*: ``fast + weight (slow -
+    fast)``, s.
+
+    Raises:
+        ValueError: *weight* is outside [0, 1].
+    """
+    if not (math.isfinite(weight) and 0.0 <= weight <= 1.0):
+        raise ValueError(
+            f"a paced base reads the gentleness weight from the observation's last entry, "
+            f"got {weight!r}; accepted range [0, 1] (a policy trained over the weight range)"
+        )
+    fast, slow = pace_s
+    return fast + weight * (slow - fast)
+
+
 @dataclass(frozen=True)
 class ResidualConfig:
     """A residual policy's base controller and the reach of its correction.
@@ -83,24 +129,50 @@ class ResidualConfig:
             ``a`` in [-1, 1] adds ``scale x a``), in (0, 2].
         penalty: Training only: weight of ``a^2`` subtracted from the reward, in [0, 100]
             (recorded with the policy as its provenance; the run-time law ignores it).
+        pace_s: ``(fast, slow)``: the base's reference duration at gentleness weights 0 and
+            1, s (a paced base, :class:`PacedBase`); ``None``: the base spec's own.
     """
 
     base: str
     scale: float = 0.5
     penalty: float = 0.0
+    pace_s: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.base, str) or not self.base.strip():
             raise ValueError(f"ResidualConfig.base = {self.base!r} must name a controller spec")
         check_residual_scale(self.scale)
         check_residual_penalty(self.penalty)
+        if self.pace_s is not None:
+            object.__setattr__(self, "pace_s", check_pace(self.pace_s))
+            kind, _, tail = self.base.partition(":")
+            option = PACE_OPTIONS.get(kind.strip())
+            if option is None:
+                raise ValueError(
+                    f"a paced base sets the reference duration of {sorted(PACE_OPTIONS)}; "
+                    f"got base {self.base!r}"
+                )
+            if option in {part.split("=")[0].strip() for part in tail.split(",")}:
+                raise ValueError(
+                    f"base {self.base!r} sets {option}, which the pace {self.pace_s} sets "
+                    "from the gentleness weight: leave it out of the base"
+                )
 
     def to_dict(self) -> dict[str, Any]:
-        """The metadata record (:data:`RESIDUAL_KEY`; ``penalty`` only when it is not 0)."""
+        """The metadata record (:data:`RESIDUAL_KEY`; ``penalty`` and ``pace_s`` only when
+        set)."""
         record: dict[str, Any] = {"base": self.base, "scale": self.scale}
         if self.penalty:
             record["penalty"] = self.penalty
+        if self.pace_s is not None:
+            record["pace_s"] = list(self.pace_s)
         return record
+
+    def paced_spec(self, duration_s: float) -> str:
+        """The base spec with its reference duration set to *duration_s* (a paced base)."""
+        kind = self.base.partition(":")[0].strip()
+        separator = "," if ":" in self.base else ":"
+        return f"{self.base}{separator}{PACE_OPTIONS[kind]}={duration_s!r}"
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any] | None) -> ResidualConfig | None:
@@ -109,10 +181,12 @@ class ResidualConfig:
         record = (metadata or {}).get(RESIDUAL_KEY)
         if not record:
             return None
+        pace = record.get("pace_s")
         return cls(
             base=str(record["base"]),
             scale=float(record["scale"]),
             penalty=float(record.get("penalty", 0.0)),
+            pace_s=None if pace is None else check_pace(pace),
         )
 
 
@@ -123,6 +197,47 @@ def residual_command(base_command: float, action: float, scale: float) -> float:
 
 def _base_command(base: Controller, obs: np.ndarray, measurements: Measurements) -> float:
     return float(np.asarray(base.act(obs, measurements), dtype=np.float64).reshape(-1)[0])
+
+
+class PacedBase:
+    """A base controller whose reference duration follows the gentleness weight: at each
+    episode's first step it builds ``build(paced_duration_s(pace_s, w))``, ``w`` the
+    observation's last entry (a policy trained over the weight range observes it last), and
+    then runs it for the episode.
+
+    Args:
+        build: The base controller at a reference duration (s).
+        pace_s: ``(fast, slow)`` durations at weights 0 and 1 (:attr:`ResidualConfig.pace_s`).
+    """
+
+    def __init__(self, build: Callable[[float], Controller], pace_s: tuple[float, float]):
+        self._build = build
+        self.pace_s = check_pace(pace_s)
+        #: The sensors the base declares (those of its fast end: the pace changes no sensor).
+        self.sensors: frozenset[str] = declared_sensors(build(self.pace_s[0]))
+        self._seed: int | None = None
+        self._base: Controller | None = None
+        #: The reference duration of the episode in progress, s (``None`` before its first
+        #: step).
+        self.duration_s: float | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the episode's base: the next step builds one at its weight."""
+        self._seed = seed
+        self._base = None
+        self.duration_s = None
+
+    def act(self, obs: np.ndarray, measurements: Measurements) -> np.ndarray:
+        """The command of the episode's base (built at the first step from ``obs[-1]``)."""
+        base = self._base
+        if base is None:
+            self.duration_s = paced_duration_s(self.pace_s, float(obs[-1]))
+            base = self._base = self._build(self.duration_s)
+            base.reset(self._seed)
+        return base.act(obs, measurements)
+
+    def __repr__(self) -> str:
+        return f"PacedBase(pace_s={self.pace_s}, duration_s={self.duration_s})"
 
 
 class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):

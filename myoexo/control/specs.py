@@ -83,7 +83,7 @@ from myoexo.control.impedance import ImpedanceConfig, ImpedanceController
 from myoexo.control.pid import PID, PIDConfig, PIDGains
 from myoexo.control.policy import GentleController, SB3Controller
 from myoexo.control.protocol import Controller
-from myoexo.control.residual import ResidualConfig, ResidualController
+from myoexo.control.residual import PacedBase, ResidualConfig, ResidualController
 from myoexo.envs.config import check_gentleness
 from myoexo.envs.options import TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, load_sb3_model
@@ -474,8 +474,16 @@ def with_residual_base(
 def residual_base(residual: ResidualConfig, env: Any) -> Controller:
     """The base controller *residual* names, built on *env* (what
     :class:`~myoexo.control.residual.ResidualWrapper` trains on and
-    :class:`~myoexo.control.residual.ResidualController` runs on)."""
-    return build_controller(parse_classical_spec(residual.base, "residual base"), env)
+    :class:`~myoexo.control.residual.ResidualController` runs on): with a pace, a
+    :class:`~myoexo.control.residual.PacedBase` that builds it at each episode's weight."""
+    if residual.pace_s is None:
+        return build_controller(parse_classical_spec(residual.base, "residual base"), env)
+
+    def build(duration_s: float) -> Controller:
+        spec = parse_classical_spec(residual.paced_spec(duration_s), "residual base")
+        return build_controller(spec, env)
+
+    return PacedBase(build, residual.pace_s)
 
 
 def parse_classical_spec(text: str, role: str) -> ControllerSpec:

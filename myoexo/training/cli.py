@@ -168,9 +168,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     given = {
         f.name: getattr(args, f.name) for f in option_fields(TrainConfig) if hasattr(args, f.name)
     }
-    config = base.replace(**given) if given else base
-    twin = twin_from_args(args, base=config.twin)
-    return config if twin == config.twin else config.replace(twin=twin)
+    twin = twin_from_args(args, base=base.twin)
+    if twin != base.twin:  # one change: the options are checked against the twin they run on
+        given["twin"] = twin
+    return base.replace(**given) if given else base
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -65,7 +65,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.control.residual import RESIDUAL_PENALTY_RANGE, RESIDUAL_SCALE_RANGE, ResidualConfig
+from myoexo.control.residual import (
+    PACE_RANGE_S,
+    RESIDUAL_PENALTY_RANGE,
+    RESIDUAL_SCALE_RANGE,
+    ResidualConfig,
+)
 from myoexo.envs.options import OPTION_FIELDS, TASK_FIELDS, TwinOptions
 from myoexo.policies.algorithms import ALGORITHMS, get_algorithm
 from myoexo.runtime.fields import FieldError, FieldSpec, check_fields, convert, option
@@ -249,6 +254,13 @@ class TrainConfig:
         0.0, "residual learning: weight of the squared correction subtracted from the reward",
         low=RESIDUAL_PENALTY_RANGE[0], high=RESIDUAL_PENALTY_RANGE[1],
     )  # fmt: skip
+    residual_pace_s: tuple[float, ...] = option(
+        (),
+        "residual learning over the gentleness range: the base's reference duration at "
+        "weights 0 and 1 (FAST SLOW; the base PID's ramp_s or the impedance's duration_s, "
+        "linear in the weight; none: the base spec's own)",
+        low=PACE_RANGE_S[0], high=PACE_RANGE_S[1], unit="s", metavar="S",
+    )  # fmt: skip
 
     settling_penalty: float = option(
         0.0,
@@ -258,7 +270,7 @@ class TrainConfig:
     )  # fmt: skip
 
     def __post_init__(self) -> None:
-        for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
+        for name in ("net_arch_pi", "net_arch_qf", "eval_levels", "residual_pace_s"):
             value = getattr(self, name)
             if isinstance(value, (list, tuple)):
                 object.__setattr__(self, name, tuple(value))
@@ -292,10 +304,24 @@ class TrainConfig:
                     "TrainConfig", "residual_base", self.residual_base,
                     f"is not a classical controller spec ({exc})",
                 ) from None  # fmt: skip
-        elif self.residual_penalty:
+            if self.residual_pace_s:
+                if self.twin.gentleness != "random":
+                    raise FieldError(
+                        "TrainConfig", "residual_pace_s", self.residual_pace_s,
+                        "paces the base by the gentleness weight: train over the weight "
+                        "range (gentleness random)",
+                    )  # fmt: skip
+                try:
+                    _ = self.residual
+                except ValueError as exc:
+                    raise FieldError(
+                        "TrainConfig", "residual_pace_s", self.residual_pace_s, str(exc)
+                    ) from None
+        elif self.residual_penalty or self.residual_pace_s:
+            name = "residual_penalty" if self.residual_penalty else "residual_pace_s"
             raise FieldError(
-                "TrainConfig", "residual_penalty", self.residual_penalty,
-                "prices a correction, but no residual_base names what it corrects",
+                "TrainConfig", name, getattr(self, name),
+                "shapes a correction, but no residual_base names what it corrects",
             )  # fmt: skip
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):
@@ -425,7 +451,10 @@ class TrainConfig:
         if not self.residual_base:
             return None
         return ResidualConfig(
-            base=self.residual_base, scale=self.residual_scale, penalty=self.residual_penalty
+            base=self.residual_base,
+            scale=self.residual_scale,
+            penalty=self.residual_penalty,
+            pace_s=tuple(self.residual_pace_s) if self.residual_pace_s else None,  # type: ignore[arg-type]
         )
 
     # -- records ---------------------------------------------------------------------------
