@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -27,10 +28,14 @@ def test_settling_steps_count_the_control_steps_before_the_paper_settling_time()
 
 
 def test_the_penalty_must_be_positive_and_needs_an_off_policy_learner():
-    with pytest.raises(ValueError, match="penalty = 0"):
+    with pytest.raises(ValueError, match="penalty = -1"):
+        SettlingRewardCallback(-1.0)
+    with pytest.raises(ValueError, match="nothing to relabel"):
         SettlingRewardCallback(0.0)
     with pytest.raises(FieldError, match="settling_penalty"):
         get_preset("ppo", settling_penalty=1.0)
+    with pytest.raises(FieldError, match="torque_until_settling"):
+        get_preset("ppo", torque_until_settling=True)
 
 
 def _stored_rewards(penalty: float) -> tuple[np.ndarray, np.ndarray]:
@@ -68,3 +73,34 @@ def test_each_ended_episode_is_charged_on_a_prefix_of_its_steps():
             start = end + 1
         assert not np.any(diff[start:, i])  # the running episode is not charged yet
     assert math.isfinite(float(charged.sum()))
+
+
+@pytest.mark.parametrize("penalty", [0.0, 2.0])
+def test_the_torque_terms_are_refunded_from_the_settling_time_on(penalty):
+    """Driven as SB3's collection drives it (the callback sees each step before its
+    transition is stored): an episode that settles at 0.78 s gets back ``-w_inter x inter +
+    gentleness x gentle`` on each step from then on, and ``-penalty`` before; the next
+    episode, not yet ended, nothing."""
+    t = 0.01 * np.arange(1, 201)
+    errors = 78.0 * np.exp(-t / 0.2) + 5.0
+    buffer = SimpleNamespace(rewards=np.zeros((260, 1), np.float32), pos=3, buffer_size=260)
+    callback = SettlingRewardCallback(penalty, torque_until_settling=True)
+    env = SimpleNamespace(num_envs=1, get_attr=lambda name: [{"inter": -0.1}])
+    callback.model = SimpleNamespace(replay_buffer=buffer, get_env=lambda: env)
+    callback._on_training_start()
+    rng = np.random.default_rng(0)
+    inter, gentle = rng.uniform(0, 1, 250), rng.uniform(0, 1, 250)
+    for k in range(250):  # one episode of 200 steps, then 50 of the next
+        info = {"time_s": t[k % 200], "error_deg": errors[k % 200], "inter": inter[k]}
+        info.update(gentle=gentle[k], gentleness=0.4)
+        callback.locals = {"dones": [k == 199], "infos": [info]}
+        callback._on_step()
+        buffer.pos += 1
+    callback._on_rollout_end()
+    settled = callback.settling_steps(list(t), list(errors))
+    assert 70 < settled < 85
+    expected = np.zeros(260)
+    expected[3 : 3 + settled] = -penalty
+    rows = np.arange(3 + settled, 203)
+    expected[rows] = 0.4 * gentle[rows - 3] + 0.1 * inter[rows - 3]
+    np.testing.assert_allclose(buffer.rewards[:, 0], expected, atol=1e-6)

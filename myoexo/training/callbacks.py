@@ -3,7 +3,8 @@
 * :class:`RewardTermsCallback`: per-episode means of the reward terms (``info["rwd_dict"]``)
   and the paper's episode quantities per level, to the SB3 logger (tensorboard, CSV).
 * :class:`SettlingRewardCallback`: a hindsight reward for settling sooner: once an episode
-  ends, each of its stored transitions before its settling time is charged a penalty.
+  ends, each of its stored transitions before its settling time is charged a penalty (and,
+  optionally, those from it on get their torque terms back).
 * :class:`PaperMetricsEvalCallback`: every ``eval_every_steps``, the deterministic policy on
   a few fixed subjects per level, next to the PID on the same subjects: final error, peak
   and RMS interaction torque (docs/reference.md section 5), and the score that ranks
@@ -128,47 +129,80 @@ class SettlingRewardCallback(BaseCallback):
     resumed from a checkpoint leaves uncharged the episodes that were running when it
     stopped (their ends were never seen).
 
+    With ``torque_until_settling``, the reward's interaction-torque terms count until the
+    episode settles, as the study's peak and RMS torque do: each step from the settling time
+    on gets back what its ``inter`` and ``gentle`` terms cost it (``-w_inter x inter +
+    gentleness x gentle``, read from the step's ``info`` and the env's ``rwd_keys_wt``), so
+    holding the knee at the target costs the policy no torque penalty.
+
     Args:
-        penalty: Charged per control step before settling (> 0).
+        penalty: Charged per control step before settling (>= 0).
         threshold: Band half-width, a fraction of the step.
+        torque_until_settling: Refund the torque terms from the settling time on.
+
+    Raises:
+        ValueError: *penalty* is negative, or neither a penalty nor the refund is asked.
     """
 
     def __init__(
-        self, penalty: float, threshold: float = SETTLING_THRESHOLD, verbose: int = 0
+        self,
+        penalty: float,
+        threshold: float = SETTLING_THRESHOLD,
+        torque_until_settling: bool = False,
+        verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
-        if not penalty > 0.0:
-            raise ValueError(f"penalty = {penalty} must be > 0")
+        if not penalty >= 0.0:
+            raise ValueError(f"penalty = {penalty} must be >= 0")
+        if not (penalty or torque_until_settling):
+            raise ValueError("nothing to relabel: penalty = 0 and no torque_until_settling")
         self.penalty = float(penalty)
         self.threshold = float(threshold)
+        self.torque_until_settling = bool(torque_until_settling)
         self._buffer: Any = None
+        self._inter_weight: list[float] = []  # each env's weight of the ``inter`` term
         self._first_row: list[int] = []  # buffer row of each env's episode's first step
         self._errors: list[list[float]] = []
         self._times: list[list[float]] = []
-        self._due: list[tuple[int, np.ndarray]] = []
+        self._torque_paid: list[list[float]] = []
+        self._due: list[tuple[int, np.ndarray, Any]] = []  # env, rows, reward change
 
     def _on_training_start(self) -> None:
         self._buffer = getattr(self.model, "replay_buffer", None)
         if self._buffer is None:
             raise TypeError(f"{type(self.model).__name__} keeps no replay buffer to relabel")
         n = self.training_env.num_envs
+        if self.torque_until_settling:
+            weights = self.training_env.get_attr("rwd_keys_wt")
+            self._inter_weight = [float(w.get("inter", 0.0)) for w in weights]
         self._first_row = [int(self._buffer.pos)] * n
         self._errors = [[] for _ in range(n)]
         self._times = [[] for _ in range(n)]
+        self._torque_paid = [[] for _ in range(n)]
         self._due = []
 
     def _on_step(self) -> bool:
         dones = self.locals["dones"]
+        size = self._buffer.buffer_size
         for i, info in enumerate(self.locals["infos"]):
             self._errors[i].append(float(info["error_deg"]))
             self._times[i].append(float(info["time_s"]))
+            if self.torque_until_settling:
+                gentleness = info.get("gentleness") or 0.0
+                paid = gentleness * info["gentle"] - self._inter_weight[i] * info["inter"]
+                self._torque_paid[i].append(paid)
             if dones[i]:
+                n_steps = len(self._errors[i])
                 steps = self.settling_steps(self._times[i], self._errors[i])
-                rows = (self._first_row[i] + np.arange(steps)) % self._buffer.buffer_size
-                self._due.append((i, rows))
+                first = self._first_row[i]
+                if self.penalty:
+                    self._due.append((i, (first + np.arange(steps)) % size, -self.penalty))
+                if self.torque_until_settling and steps < n_steps:
+                    rows = (first + np.arange(steps, n_steps)) % size
+                    self._due.append((i, rows, np.asarray(self._torque_paid[i][steps:])))
                 # this step's transition goes to the buffer's current row; the next, after it
-                self._first_row[i] = (int(self._buffer.pos) + 1) % self._buffer.buffer_size
-                self._errors[i], self._times[i] = [], []
+                self._first_row[i] = (int(self._buffer.pos) + 1) % size
+                self._errors[i], self._times[i], self._torque_paid[i] = [], [], []
         return True
 
     def settling_steps(self, times_s: list[float], errors_deg: list[float]) -> int:
@@ -179,8 +213,8 @@ class SettlingRewardCallback(BaseCallback):
 
     def _on_rollout_end(self) -> None:
         """Charge the ended episodes, whose transitions are all stored by now."""
-        for i, rows in self._due:
-            self._buffer.rewards[rows, i] -= self.penalty
+        for i, rows, change in self._due:
+            self._buffer.rewards[rows, i] += change
         self._due = []
 
 

@@ -268,6 +268,12 @@ class TrainConfig:
         "around its own final angle), once it has ended (0: none; off-policy learners only)",
         low=0.0, high=SETTLING_PENALTY_MAX,
     )  # fmt: skip
+    torque_until_settling: bool = option(
+        False,
+        "hindsight reward: the interaction-torque terms (inter, and gentle at the episode's "
+        "weight) count until the episode settled, as the study's torque measures do: they "
+        "are refunded from its settling time on, once it has ended (off-policy learners only)",
+    )
 
     def __post_init__(self) -> None:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels", "residual_pace_s"):
@@ -326,11 +332,12 @@ class TrainConfig:
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):
                 raise FieldError("TrainConfig", name, (), "is empty")
-        if self.settling_penalty and get_algorithm(self.algorithm).on_policy:
-            raise FieldError(
-                "TrainConfig", "settling_penalty", self.settling_penalty,
-                f"rewrites stored rewards; {self.algorithm} keeps no replay buffer",
-            )  # fmt: skip
+        for name in ("settling_penalty", "torque_until_settling"):
+            if getattr(self, name) and get_algorithm(self.algorithm).on_policy:
+                raise FieldError(
+                    "TrainConfig", name, getattr(self, name),
+                    f"rewrites stored rewards; {self.algorithm} keeps no replay buffer",
+                )  # fmt: skip
 
     # -- changes ---------------------------------------------------------------------------
     def replace(self, **changes: Any) -> TrainConfig:

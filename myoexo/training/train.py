@@ -374,8 +374,13 @@ def _learn(
             callbacks = [
                 RewardTermsCallback(),
                 *(
-                    [SettlingRewardCallback(config.settling_penalty)]
-                    if config.settling_penalty
+                    [
+                        SettlingRewardCallback(
+                            config.settling_penalty,
+                            torque_until_settling=config.torque_until_settling,
+                        )
+                    ]
+                    if config.settling_penalty or config.torque_until_settling
                     else []
                 ),
                 *([evaluator] if evaluator else []),
