@@ -196,6 +196,28 @@ def test_an_output_reach_above_one_lets_the_student_hold_the_motors_limit(tmp_pa
         DistillConfig(output_reach=0.9)
 
 
+def test_a_label_at_the_limit_pulls_the_command_to_the_margin_beyond_it():
+    """A label at the motor's limit costs nothing at or beyond ``limit + margin`` and pulls a
+    command short of it by the distance left; a label inside the range is met exactly."""
+    import torch
+
+    from myoexo.runtime.fields import FieldError
+    from myoexo.studies.distill import DistillConfig, imitation_error
+
+    target = torch.tensor([-1.0, -1.0, -1.0, 1.0, 1.0, 0.3, 0.3])
+    pred = torch.tensor([-1.0, -1.05, -1.2, 1.12, 0.9, 0.4, 0.2])
+    np.testing.assert_allclose(
+        imitation_error(pred, target).numpy(), [0, 0, 0, 0, -0.1, 0.1, -0.1], atol=1e-6
+    )
+    np.testing.assert_allclose(
+        imitation_error(pred, target, 0.1).numpy(),
+        [0.1, 0.05, 0, 0, -0.2, 0.1, -0.1],
+        atol=1e-6,
+    )
+    with pytest.raises(FieldError, match=r"limit_margin = 0.2 must be below output_reach - 1"):
+        DistillConfig(output_reach=1.1, limit_margin=0.2)
+
+
 def test_frame_indices_refuses_unknown_layouts():
     with pytest.raises(ValueError, match="lacks"):
         frame_indices(["exo_angle_rad", "time_frac"])

@@ -166,6 +166,13 @@ class DistillConfig:
         low=1.0,
         high=2.0,
     )
+    limit_margin: float = option(
+        0.0,
+        "a label at the motor's limit is met only by a command at least this far beyond it "
+        "(then clipped), so that the student holds the limit through sensor noise and "
+        "latency (0: any command at or beyond the limit; below output_reach - 1)",
+        low=0.0,
+    )
     teacher: str = option(
         "sac",
         "full-state policy that labels the states: a shipped one (sac, or residual on its base "
@@ -231,6 +238,12 @@ class DistillConfig:
         for name in ("levels", "hidden"):
             if not getattr(self, name):
                 raise FieldError("DistillConfig", name, (), "is empty")
+        if self.limit_margin and not self.limit_margin < self.output_reach - 1.0:
+            raise FieldError(
+                "DistillConfig", "limit_margin", self.limit_margin,
+                f"must be below output_reach - 1 = {self.output_reach - 1.0:g} (the head's "
+                "outputs stop short of the reach)",
+            )  # fmt: skip
         if self.twin.robustness:
             raise ValueError(
                 "twin robustness = true: distillation draws perturbed twins per episode with "
@@ -596,6 +609,21 @@ def _module_from_actor(actor: MLPActor, config: DistillConfig) -> Any:
     return module
 
 
+def imitation_error(pred: Any, target: Any, margin: float = 0.0) -> Any:
+    """The student's error on a batch of labels (torch tensors): ``pred - target``, except
+    that a label at the motor's limit is met by any command at least *margin* beyond it
+    (the command is then clipped to the limit), so such a label pulls a command only up to
+    ``limit + margin`` and never back."""
+    import torch
+
+    upper, lower = target >= LIMIT_LABEL, target <= -LIMIT_LABEL
+    if margin:
+        target = target + margin * (upper.float() - lower.float())
+    err = pred - target
+    err = torch.where(upper & (err > 0.0), torch.zeros_like(err), err)
+    return torch.where(lower & (err < 0.0), torch.zeros_like(err), err)
+
+
 def train_student(
     config: DistillConfig,
     data: Episodes,
@@ -656,11 +684,7 @@ def train_student(
             x = torch.cat([x, z_weight[rows].unsqueeze(1)], dim=1)
         return reach * torch.tanh(module(x)).squeeze(1)
 
-    def imitation_error(pred: Any, target: Any) -> Any:
-        # a label at the motor's limit is met by any command at or beyond it (then clipped)
-        err = pred - target
-        err = torch.where((target >= LIMIT_LABEL) & (err > 0.0), torch.zeros_like(err), err)
-        return torch.where((target <= -LIMIT_LABEL) & (err < 0.0), torch.zeros_like(err), err)
+    margin = float(config.limit_margin)
 
     opt = torch.optim.Adam(module.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     n = labels.numel()
@@ -676,7 +700,7 @@ def train_student(
         for k in range(steps_per_epoch):
             rows = perm[k * config.batch_size : (k + 1) * config.batch_size]
             pred = command(rows)
-            mse = torch.mean(imitation_error(pred, labels[rows]) ** 2)
+            mse = torch.mean(imitation_error(pred, labels[rows], margin) ** 2)
             loss = mse
             if config.smoothness_weight > 0.0:  # on the executed (clipped) command
                 step = torch.clamp(command(next_row[rows]), -1.0, 1.0) - torch.clamp(
