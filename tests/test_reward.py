@@ -319,6 +319,20 @@ def test_pure_reward_weights_and_params_are_arguments():
     assert rwd["dense"] == approx(-10.0 * rwd["act"] + 2.0 * rwd["pose"])
 
 
+def test_torque_cost_is_what_the_torque_terms_take_from_dense():
+    """Without the ``inter`` weight and the gentleness weight, ``dense`` rises by exactly
+    :func:`~myoexo.envs.reward.torque_cost` (a rising torque: the ``gentle`` peak term
+    counts too)."""
+    from myoexo.envs.reward import torque_cost
+
+    weights = {**DEFAULT_REWARD_WEIGHTS, "inter": -0.1}
+    rwd, _ = _pure(weights=weights, gentleness=0.6, peak_torque_nm=20.0)
+    plain, _ = _pure(weights={k: w for k, w in weights.items() if k != "inter"})
+    assert rwd["gentle"] > 0.0 and rwd["inter"] > 0.0
+    assert plain["dense"] - rwd["dense"] == approx(torque_cost(rwd, weights, 0.6))
+    assert torque_cost(rwd, {}, 0.0) == 0.0
+
+
 def test_env_reward_is_the_pure_function_of_consecutive_steps(default_run):
     """The env's reward of each step equals ``reward_dict`` of the step's observations and
     the previous step's (the reset's for the first), bit for bit."""

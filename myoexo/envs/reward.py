@@ -135,3 +135,10 @@ def reward_dict(
         dense -= gentleness * gentle
     rwd["dense"] = dense
     return rwd
+
+
+def torque_cost(rwd: Mapping[str, Any], weights: Mapping[str, float], gentleness: float) -> float:
+    """What one step's interaction-torque terms took from its ``dense`` reward (a
+    :func:`reward_dict` result, or a step's ``info``, which carries its terms):
+    ``gentleness x gentle - w_inter x inter``, *weights* the ``weighted_reward_keys``."""
+    return gentleness * rwd["gentle"] - weights.get("inter", 0.0) * rwd["inter"]

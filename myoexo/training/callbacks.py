@@ -34,6 +34,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from myoexo.control.residual import ResidualConfig
 from myoexo.envs.options import TwinOptions
+from myoexo.envs.reward import torque_cost
 from myoexo.evaluation import criteria
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.evaluation.criteria import CRITERIA_METRICS
@@ -132,8 +133,9 @@ class SettlingRewardCallback(BaseCallback):
     With ``torque_until_settling``, the reward's interaction-torque terms count until the
     episode settles, as the study's peak and RMS torque do: each step from the settling time
     on gets back what its ``inter`` and ``gentle`` terms cost it (``-w_inter x inter +
-    gentleness x gentle``, read from the step's ``info`` and the env's ``rwd_keys_wt``), so
-    holding the knee at the target costs the policy no torque penalty.
+    gentleness x gentle``, :func:`~myoexo.envs.reward.torque_cost` of the step's ``info`` and
+    the env's ``rwd_keys_wt``), so holding the knee at the target costs the policy no torque
+    penalty.
 
     Args:
         penalty: Charged per control step before settling (>= 0).
@@ -160,7 +162,7 @@ class SettlingRewardCallback(BaseCallback):
         self.threshold = float(threshold)
         self.torque_until_settling = bool(torque_until_settling)
         self._buffer: Any = None
-        self._inter_weight: list[float] = []  # each env's weight of the ``inter`` term
+        self._weights: list[dict[str, float]] = []  # each env's ``rwd_keys_wt``
         self._first_row: list[int] = []  # buffer row of each env's episode's first step
         self._errors: list[list[float]] = []
         self._times: list[list[float]] = []
@@ -173,8 +175,7 @@ class SettlingRewardCallback(BaseCallback):
             raise TypeError(f"{type(self.model).__name__} keeps no replay buffer to relabel")
         n = self.training_env.num_envs
         if self.torque_until_settling:
-            weights = self.training_env.get_attr("rwd_keys_wt")
-            self._inter_weight = [float(w.get("inter", 0.0)) for w in weights]
+            self._weights = [dict(w) for w in self.training_env.get_attr("rwd_keys_wt")]
         self._first_row = [int(self._buffer.pos)] * n
         self._errors = [[] for _ in range(n)]
         self._times = [[] for _ in range(n)]
@@ -189,8 +190,7 @@ class SettlingRewardCallback(BaseCallback):
             self._times[i].append(float(info["time_s"]))
             if self.torque_until_settling:
                 gentleness = info.get("gentleness") or 0.0
-                paid = gentleness * info["gentle"] - self._inter_weight[i] * info["inter"]
-                self._torque_paid[i].append(paid)
+                self._torque_paid[i].append(torque_cost(info, self._weights[i], gentleness))
             if dones[i]:
                 n_steps = len(self._errors[i])
                 steps = self.settling_steps(self._times[i], self._errors[i])
