@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from myoexo.control import read_sensors
+from myoexo.control import read_sensors, specs
 from myoexo.control.policy import CallableController, GentleController
 from myoexo.control.residual import (
     PacedBase,
@@ -19,6 +19,7 @@ from myoexo.control.residual import (
 )
 from myoexo.control.specs import (
     build_controller,
+    paced_base_spec,
     parse_controller_spec,
     residual_base,
     with_residual_base,
@@ -191,13 +192,21 @@ def test_pace_bounds_and_records():
     with pytest.raises(ValueError, match=r"two durations .* in \[0.05, 10\] s"):
         ResidualConfig("pid:reference=minjerk", pace_s=(0.3, 20.0))
     with pytest.raises(ValueError, match="sets ramp_s"):
-        ResidualConfig(BASE, pace_s=(0.3, 0.6))
-    assert ResidualConfig("impedance", pace_s=(0.5, 1.0)).paced_spec(0.75) == (
-        "impedance:duration_s=0.75"
-    )
-    assert PACED.paced_spec(0.4) == "pid:reference=minjerk,ramp_s=0.4"
+        paced_base_spec(BASE)
+    with pytest.raises(ValueError, match="a classical controller spec"):
+        paced_base_spec("oracle")
+    impedance, option = paced_base_spec("impedance")
+    assert (impedance.kind, option) == ("impedance", "duration_s")
+    pid, option = paced_base_spec(PACED.base)
+    assert (pid.options, option) == ({"reference": "minjerk"}, "ramp_s")
     assert ResidualConfig.from_metadata({"residual": PACED.to_dict()}) == PACED
     assert "pace_s" not in ResidualConfig(BASE).to_dict()  # older records unchanged
+
+
+def test_a_paced_base_needs_a_kind_with_a_reference_duration(monkeypatch):
+    monkeypatch.setattr(specs, "PACE_OPTIONS", {"pid": "ramp_s"})
+    with pytest.raises(ValueError, match=r"reference duration of \['pid'\]; got base 'impedance'"):
+        paced_base_spec("impedance")
 
 
 def test_train_config_paces_the_base_only_over_the_weight_range():

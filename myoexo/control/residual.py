@@ -20,10 +20,11 @@ task's own terms (0: the env's reward unchanged).
 A **paced base** (``pace_s = (fast, slow)``, for a policy trained over the gentleness range)
 moves its reference in ``fast + w (slow - fast)`` seconds at gentleness weight ``w``: the
 base PID's ``ramp_s`` or the impedance controller's ``duration_s``
-(:data:`PACE_OPTIONS`), set at each episode's first step from the weight, the observation's
-last entry (:class:`PacedBase`). The weight then sets the move's pace, which the classical
-families show to be the first lever between settling time and interaction torque, and the
-policy corrects a base that is already as fast or as gentle as asked.
+(:data:`~myoexo.control.specs.PACE_OPTIONS`), set at each episode's first step from the
+weight, the observation's last entry (:class:`PacedBase`). The weight then sets the move's
+pace, which the classical families show to be the first lever between settling time and
+interaction torque, and the policy corrects a base that is already as fast or as gentle as
+asked.
 
 Two halves of one definition, used in training and at run time:
 
@@ -57,9 +58,6 @@ RESIDUAL_PENALTY_RANGE: tuple[float, float] = (0.0, 100.0)
 
 #: Accepted reference durations of a paced base, s, ``[low, high]`` (both ends of the pace).
 PACE_RANGE_S: tuple[float, float] = (0.05, 10.0)
-
-#: The option of a base controller spec that a paced base sets: its reference's duration.
-PACE_OPTIONS: Mapping[str, str] = {"pid": "ramp_s", "impedance": "duration_s"}
 
 
 def check_residual_scale(scale: float) -> float:
@@ -130,7 +128,8 @@ class ResidualConfig:
         penalty: Training only: weight of ``a^2`` subtracted from the reward, in [0, 100]
             (recorded with the policy as its provenance; the run-time law ignores it).
         pace_s: ``(fast, slow)``: the base's reference duration at gentleness weights 0 and
-            1, s (a paced base, :class:`PacedBase`); ``None``: the base spec's own.
+            1, s (a paced base, :class:`PacedBase`; the base spec leaves that option out,
+            :func:`~myoexo.control.specs.paced_base_spec`); ``None``: the base spec's own.
     """
 
     base: str
@@ -145,18 +144,6 @@ class ResidualConfig:
         check_residual_penalty(self.penalty)
         if self.pace_s is not None:
             object.__setattr__(self, "pace_s", check_pace(self.pace_s))
-            kind, _, tail = self.base.partition(":")
-            option = PACE_OPTIONS.get(kind.strip())
-            if option is None:
-                raise ValueError(
-                    f"a paced base sets the reference duration of {sorted(PACE_OPTIONS)}; "
-                    f"got base {self.base!r}"
-                )
-            if option in {part.split("=")[0].strip() for part in tail.split(",")}:
-                raise ValueError(
-                    f"base {self.base!r} sets {option}, which the pace {self.pace_s} sets "
-                    "from the gentleness weight: leave it out of the base"
-                )
 
     def to_dict(self) -> dict[str, Any]:
         """The metadata record (:data:`RESIDUAL_KEY`; ``penalty`` and ``pace_s`` only when
@@ -167,12 +154,6 @@ class ResidualConfig:
         if self.pace_s is not None:
             record["pace_s"] = list(self.pace_s)
         return record
-
-    def paced_spec(self, duration_s: float) -> str:
-        """The base spec with its reference duration set to *duration_s* (a paced base)."""
-        kind = self.base.partition(":")[0].strip()
-        separator = "," if ":" in self.base else ":"
-        return f"{self.base}{separator}{PACE_OPTIONS[kind]}={duration_s!r}"
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any] | None) -> ResidualConfig | None:

@@ -478,12 +478,40 @@ def residual_base(residual: ResidualConfig, env: Any) -> Controller:
     :class:`~myoexo.control.residual.PacedBase` that builds it at each episode's weight."""
     if residual.pace_s is None:
         return build_controller(parse_classical_spec(residual.base, "residual base"), env)
+    spec, option = paced_base_spec(residual.base)
 
     def build(duration_s: float) -> Controller:
-        spec = parse_classical_spec(residual.paced_spec(duration_s), "residual base")
-        return build_controller(spec, env)
+        return build_controller(
+            dataclasses.replace(spec, options={**spec.options, option: duration_s}), env
+        )
 
     return PacedBase(build, residual.pace_s)
+
+
+#: The option of a base controller spec that a paced base sets: its reference's duration.
+PACE_OPTIONS: Mapping[str, str] = {"pid": "ramp_s", "impedance": "duration_s"}
+
+
+def paced_base_spec(base: str) -> tuple[ControllerSpec, str]:
+    """The residual base spec *base* of a paced base, and the option of it
+    (:data:`PACE_OPTIONS`) the pace sets at each episode's weight.
+
+    Raises:
+        ValueError: *base* is no classical controller spec, is of a kind without a reference
+            duration, or sets that duration itself.
+    """
+    spec = parse_classical_spec(base, "residual base")
+    option = PACE_OPTIONS.get(spec.kind)
+    if option is None:
+        raise ValueError(
+            f"a paced base sets the reference duration of {sorted(PACE_OPTIONS)}; got base {base!r}"
+        )
+    if option in spec.options:
+        raise ValueError(
+            f"base {base!r} sets {option}, which the pace sets from the gentleness weight: "
+            "leave it out of the base"
+        )
+    return spec, option
 
 
 def parse_classical_spec(text: str, role: str) -> ControllerSpec:

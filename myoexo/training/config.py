@@ -301,7 +301,7 @@ class TrainConfig:
         object.__setattr__(self, "algorithm_kwargs", kwargs)
         check_fields(self)
         if self.residual_base:
-            from myoexo.control.specs import parse_classical_spec
+            from myoexo.control.specs import paced_base_spec, parse_classical_spec
 
             try:
                 parse_classical_spec(self.residual_base, "residual base")
@@ -319,6 +319,7 @@ class TrainConfig:
                     )  # fmt: skip
                 try:
                     _ = self.residual
+                    paced_base_spec(self.residual_base)
                 except ValueError as exc:
                     raise FieldError(
                         "TrainConfig", "residual_pace_s", self.residual_pace_s, str(exc)
