@@ -105,7 +105,7 @@ class ValidationConfig:
     """What :func:`validate` runs (each field is an option of ``myoexo twin validate``)."""
 
     subjects: int = option(
-        6, "subjects per level of the clinical tests (Tardieu, MAS, pendulum)", low=1, high=10_000
+        20, "subjects per level of the clinical tests (Tardieu, MAS, pendulum)", low=1, high=10_000
     )
     pid_subjects: int = option(
         20, "subjects per level of the paper's PID on the task", low=1, high=10_000
