@@ -160,6 +160,45 @@ def test_the_smoothness_term_makes_the_students_command_change_less_between_step
     assert errors[5.0] < 0.15, errors
 
 
+def test_the_absolute_smoothness_term_damps_jitter_and_keeps_a_sharp_step():
+    """Labels that step from 0.5 to -0.5 halfway through each episode, with an alternating
+    jitter of 0.05 (both readable from the frame): the absolute smoothness term (the
+    command's total variation per step) removes the jitter and keeps the step's height; the
+    squared term removes as little jitter only at a weight that also shrinks the step."""
+    from myoexo.studies.distill import DistillConfig, Episodes, train_student
+
+    lengths = [200, 200]
+    n = sum(lengths)
+    t = np.concatenate([np.arange(k) for k in lengths]) / 200.0
+    alternating = np.where(np.arange(n) % 2, 1.0, -1.0)
+    frames = np.zeros((n, FRAME_DIM), np.float32)
+    frames[:, 0] = t
+    frames[:, 1] = np.where(t < 0.5, 1.0, -1.0)
+    frames[:, 2] = alternating
+    labels = (0.5 * frames[:, 1] + 0.05 * alternating).astype(np.float32)
+    data = Episodes(frames, labels, np.array([0, lengths[0]]), np.zeros(n, np.int32))
+    mid = lengths[0] // 2
+    steady = np.ones(n - 1, bool)
+    steady[[mid - 1, lengths[0] - 1, lengths[0] + mid - 1]] = False  # the steps, the seam
+    jitter, height = {}, {}
+    for norm, weight in (("squared", 0.0), ("absolute", 0.2), ("squared", 5.0)):
+        config = DistillConfig(
+            n_frames=1, hidden=(32,), batch_size=64, lr=3e-3, smoothness_weight=weight,
+            smoothness_norm=norm,
+        )  # fmt: skip
+        student, _ = train_student(config, data, 60, None, seed=0, log=lambda _: None)
+        command = np.array([student.actor.act(f.astype(np.float64))[0] for f in frames])
+        jitter[norm, weight] = float(np.mean(np.abs(np.diff(command))[steady]))
+        height[norm, weight] = float(command[mid - 1] - command[mid])
+    assert jitter["squared", 0.0] > 0.05, jitter  # imitation alone follows the jitter
+    assert jitter["absolute", 0.2] < 0.1 * jitter["squared", 0.0], jitter
+    assert height["absolute", 0.2] > 0.9, height
+    assert jitter["squared", 5.0] > jitter["absolute", 0.2] and height["squared", 5.0] < 0.8, (
+        jitter,
+        height,
+    )
+
+
 def test_an_output_reach_above_one_lets_the_student_hold_the_motors_limit(tmp_path, env_exo):
     """With a tanh head the command approaches the teacher's saturated label and never
     reaches it; a head spanning [-1.1, 1.1] (clipped to the motor's range) commands the limit

@@ -158,6 +158,14 @@ class DistillConfig:
         "loss (CAPS, Mysore et al. 2021; 0: imitation alone)",
         low=0.0,
     )
+    smoothness_norm: str = option(
+        "squared",
+        "how the smoothness term prices a change of the command between consecutive steps: "
+        "'squared' (its mean square, which also slows a monotone move) or 'absolute' (its "
+        "mean absolute value: the command's total variation per step, the smoothness measure "
+        "of the tables, which a monotone move of any speed pays only its height for)",
+        choices=("squared", "absolute"),
+    )
     output_reach: float = option(
         1.0,
         "the student's tanh head spans [-reach, reach] and its command is then clipped to "
@@ -706,7 +714,8 @@ def train_student(
                 step = torch.clamp(command(next_row[rows]), -1.0, 1.0) - torch.clamp(
                     pred, -1.0, 1.0
                 )
-                loss = mse + config.smoothness_weight * torch.mean(step**2)
+                change = step**2 if config.smoothness_norm == "squared" else torch.abs(step)
+                loss = mse + config.smoothness_weight * torch.mean(change)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
