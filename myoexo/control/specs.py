@@ -471,23 +471,6 @@ def with_residual_base(
     return ResidualController(controller, residual_base(residual, env), residual.scale)
 
 
-def residual_base(residual: ResidualConfig, env: Any) -> Controller:
-    """The base controller *residual* names, built on *env* (what
-    :class:`~myoexo.control.residual.ResidualWrapper` trains on and
-    :class:`~myoexo.control.residual.ResidualController` runs on): with a pace, a
-    :class:`~myoexo.control.residual.PacedBase` that builds it at each episode's weight."""
-    if residual.pace_s is None:
-        return build_controller(parse_classical_spec(residual.base, "residual base"), env)
-    spec, option = paced_base_spec(residual.base)
-
-    def build(duration_s: float) -> Controller:
-        return build_controller(
-            dataclasses.replace(spec, options={**spec.options, option: duration_s}), env
-        )
-
-    return PacedBase(build, residual.pace_s)
-
-
 #: The option of a base controller spec that a paced base sets: its reference's duration.
 PACE_OPTIONS: Mapping[str, str] = {"pid": "ramp_s", "impedance": "duration_s"}
 
@@ -512,6 +495,23 @@ def paced_base_spec(base: str) -> tuple[ControllerSpec, str]:
             "leave it out of the base"
         )
     return spec, option
+
+
+def residual_base(residual: ResidualConfig, env: Any) -> Controller:
+    """The base controller *residual* names, built on *env* (what
+    :class:`~myoexo.control.residual.ResidualWrapper` trains on and
+    :class:`~myoexo.control.residual.ResidualController` runs on): with a pace, a
+    :class:`~myoexo.control.residual.PacedBase` that builds it at each episode's weight."""
+    if residual.pace_s is None:
+        return build_controller(parse_classical_spec(residual.base, "residual base"), env)
+    spec, option = paced_base_spec(residual.base)
+
+    def build(duration_s: float) -> Controller:
+        return build_controller(
+            dataclasses.replace(spec, options={**spec.options, option: duration_s}), env
+        )
+
+    return PacedBase(build, residual.pace_s)
 
 
 def parse_classical_spec(text: str, role: str) -> ControllerSpec:

@@ -153,9 +153,9 @@ class DistillConfig:
     weight_decay: float = option(0.0, "Adam weight decay", low=0.0)
     smoothness_weight: float = option(
         0.0,
-        "weight of the temporal smoothness term: the mean squared change of the student's "
-        "command between consecutive control steps of an episode, added to the imitation "
-        "loss (CAPS, Mysore et al. 2021; 0: imitation alone)",
+        "weight of the temporal smoothness term: the mean change of the student's command "
+        "between consecutive control steps of an episode (priced by smoothness_norm), added "
+        "to the imitation loss (CAPS, Mysore et al. 2021; 0: imitation alone)",
         low=0.0,
     )
     smoothness_norm: str = option(
