@@ -167,7 +167,7 @@ class ResidualConfig:
             base=str(record["base"]),
             scale=float(record["scale"]),
             penalty=float(record.get("penalty", 0.0)),
-            pace_s=None if pace is None else check_pace(pace),
+            pace_s=None if pace is None else tuple(pace),
         )
 
 
