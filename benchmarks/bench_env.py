@@ -19,6 +19,12 @@ default block is one step (~0.1 ms): on a loaded machine a longer block is preem
 every pass, and its best time measures the load, not the step (with ``--block 100`` and
 ~8 busy processes on 2 cores the ratio reads ~1.3 while one-step blocks read ~1.19).
 
+Where the time goes, printed for information: the same measurement of the env with its
+reflex stage removed (``remove_ctrl_stage``: the muscles unexcited), and the stage's cost per
+step in the loop (the difference of the two env times). Between ``mj_step`` calls every small
+numpy call of the stage costs more than timed on its own, so the stage costs the loop about
+twice what a micro-benchmark of it reads.
+
 An independent check, printed last: zero-action episodes (exo unpowered, reflexes on),
 each env step followed by ``mj_step(frame_skip)`` of a raw copy of the reset state with zero
 controls, every call timed on its own; the ratio of the median times.
@@ -36,6 +42,7 @@ import mujoco
 import numpy as np
 
 import myoexo  # noqa: F401  (registers the ids)
+from myoexo.spasticity import STAGE_NAME
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import reflex_argument
 
@@ -47,9 +54,16 @@ def _snapshot(env) -> mujoco.MjData:
 
 
 def bench(
-    env_id: str, steps: int, repeats: int = 7, block: int = 1, reflex: str = DEFAULT_REFLEX
+    env_id: str,
+    steps: int,
+    repeats: int = 7,
+    block: int = 1,
+    reflex: str = DEFAULT_REFLEX,
+    with_reflex: bool = True,
 ) -> dict[str, float]:
     env = gym.make(env_id, reflex=reflex).unwrapped  # the bare env: what a VecEnv worker steps
+    if not with_reflex:  # where the time goes: the env without its reflex stage
+        env.remove_ctrl_stage(STAGE_NAME)
     model, fs = env.model, env.frame_skip
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.6, 0.2, size=(steps, 1)).astype(np.float32)
@@ -164,6 +178,12 @@ def main() -> None:
         f"{r['ratio_same_trajectory']:.3f})"
     )
     print(f"ratio env / (frame_skip x raw) = {r['ratio']:.3f}   (target <= 1.20)")
+    bare = bench(args.env, args.steps, args.repeats, args.block, args.reflex, with_reflex=False)
+    stage_us = 1e6 / r["env_steps_per_s"] - 1e6 / bare["env_steps_per_s"]
+    print(
+        f"(for information: the same env without its reflex stage, muscles unexcited: ratio "
+        f"{bare['ratio']:.3f}; the stage costs {stage_us:.1f} us per step in the loop)"
+    )
     z = zero_action_loop(args.env, repeats=args.repeats)
     print(
         f"zero-action loop (medians): env step {z['env_step_us']:.1f} us, "

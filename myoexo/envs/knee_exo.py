@@ -88,7 +88,7 @@ from myoexo.model.scene import DEFAULT_CAMERA, MuscleColorizer
 from myoexo.spasticity.personal import PersonalSubject, load_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
 from myoexo.spasticity.registry import ReflexModel, reflex_label
-from myoexo.spasticity.stage import SpasticityStage
+from myoexo.spasticity.stage import STAGE_NAME, SpasticityStage
 
 __all__ = [
     "CUFF_OBS_KEYS",
@@ -316,7 +316,7 @@ class MyoExoKneeEnv(CtrlStageHost, MyoGymnasiumEnv, EzPickle):
             subject_noise=bool(draws) and self.personal is None,
             reflex=reflex,
         )
-        self.add_ctrl_stage("spasticity", self.spasticity.apply, self.spasticity.reset)
+        self.add_ctrl_stage(STAGE_NAME, self.spasticity.apply, self.spasticity.reset)
         #: The stepping twin (:class:`~myoexo.envs.twin.Twin`): this env's model, data and
         #: reflex stage, stepped through this env's control stages.
         self.twin = Twin(
