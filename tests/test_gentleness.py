@@ -226,6 +226,56 @@ def test_dominance_asks_for_every_measure_at_equal_accuracy():
     assert verdict["matched_by_no_weight"] == "accurate_gentle"
 
 
+def test_a_controller_that_never_settles_is_slower_than_one_that_does(tmp_path):
+    import pandas as pd
+
+    from myoexo.studies.gentleness import dominance, recount, write_record
+
+    weights = pd.DataFrame(
+        {
+            "weight": [0.0, 1.0],
+            "level": [0, 0],
+            "sac_abs_final_error_deg": [0.2, 0.3],
+            "sac_settling_time_s": [0.6, float("nan")],  # weight 1 never settles
+            "sac_peak_nm": [44.0, 43.0],
+            "sac_rms_nm": [18.0, 17.0],
+        }
+    )
+    classical = pd.DataFrame(
+        {
+            "level": [0, 0],
+            "controller": ["never_settles", "settles"],
+            "abs_final_error_deg": [5.7, 0.2],
+            "settling_time_s": [float("nan"), 1.0],
+            "peak_interaction_torque_nm": [112.0, 100.0],
+            "rms_interaction_torque_nm": [95.0, 65.0],
+        }
+    )
+    table = dominance(weights, classical).set_index("controller")
+    # a NaN mean settling time (no episode settled) loses to any finite one, ties with NaN
+    assert table.loc["never_settles", "matched_by"] == "0 1"
+    assert table.loc["settles", "matched_by"] == "0"
+
+    # a finished study's files, counted again from themselves
+    for column in ("pid_settling_time_s", "pid_peak_nm", "pid_rms_nm"):
+        weights[column] = 1.0
+    for column in ("peak_reduction_pct", "rms_reduction_pct"):
+        weights[column] = 0.0
+    weights["pass"] = True
+    record = {"policy": "p", "default_gentleness": 0.0, "subjects": 2, "root_seed": 1}
+    write_record(tmp_path, record, weights, classical, figure=False)
+    stale = pd.read_csv(tmp_path / "dominance.csv")
+    stale["matched_by"] = ""  # as an older count might have left it
+    stale.to_csv(tmp_path / "dominance.csv", index=False)
+    recounted = recount(tmp_path)
+    assert recounted["against_classical"][0]["matched"] == 2
+    assert "recounted_with" in recounted and recounted["policy"] == "p"
+    fresh = pd.read_csv(tmp_path / "dominance.csv").set_index("controller")
+    assert fresh.loc["never_settles", "matched_by"] == "0 1"
+    verdict_row = (tmp_path / "gentleness.md").read_text().splitlines()[-1].split("|")
+    assert [cell.strip() for cell in verdict_row[1:6]] == ["0", "0", "2", "2", "True"]
+
+
 def test_onnx_takes_the_weight_as_its_own_input(tmp_path):
     onnxruntime = pytest.importorskip("onnxruntime")
     from myoexo.training.export import export_onnx

@@ -146,6 +146,7 @@ def dominance(weights: Any, classical: Any) -> Any:
     """Per level and classical controller: the weights that are at least as good on peak
     torque, RMS torque and settling time at an equal or better final error (lower or equal,
     or both within the level's accuracy bound, :class:`~myoexo.evaluation.criteria.Criteria`).
+    A mean settling time of NaN (no episode settled) is slower than any finite one.
 
     Returns:
         One row per level and classical controller: its means and ``matched_by`` (the
@@ -164,11 +165,13 @@ def dominance(weights: Any, classical: Any) -> Any:
         accurate = (err <= c.abs_final_error_deg) | (
             (err < bound) & (c.abs_final_error_deg < bound)
         )
+        # a mean settling time of NaN: settled in no episode, slower than any that settles
+        their_settling = c.settling_time_s if math.isfinite(c.settling_time_s) else math.inf
         ok = (
             accurate
             & (mine.sac_peak_nm <= c.peak_interaction_torque_nm)
             & (mine.sac_rms_nm <= c.rms_interaction_torque_nm)
-            & (mine.sac_settling_time_s <= c.settling_time_s)
+            & (mine.sac_settling_time_s.fillna(math.inf) <= their_settling)
         )
         rows.append({**c.to_dict(), "matched_by": " ".join(f"{w:g}" for w in mine.weight[ok])})
     return pd.DataFrame(rows)
@@ -279,8 +282,32 @@ def run_gentleness(
     if run.table is None:
         raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
     weights = weight_table(run.table, config)
-    default = choose_default(weights)
-    out = config.out
+    means = classical_means(run.table, ["pid", *classical]) if classical else None
+    record = {
+        "policy": config.policy,
+        "default_gentleness": choose_default(weights),
+        "weights": list(config.weights),
+        "subjects": config.subjects,
+        "levels": list(config.levels),
+        "root_seed": config.root_seed,
+        "against_classical": [],
+        "rule": "smallest shortfall against the study's claims plus settling excess over the "
+        "PID; ties: largest mean peak and RMS reduction at levels 1-2",
+        "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
+        "versions": package_versions(),
+    }
+    return write_record(config.out, record, weights, means)
+
+
+def write_record(
+    out: Path, record: dict[str, Any], weights: Any, means: Any | None, figure: bool = True
+) -> dict[str, Any]:
+    """Write a study's files from its per-weight table *weights* (:func:`weight_table`) and
+    the classical controllers' means (:func:`classical_means`; ``None``: none were run):
+    ``gentleness.csv``, ``dominance.csv``, ``gentleness.md``, ``gentleness.png`` (unless not
+    *figure*) and the record *record* (its ``against_classical`` set here). Returns the
+    record."""
+    default = record["default_gentleness"]
     weights.to_csv(out / "gentleness.csv", index=False)
     cols = [
         "weight", "level", "sac_abs_final_error_deg", "sac_settling_time_s",
@@ -288,15 +315,13 @@ def run_gentleness(
         "sac_rms_nm", "pid_rms_nm", "rms_reduction_pct", "pass",
     ]  # fmt: skip
     header = (
-        f"Policy `{config.policy}` at each gentleness weight against the paper's PID, "
-        f"{config.subjects} subjects per level of root {config.root_seed} (selection, "
+        f"Policy `{record['policy']}` at each gentleness weight against the paper's PID, "
+        f"{record['subjects']} subjects per level of root {record['root_seed']} (selection, "
         f"in-sample). Default weight: **{default:g}**.\n\n"
     )
     text = header + str(weights[cols].round(2).to_markdown(index=False)) + "\n"
-    means = None
     verdicts: list[dict[str, Any]] = []
-    if classical:
-        means = classical_means(run.table, ["pid", *classical])
+    if means is not None:
         matched = dominance(weights, means)
         matched.to_csv(out / "dominance.csv", index=False)
         summary = level_verdicts(matched)
@@ -309,22 +334,34 @@ def run_gentleness(
             + "\n"
         )
     (out / "gentleness.md").write_text(text)
-    plot(weights, means).savefig(out / "gentleness.png", dpi=130)
-    record = {
-        "policy": config.policy,
-        "default_gentleness": default,
-        "weights": list(config.weights),
-        "subjects": config.subjects,
-        "levels": list(config.levels),
-        "root_seed": config.root_seed,
-        "against_classical": verdicts,
-        "rule": "smallest shortfall against the study's claims plus settling excess over the "
-        "PID; ties: largest mean peak and RMS reduction at levels 1-2",
-        "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
-        "versions": package_versions(),
-    }
+    if figure:
+        import matplotlib.pyplot as plt
+
+        fig = plot(weights, means)
+        fig.savefig(out / "gentleness.png", dpi=130)
+        plt.close(fig)
+    record = {**record, "against_classical": verdicts}
     (out / RECORD_FILE).write_text(json.dumps(record, indent=1) + "\n")
     return record
+
+
+def recount(out: Path | str) -> dict[str, Any]:
+    """Count a finished study's matches again from its own files (``gentleness.csv`` and
+    the classical means in ``dominance.csv``; no episode is run) and rewrite them
+    (:func:`write_record`; the figure, which shows no count, is kept), e.g. after a change
+    of :func:`dominance`. The record keeps its command and versions and gains
+    ``recounted_with`` (the versions that counted)."""
+    import pandas as pd
+
+    from myoexo.runtime.files import package_versions
+
+    out = Path(out)
+    record = json.loads((out / RECORD_FILE).read_text())
+    weights = pd.read_csv(out / "gentleness.csv")
+    path = out / "dominance.csv"
+    means = pd.read_csv(path).drop(columns="matched_by") if path.exists() else None
+    record["recounted_with"] = package_versions()
+    return write_record(out, record, weights, means, figure=False)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
