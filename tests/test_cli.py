@@ -143,3 +143,13 @@ def test_a_multi_line_message_is_printed_on_one_line(monkeypatch, capsys):
     monkeypatch.setattr(myoexo.clinical.stretch, "run", fails)
     assert main(["clinic", "stretch"]) == 2
     assert capsys.readouterr().err == "myoexo clinic stretch: error: first line second line\n"
+
+
+def test_an_examination_writes_its_table_traces_and_figure_with_out(tmp_path, capsys):
+    import pandas as pd
+
+    assert main(["clinic", "tardieu", "--levels", "0", "--out", str(tmp_path)]) == 0
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert written == ["tardieu.csv", "tardieu.png", "tardieu_traces.csv"]
+    assert list(pd.read_csv(tmp_path / "tardieu.csv").level) == [0]
+    assert "wrote " in capsys.readouterr().out

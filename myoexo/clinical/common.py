@@ -51,7 +51,6 @@ __all__ = [
     "motor_nm_per_ctrl",
     "simulate_drive",
     "twin_model",
-    "write_outputs",
 ]
 
 PoseFn = Callable[..., Any]
@@ -310,6 +309,26 @@ class ExamOptions:
     def __post_init__(self) -> None:
         check_fields(self)
 
+    def write(
+        self, stem: str, table: pd.DataFrame, traces: pd.DataFrame, plot: Callable[[], Figure]
+    ) -> list[Path]:
+        """With :attr:`out`: write ``<stem>.csv`` (the table), ``<stem>_traces.csv`` and
+        ``<stem>.png`` (the figure *plot* draws, at :attr:`dpi`) into it (created if
+        missing), say so and return the paths; without: nothing."""
+        if self.out is None:
+            return []
+        self.out.mkdir(parents=True, exist_ok=True)
+        paths = [
+            self.out / f"{stem}.csv",
+            self.out / f"{stem}_traces.csv",
+            self.out / f"{stem}.png",
+        ]
+        table.to_csv(paths[0], index=False)
+        traces.to_csv(paths[1], index=False)
+        plot().savefig(paths[2], dpi=self.dpi)
+        print("wrote " + ", ".join(str(path) for path in paths))
+        return paths
+
     def subjects(self, levels: Iterable[int]) -> Mapping[int, SpasticityParams] | None:
         """The individual subjects of *levels* (:func:`draw_subjects` with
         ``subject_seed``; ``None``: the nominal Table I subjects)."""
@@ -330,21 +349,3 @@ def add_exam_arguments(parser: argparse.ArgumentParser, params: type) -> None:
 def print_table(table: pd.DataFrame) -> None:
     """Print a table with 3 decimals."""
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
-
-
-def write_outputs(
-    out: Path,
-    stem: str,
-    table: pd.DataFrame,
-    traces: pd.DataFrame,
-    figure: Figure,
-    dpi: int,
-) -> list[Path]:
-    """Write ``<stem>.csv`` (the table), ``<stem>_traces.csv`` and ``<stem>.png`` into *out*
-    (created if missing); return the paths."""
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{stem}.csv", out / f"{stem}_traces.csv", out / f"{stem}.png"]
-    table.to_csv(paths[0], index=False)
-    traces.to_csv(paths[1], index=False)
-    figure.savefig(paths[2], dpi=dpi)
-    return paths

@@ -63,7 +63,6 @@ from myoexo.clinical.common import (
     print_table,
     resolve_twin,
     simulate_drive,
-    write_outputs,
 )
 from myoexo.control.reference import minimum_jerk_position, minimum_jerk_rate
 from myoexo.runtime.fields import check_fields, from_options, option
@@ -346,10 +345,5 @@ def run(args: argparse.Namespace) -> int:
     options = from_options(ExamOptions, args, reflex=args.reflex)
     result = run_mas_exam(params, reflex=options.reflex, subjects=options.subjects(params.levels))
     print_table(result.table())
-    if options.out is not None:
-        paths = write_outputs(
-            options.out, "mas_exam", result.table(), result.traces, plot_mas_exam(result),
-            options.dpi,
-        )  # fmt: skip
-        print("wrote " + ", ".join(str(path) for path in paths))
+    options.write("mas_exam", result.table(), result.traces, lambda: plot_mas_exam(result))
     return 0

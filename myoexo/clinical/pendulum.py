@@ -84,7 +84,6 @@ from myoexo.clinical.common import (
     print_table,
     simulate_drive,
     twin_model,
-    write_outputs,
 )
 from myoexo.model.exo import EXO_JOINT
 from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_fields
@@ -544,10 +543,5 @@ def run(args: argparse.Namespace) -> int:
     print_table(result.table())
     print("published:")
     print(published_values().to_string(index=False))
-    if options.out is not None:
-        paths = write_outputs(
-            options.out, "pendulum", result.table(), result.traces, plot_pendulum(result),
-            options.dpi,
-        )  # fmt: skip
-        print("wrote " + ", ".join(str(path) for path in paths))
+    options.write("pendulum", result.table(), result.traces, lambda: plot_pendulum(result))
     return 0

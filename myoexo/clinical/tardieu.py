@@ -70,7 +70,6 @@ from myoexo.clinical.common import (
     normalise_levels,
     print_table,
     resolve_twin,
-    write_outputs,
 )
 from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
 from myoexo.runtime.fields import check_fields, from_options, option
@@ -353,10 +352,5 @@ def run(args: argparse.Namespace) -> int:
     options = from_options(ExamOptions, args, reflex=args.reflex)
     result = run_tardieu(params, reflex=options.reflex, subjects=options.subjects(params.levels))
     print_table(result.table())
-    if options.out is not None:
-        paths = write_outputs(
-            options.out, "tardieu", result.table(), result.traces, plot_tardieu(result),
-            options.dpi,
-        )  # fmt: skip
-        print("wrote " + ", ".join(str(path) for path in paths))
+    options.write("tardieu", result.table(), result.traces, lambda: plot_tardieu(result))
     return 0
