@@ -27,7 +27,8 @@ reductions at levels 1-2 (the study's headline). It is written with its provenan
 exported policy's metadata (``default_gentleness``). Files: ``gentleness.json``,
 ``gentleness.md`` (one row per weight and level) and ``gentleness.png`` (settling time
 against peak torque per level: the weights as one curve, the PID and the classical
-controllers) and ``dominance.csv``.
+controllers) and ``dominance.csv``. :func:`recount` counts a finished study's matches again
+from these files, without running an episode.
 """
 
 from __future__ import annotations
@@ -290,7 +291,7 @@ def run_gentleness(
         "subjects": config.subjects,
         "levels": list(config.levels),
         "root_seed": config.root_seed,
-        "against_classical": [],
+        "against_classical": [],  # written by write_record
         "rule": "smallest shortfall against the study's claims plus settling excess over the "
         "PID; ties: largest mean peak and RMS reduction at levels 1-2",
         "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
