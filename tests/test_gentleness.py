@@ -276,6 +276,29 @@ def test_a_controller_that_never_settles_is_slower_than_one_that_does(tmp_path):
     assert [cell.strip() for cell in verdict_row[1:6]] == ["0", "0", "2", "2", "True"]
 
 
+def test_the_default_is_never_a_weight_that_does_not_settle_at_some_level():
+    import pandas as pd
+
+    from myoexo.studies.gentleness import choose_default
+
+    # weight 0 has the larger reductions but settles in no episode at level 1
+    rows = [
+        (0.0, 0, 0.5, 0.6, 60.0, 60.0),
+        (0.0, 1, 0.5, float("nan"), 60.0, 60.0),
+        (1.0, 0, 0.5, 0.9, 20.0, 20.0),
+        (1.0, 1, 0.5, 0.9, 20.0, 20.0),
+    ]
+    table = pd.DataFrame(
+        rows,
+        columns=[
+            "weight", "level", "sac_abs_final_error_deg", "settling_ratio",
+            "peak_reduction_pct", "rms_reduction_pct",
+        ],
+    )  # fmt: skip
+    assert choose_default(table) == 1.0
+    assert choose_default(table.fillna(0.8)) == 0.0  # settled: its reductions win
+
+
 def test_onnx_takes_the_weight_as_its_own_input(tmp_path):
     onnxruntime = pytest.importorskip("onnxruntime")
     from myoexo.training.export import export_onnx

@@ -124,11 +124,13 @@ def weight_table(table: Any, config: GentlenessConfig) -> Any:
 
 def weight_key(rows: Any) -> tuple[float, float]:
     """Sort key of one weight's rows (lower is better): the shortfall against the study's
-    claims plus the settling excess over the PID, then minus the headline reductions."""
+    claims plus the settling excess over the PID (infinite at a level where none of its
+    episodes settled), then minus the headline reductions."""
     from myoexo.evaluation.criteria import shortfall
 
     table = rows.set_index("level")
-    excess = float((table.settling_ratio - 1.0).clip(lower=0.0).sum())
+    # a level where no episode settled (NaN): an excess no settling weight has
+    excess = float((table.settling_ratio - 1.0).clip(lower=0.0).fillna(math.inf).sum())
     headline = table[table.index.isin(HEADLINE_LEVELS)]
     gain = float((headline.peak_reduction_pct + headline.rms_reduction_pct).mean() / 2)
     return shortfall(table) + excess, -gain if math.isfinite(gain) else math.inf
