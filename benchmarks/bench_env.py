@@ -22,8 +22,8 @@ every pass, and its best time measures the load, not the step (with ``--block 10
 Where the time goes, printed for information: the same measurement of the env with its
 reflex stage removed (``remove_ctrl_stage``: the muscles unexcited), and the stage's cost per
 step in the loop (the difference of the two env times). Between ``mj_step`` calls every small
-numpy call of the stage costs more than timed on its own, so the stage costs the loop about
-twice what a micro-benchmark of it reads.
+numpy call of the stage costs more than timed on its own, so the stage costs the loop two to
+three times what a micro-benchmark of it reads.
 
 An independent check, printed last: zero-action episodes (exo unpowered, reflexes on),
 each env step followed by ``mj_step(frame_skip)`` of a raw copy of the reset state with zero
