@@ -274,8 +274,14 @@ def test_a_joined_cluster_drops_the_tasks_of_a_killed_driver(tmp_path):
                 pid: t for pid, t in descendants(head.pid).items() if "_chunk_task" in _cmd(pid)
             }
 
-        running = chunk_workers()
-        assert running, "no task of the driver on the cluster"
+        running: dict[int, str] = {}
+
+        def tasks_running() -> bool:  # a snapshot: a worker between two tasks shows none
+            running.clear()
+            running.update(chunk_workers())
+            return bool(running)
+
+        wait_for(tasks_running, driver, "task of the driver on the cluster")
         os.kill(driver.pid, signal.SIGKILL)
         driver.wait()
         assert not wait_gone(running), "the killed driver's tasks still run"
