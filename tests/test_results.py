@@ -92,12 +92,37 @@ def test_a_set_states_the_peak_reduction_the_references_hold_allows(evaluation, 
     for value, reads in ((1.0, "(>= 8.8: out of reach, at most 1.0)"), (50.0, "(>= 8.8: ")):
         meta["hold_bounds"][0]["peak_reduction_bound_pct"] = value
         (dest / "meta.json").write_text(json.dumps(meta))
-        (level_2,) = [line for line in render(dest).splitlines() if line.startswith("| 2 |")]
-        assert reads in level_2
-        assert ("out of reach" in level_2) == (value < 8.8)
+        peak_cell = _level_2_cells(render(dest))[6]
+        assert reads in peak_cell
+        assert ("out of reach" in peak_cell) == (value < 8.8)
     meta.pop("hold_bounds")  # a set collected before the bound: its tables as they were
     (dest / "meta.json").write_text(json.dumps(meta))
     assert "out of reach" not in render(dest) and "hold_bounds" not in render(dest)
+
+
+def _level_2_cells(markdown: str) -> list[str]:
+    (line,) = [line for line in markdown.splitlines() if line.startswith("| 2 |")]
+    return [cell.strip() for cell in line.strip("|").split("|")]
+
+
+def test_where_the_reference_stalls_the_final_error_is_judged_against_it(evaluation, tmp_path):
+    """At level 2, where the reference holds the knee short of the study's 1-deg bound, the
+    bound reads "out of reach" and the cell judges "no worse than the reference" by the
+    paired difference of the absolute final errors (met only below 0)."""
+    dest = collect(evaluation, tmp_path / "set")
+    red = pd.read_csv(dest / "reductions.csv").set_index("level").loc[2]
+    ref_error = red.abs_final_error_deg - red.abs_final_error_diff_deg
+    assert ref_error > 1.0  # 0.5-s episodes: the PID is far from the target at level 2
+    cell = _level_2_cells(render(dest))[2]
+    low, high = red.abs_final_error_diff_deg_low, red.abs_final_error_diff_deg_high
+    call = "met" if high < 0 else "missed" if low > 0 else "tie"
+    assert f"(< 1: out of reach, `pid` stalls {ref_error:.2f} short; vs `pid` " in cell
+    assert cell.endswith(f"[{low:+.2f}, {high:+.2f}]: {call})")
+    meta = json.loads((dest / "meta.json").read_text())
+    meta.pop("hold_bounds")  # no hold measured: the study's bound as it stands
+    (dest / "meta.json").write_text(json.dumps(meta))
+    cell = _level_2_cells(render(dest))[2]
+    assert "out of reach" not in cell and cell.endswith(("(< 1: missed)", "(< 1: tie)"))
 
 
 def _evaluation(out: Path, controllers: tuple[str, ...], subjects: int = 3) -> Path:

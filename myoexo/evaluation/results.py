@@ -281,6 +281,26 @@ def _judged(
     return f"{cell} ({'>=' if higher else '<'} {target:g}: {call})"
 
 
+def _final_error_judged(row: Any, target: float, ref: str, ref_error: float, stall: bool) -> str:
+    """The final-error cell: the mean absolute final error with its interval, judged against
+    the study's bound *target*. Where the reference stalls against the reflex short of that
+    bound (*stall*: a level with a hold bound, :mod:`~myoexo.evaluation.bound`, and
+    *ref_error*, the reference's mean absolute final error on the same subjects, beyond the
+    bound), the bound reads "out of reach" and the cell judges the study's reading there
+    instead, no worse than the reference: the paired difference of the absolute final
+    errors, met when its whole interval is below 0."""
+    name = "abs_final_error_deg"
+    if not (stall and ref_error > target):
+        return _judged(row, name, target, False, 2)
+    diff = "abs_final_error_diff_deg"
+    low, high = row[f"{diff}_low"], row[f"{diff}_high"]
+    call = verdict(low, high, 0.0, higher_is_better=False)
+    return (
+        f"{_ci_of(row, name, 2)} (< {target:g}: out of reach, `{ref}` stalls "
+        f"{ref_error:.2f} short; vs `{ref}` {row[diff]:+.2f} [{low:+.2f}, {high:+.2f}]: {call})"
+    )
+
+
 def headline_table(folder: str | Path, controller: str) -> str:
     """The short table of one controller against the PID (the README's): per level its mean
     absolute final error, peak and RMS reductions and settling ratio, each with its interval
@@ -299,7 +319,13 @@ def headline_table(folder: str | Path, controller: str) -> str:
             [
                 str(level),
                 str(int(row.seeds)) if "seeds" in row else "1",
-                _judged(row, "abs_final_error_deg", paper.sac_final_error_bound_deg, False, 2),
+                _final_error_judged(
+                    row,
+                    paper.sac_final_error_bound_deg,
+                    ref,
+                    float(row.abs_final_error_deg - row.abs_final_error_diff_deg),
+                    int(level) in bounds,
+                ),
                 fmt_num(s.loc[(ref, level), "final_error_deg_mean"]),
                 f"{fmt_num(k.loc[(ref, level), 'worst_abs_final_error_deg'], 1)} / "
                 f"{fmt_num(k.loc[(controller, level), 'worst_abs_final_error_deg'], 1)}",
@@ -400,7 +426,10 @@ def hold_bound_line(meta: dict[str, Any]) -> str:
         f"What the motor allows (`myoexo.evaluation.bound.hold_bounds`): where the study keeps "
         f"a controller at `{ref}`'s final error, it holds `{ref}`'s torque at the end (the mean "
         f"over the last {bounds[0]['window_s']:g} s of `{ref}`'s episodes), so its peak is at "
-        f'least that: {each}. A peak claim above it reads "out of reach".'
+        f'least that: {each}. A peak claim above it reads "out of reach". Where `{ref}`, '
+        "which holds that torque, ends beyond the study's final-error bound, the bound reads "
+        '"out of reach" too, and the final error is judged against the study\'s reading there, '
+        f"no worse than `{ref}`: the paired difference, met when its whole interval is below 0."
     )
 
 
