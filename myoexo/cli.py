@@ -67,6 +67,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "the soonest an open-loop command settles each subject at the PID's final error, and "
         "at what interaction torque (an oracle on the selection subjects)",
     ),
+    "twin hold-slope": (
+        "myoexo.studies.hold_slope",
+        "how much less torque holds the knee per degree it ends short, where the motor stalls "
+        "(the slope the result sets' hold bounds read)",
+    ),
     "twin tune-pid": ("myoexo.control.ziegler_nichols", "Ziegler-Nichols tuning on the twin"),
     "twin strap-lag": (
         "myoexo.studies.strap_lag",

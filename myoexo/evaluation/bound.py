@@ -1,14 +1,25 @@
 """What a controller can reach at most: the distance to the oracle (:mod:`myoexo.control.oracle`)
 and the bound the reference's hold torque sets on the peak reduction.
 
-**Hold bound.** Where the motor stalls against the reflex (level 2: the knee ends short of the
-target), the strap carries the hold at the end of the episode. A controller that ends where
-the reference ends holds the same torque there, so its peak interaction torque (over the
-whole episode) is at least that hold: its peak reduction against the reference (in % of the
-reference's mean peak) is at most ``100 (1 - mean hold / mean reference peak)``
-(:func:`hold_bounds`, from the reference's stored traces). It binds at the levels where the
-study's claims keep a controller at the reference's own final error
-(:data:`HOLD_BOUND_LEVELS`); the result tables then say "out of reach" for a claim above it.
+**Hold bound.** Where the motor stalls against the reflex (levels 2-3: the knee ends short of
+the target), the strap carries the hold at the end of the episode, and a controller's peak
+interaction torque (over the whole episode) is at least its own hold. How far short the
+study's accuracy claim lets a controller end sets how little it may hold:
+
+* **level 2**: the claim (< 1 deg) is below the reference's own final error, the motor's
+  stall; the study's claims are read there as "no worse than the reference", so a controller
+  that meets them ends where the reference ends and holds the reference's torque;
+* **level 3**: the claim (< 11.45 deg) lies ``slack`` deg beyond the reference's mean absolute
+  final error, and a knee held ``x`` deg further short needs at most ``x`` times the twin's
+  steepest **hold slope** less torque (Nm/deg, measured by ``myoexo twin hold-slope``, the
+  package's fit :data:`HOLD_SLOPE_FIT`; a level it has not measured gets no bound there).
+
+So its mean peak is at least ``hold - slope x slack`` (the reference's mean hold over the last
+:data:`HOLD_WINDOW_S`, from its stored traces), and its peak reduction against the reference
+(in % of the reference's mean peak) at most ``100 (1 - (hold - slope x slack) / mean reference
+peak)`` (:func:`hold_bound`, :func:`hold_bounds`). The result tables then say "out of reach" for
+a claim above it. Levels 0-1 (the knee reaches the target) are not bounded
+(:data:`HOLD_BOUND_LEVELS`).
 
 **Distance to the oracle.**
 
@@ -33,11 +44,55 @@ BOUND_PREFIX = "oracle"
 #: The end of an episode over which the reference's hold torque is averaged, s.
 HOLD_WINDOW_S = 0.5
 
-#: Levels where the study's claims keep a controller at the reference's own final error
-#: (level 2: "no worse than the PID"), so the reference's hold bounds its peak reduction.
-#: Not levels 0-1 (within 1 deg of the target) nor 3 (within 11.45 deg: a controller may end
-#: further out than the PID and hold less).
-HOLD_BOUND_LEVELS: tuple[int, ...] = (2,)
+#: Levels where the motor stalls against the reflex, so the reference's hold bounds the peak
+#: reduction of a controller that meets the study's accuracy claim (module docstring).
+HOLD_BOUND_LEVELS: tuple[int, ...] = (2, 3)
+
+#: The package's fit of the hold slope per level (``myoexo twin hold-slope --write``).
+HOLD_SLOPE_FIT = "hold_slope"
+
+
+def hold_slope_nm_per_deg(level: int) -> float | None:
+    """The twin's steepest hold slope at *level* (Nm per degree further short, the package's
+    fit :data:`HOLD_SLOPE_FIT`); ``None`` where it has not been measured."""
+    from myoexo.runtime.fits import fit_path, read_fit
+
+    if not fit_path(HOLD_SLOPE_FIT).exists():
+        return None
+    entry = read_fit(HOLD_SLOPE_FIT)["result"]["levels"].get(str(int(level)))
+    return None if entry is None else float(entry["max_nm_per_deg"])
+
+
+def hold_bound(
+    hold_nm: float,
+    reference_peak_nm: float,
+    reference_error_deg: float,
+    claim_deg: float,
+    slope_nm_per_deg: float | None,
+) -> dict[str, float] | None:
+    """The hold bound of one level (module docstring): ``slack_deg`` (how much further short
+    than the reference, on average, *claim_deg* lets a controller end: 0 where the reference
+    ends beyond the claim), ``hold_slope_nm_per_deg`` (0 without slack), ``least_hold_nm``
+    and ``peak_reduction_bound_pct``; ``None`` where there is slack and no measured slope.
+
+    Args:
+        hold_nm: The reference's mean hold.
+        reference_peak_nm: The reference's mean peak on the same subjects.
+        reference_error_deg: The reference's mean absolute final error on them.
+        claim_deg: The study's bound on the mean absolute final error at that level.
+        slope_nm_per_deg: The twin's steepest hold slope there (``None``: not measured).
+    """
+    slack = max(0.0, claim_deg - reference_error_deg)
+    if slack > 0.0 and slope_nm_per_deg is None:
+        return None
+    slope = float(slope_nm_per_deg or 0.0) if slack > 0.0 else 0.0
+    least = hold_nm - slope * slack
+    return {
+        "slack_deg": slack,
+        "hold_slope_nm_per_deg": slope,
+        "least_hold_nm": least,
+        "peak_reduction_bound_pct": 100.0 * (1.0 - least / reference_peak_nm),
+    }
 
 
 def hold_bounds(
@@ -51,12 +106,14 @@ def hold_bounds(
     docstring, from the reference's stored traces in the evaluation folder *eval_dir* and its
     episodes in *table* (that folder's :func:`~myoexo.evaluation.storage.load_table`):
     ``level``, ``subjects``, ``window_s``, ``hold_torque_nm`` (the mean over subjects of the
-    interaction torque over the last *window_s*), ``reference_peak_nm`` (the reference's
-    mean peak on the same subjects) and ``peak_reduction_bound_pct``. A level without traces
-    is left out.
+    interaction torque over the last *window_s*), ``reference_peak_nm`` and
+    ``reference_abs_final_error_deg`` (the reference's means on the same subjects), and
+    :func:`hold_bound`'s fields. A level without traces, or with slack and no measured hold
+    slope, is left out.
     """
     import numpy as np
 
+    from myoexo.evaluation.paper import PAPER_RESULTS
     from myoexo.evaluation.storage import load_traces
 
     rows = []
@@ -68,8 +125,19 @@ def hold_bounds(
         end = np.asarray(traces.time_s) >= traces.time_s[-1] - window_s + 1e-9
         hold = traces["interaction_torque_nm"][:, end].mean(axis=1)
         ref = table[(table.controller == reference) & (table.level == level)]
-        peak = ref.set_index("subject").loc[traces.subjects, "peak_interaction_torque_nm"]
-        hold_nm, peak_nm = float(hold.mean()), float(peak.mean())
+        ref = ref.set_index("subject").loc[traces.subjects]
+        hold_nm = float(hold.mean())
+        peak_nm = float(ref.peak_interaction_torque_nm.mean())
+        error_deg = float(ref.abs_final_error_deg.mean())
+        bound = hold_bound(
+            hold_nm,
+            peak_nm,
+            error_deg,
+            PAPER_RESULTS[level].sac_final_error_bound_deg,
+            hold_slope_nm_per_deg(level),
+        )
+        if bound is None:
+            continue
         rows.append(
             {
                 "level": level,
@@ -77,7 +145,8 @@ def hold_bounds(
                 "window_s": float(window_s),
                 "hold_torque_nm": hold_nm,
                 "reference_peak_nm": peak_nm,
-                "peak_reduction_bound_pct": 100.0 * (1.0 - hold_nm / peak_nm),
+                "reference_abs_final_error_deg": error_deg,
+                **bound,
             }
         )
     return rows

@@ -417,19 +417,31 @@ def hold_bound_line(meta: dict[str, Any]) -> str:
     if not bounds:
         return ""
     ref = meta["reference"]
-    each = "; ".join(
-        f"level {b['level']}: {b['hold_torque_nm']:.1f} Nm held against a mean peak of "
-        f"{b['reference_peak_nm']:.1f} Nm, so at most {b['peak_reduction_bound_pct']:.1f} %"
-        for b in bounds
-    )
+
+    def one(b: dict[str, Any]) -> str:
+        text = (
+            f"level {b['level']}: {b['hold_torque_nm']:.1f} Nm held against a mean peak of "
+            f"{b['reference_peak_nm']:.1f} Nm"
+        )
+        if b.get("slack_deg", 0.0) > 0.0:
+            text += (
+                f", less at most {b['hold_slope_nm_per_deg']:.2f} Nm/deg over the "
+                f"{b['slack_deg']:.2f} deg the claim lets a controller end further short "
+                f"({b['least_hold_nm']:.1f} Nm)"
+            )
+        return f"{text}, so at most {b['peak_reduction_bound_pct']:.1f} %"
+
     return (
-        f"What the motor allows (`myoexo.evaluation.bound.hold_bounds`): where the study keeps "
-        f"a controller at `{ref}`'s final error, it holds `{ref}`'s torque at the end (the mean "
-        f"over the last {bounds[0]['window_s']:g} s of `{ref}`'s episodes), so its peak is at "
-        f'least that: {each}. A peak claim above it reads "out of reach". Where `{ref}`, '
-        "which holds that torque, ends beyond the study's final-error bound, the bound reads "
-        '"out of reach" too, and the final error is judged against the study\'s reading there, '
-        f"no worse than `{ref}`: the paired difference, met when its whole interval is below 0."
+        f"What the motor allows (`myoexo.evaluation.bound.hold_bounds`): where the motor stalls "
+        f"against the reflex, a controller that meets the study's accuracy claim ends where "
+        f"`{ref}` ends (level 2) or at most as far beyond it as the claim allows (level 3, with "
+        f"the twin's steepest hold slope, `myoexo twin hold-slope`), and its peak is at least "
+        f"the torque that holds it there (`{ref}`'s mean over the last "
+        f"{bounds[0]['window_s']:g} s of its episodes): {'; '.join(map(one, bounds))}. A peak "
+        f'claim above it reads "out of reach". Where `{ref}`, which holds that torque, ends '
+        'beyond the study\'s final-error bound, the bound reads "out of reach" too, and the '
+        f"final error is judged against the study's reading there, no worse than `{ref}`: the "
+        "paired difference, met when its whole interval is below 0."
     )
 
 
