@@ -158,6 +158,12 @@ def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, 
     collect(later, dest, update=True)  # again: replaced, not repeated
     assert len(pd.read_csv(dest / "summary.csv")) == len(summary)
     assert json.loads((dest / "meta.json").read_text())["commands"] == meta["commands"]
+    collect(evaluation, dest, update=True)  # sac again: replaced in its place
+    assert list(dict.fromkeys(pd.read_csv(dest / "summary.csv").controller)) == [
+        "pid",
+        "sac",
+        "pid:ramp_s=0.2",
+    ]
     with pytest.raises(ValueError, match="subjects_per_level"):
         collect(_evaluation(tmp_path / "fewer", ("pid", "sac"), subjects=2), dest, update=True)
     other = tmp_path / "other"

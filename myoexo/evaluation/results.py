@@ -94,7 +94,8 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
 
     With *update*, *dest* is an existing set and *eval_dir* an evaluation of more (or
     retrained) controllers on the same subjects: its controllers' rows are added to the set,
-    replacing rows of the same name, and the other controllers' rows are kept. "The same
+    replacing rows of the same name in their place, and the other controllers' rows are
+    kept. "The same
     subjects" is checked, not assumed: the two must agree on the root seed, the subjects per
     level, the levels and the twin, and *eval_dir* must hold the set's reference controller
     with the same summary and tail rows (an episode depends only on controller, level,
@@ -212,7 +213,11 @@ def _updated(
     merged = {}
     for (name, new), frame in zip(files.items(), (summary, risk, red, heads), strict=True):
         kept = frame[~frame.controller.isin(added)]
-        merged[name] = pd.concat([kept, new[new.controller.isin(added)]], ignore_index=True)
+        rows = pd.concat([kept, new[new.controller.isin(added)]], ignore_index=True)
+        # a replaced controller keeps its place in the set, an added one comes last
+        order = {c: i for i, c in enumerate(dict.fromkeys([*frame.controller, *added]))}
+        rank = rows.controller.map(order)
+        merged[name] = rows.iloc[rank.argsort(kind="stable")].reset_index(drop=True)
     meta = {
         **meta,
         "hold_bounds": meta["hold_bounds"] or old.get("hold_bounds", []),
