@@ -175,6 +175,34 @@ def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, 
         collect(later, other, update=True)
 
 
+def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tmp_path):
+    """results bound: a set's hold bounds recomputed from a run of its reference on its own
+    subjects (the other files untouched, the command recorded); a run on other subjects, or
+    one whose reference rows differ, is refused."""
+    from myoexo.evaluation.results import bound
+
+    dest = collect(evaluation, tmp_path / "set")
+    meta = json.loads((dest / "meta.json").read_text())
+    before = {f: (dest / f).read_text() for f in ("summary.csv", "reductions.csv")}
+    later = _evaluation(tmp_path / "pid_again", ("pid",))
+    stripped = {**meta, "hold_bounds": []}
+    (dest / "meta.json").write_text(json.dumps(stripped))
+    bound(later, dest)
+    again = json.loads((dest / "meta.json").read_text())
+    assert again["hold_bounds"] == meta["hold_bounds"]
+    assert again["hold_bounds_command"].startswith("myoexo evaluate --controllers pid --levels")
+    assert again["commands"] == meta["commands"]
+    assert {f: (dest / f).read_text() for f in before} == before
+    assert "`myoexo results bound`" in render(dest)
+    with pytest.raises(ValueError, match="subjects_per_level"):
+        bound(_evaluation(tmp_path / "fewer", ("pid",), subjects=2), dest)
+    frame = pd.read_csv(dest / "summary.csv")
+    frame.loc[(frame.controller == "pid") & (frame.level == 2), "final_error_deg_mean"] += 0.1
+    frame.to_csv(dest / "summary.csv", index=False)
+    with pytest.raises(ValueError, match="did not run on the set's subjects"):
+        bound(later, dest)
+
+
 def test_tables_are_rendered_and_a_stale_one_is_caught(evaluation, tmp_path):
     root = tmp_path / "repo"
     collect(evaluation, root / RESULTS_DIR / README_SET)

@@ -33,7 +33,7 @@ from typing import Any
 
 from myoexo.control.specs import seeds_folder_of_spec
 from myoexo.envs.options import TwinOptions
-from myoexo.evaluation.bound import hold_bounds
+from myoexo.evaluation.bound import HOLD_BOUND_LEVELS, hold_bounds
 from myoexo.evaluation.config import EVALUATION_ROOT_SEED, load_config
 from myoexo.evaluation.criteria import (
     DeployableGoals,
@@ -161,6 +161,61 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     dest.mkdir(parents=True, exist_ok=True)
     for name, frame in files.items():
         frame.to_csv(dest / name, index=False)
+    write_json_atomic(dest / "meta.json", meta, indent=2)
+    return dest
+
+
+def bound(eval_dir: str | Path, dest: str | Path) -> Path:
+    """Recompute the hold bounds (:func:`~myoexo.evaluation.bound.hold_bounds`) of the result
+    set *dest* from *eval_dir*, an evaluation of the set's reference with stored traces on the
+    set's subjects, at some of the bound's levels (:data:`~myoexo.evaluation.bound
+    .HOLD_BOUND_LEVELS`). "The set's subjects" is checked as :func:`collect` checks an update:
+    the same root seed, subjects per level and twin, and the reference's summary and tail rows
+    at those levels equal to the set's. The set's other files are left as they are; its
+    ``meta.json`` gets the new bounds (those of other levels kept) and the evaluation's
+    command as ``hold_bounds_command``.
+
+    Raises:
+        ValueError: *dest* is no result set, or *eval_dir* holds no reference episodes at the
+            bound's levels or is not on the set's subjects.
+    """
+    dest = Path(dest)
+    summary, risk, _, _, meta = _read(dest)
+    config = load_config(eval_dir)
+    table = pool_seed_groups(load_table(eval_dir))
+    ref = meta["reference"]
+    cfg = config.get("config", {})
+    ours = {
+        "root_seed": int(cfg.get("root_seed", -1)),
+        "subjects_per_level": int(cfg.get("subjects", 0)),
+        "twin": cfg.get("twin"),
+        "twin_version": recorded_twin_version(config),
+    }
+    theirs = {**meta, "twin_version": recorded_twin_version(meta)}
+    for key, value in ours.items():
+        if theirs.get(key) != value:
+            raise ValueError(
+                f"the evaluation's {key} ({value!r}) is not the set's ({theirs.get(key)!r}): "
+                f"{str(dest)!r} takes bounds from its own subjects only"
+            )
+    mine = table[table.controller == ref]
+    levels = sorted(set(int(v) for v in mine.level) & set(HOLD_BOUND_LEVELS))
+    if not levels:
+        raise ValueError(
+            f"{str(eval_dir)!r} holds no {ref!r} episodes at levels {list(HOLD_BOUND_LEVELS)}"
+        )
+    for name, old, new in (
+        ("summary.csv", summary, summarize_episodes(mine)),
+        ("tail_risk.csv", risk, tail_risk(mine, ref)),
+    ):
+        if not _same_rows(old[old.level.isin(levels)], new[new.level.isin(levels)], ref):
+            raise ValueError(
+                f"the reference {ref!r} has other {name} rows at levels {levels} in the "
+                f"evaluation than in {str(dest)!r}: it did not run on the set's subjects and twin"
+            )
+    kept = [b for b in meta.get("hold_bounds", []) if int(b["level"]) not in levels]
+    bounds = sorted([*kept, *hold_bounds(eval_dir, mine, ref, levels)], key=lambda b: b["level"])
+    meta = {**meta, "hold_bounds": bounds, "hold_bounds_command": command_of(config)}
     write_json_atomic(dest / "meta.json", meta, indent=2)
     return dest
 
@@ -447,6 +502,12 @@ def hold_bound_line(meta: dict[str, Any]) -> str:
         'beyond the study\'s final-error bound, the bound reads "out of reach" too, and the '
         f"final error is judged against the study's reading there, no worse than `{ref}`: the "
         "paired difference, met when its whole interval is below 0."
+        + (
+            f" (The reference's traces for these bounds: `{meta['hold_bounds_command']}`, "
+            "on the set's subjects, `myoexo results bound`.)"
+            if meta.get("hold_bounds_command")
+            else ""
+        )
     )
 
 
@@ -741,6 +802,21 @@ class CollectOptions:
 
 
 @dataclass(frozen=True)
+class BoundOptions:
+    """What ``myoexo results bound EVAL_DIR SET`` reads and writes (its positional
+    arguments)."""
+
+    eval_dir: Path = option(
+        doc="a myoexo evaluate output folder of the set's reference on its subjects, with traces",
+        flag="",
+    )
+    set: Path = option(doc="the result set whose hold bounds it recomputes", flag="")
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class TablesOptions:
     """What ``myoexo results tables SET`` prints."""
 
@@ -779,11 +855,17 @@ def _positionals(parser: argparse.ArgumentParser, cls: type, names: Sequence[str
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``myoexo results``: each sub-command's are the fields of its options class
-    (:class:`CollectOptions`, :class:`TablesOptions`, :class:`GoalsOptions`)."""
+    (:class:`CollectOptions`, :class:`BoundOptions`, :class:`TablesOptions`,
+    :class:`GoalsOptions`)."""
     sub = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
     c = sub.add_parser("collect", help="write the result set of an evaluation folder")
     _positionals(c, CollectOptions, ("eval_dir", "dest"))
     add_options(c, CollectOptions)
+    b = sub.add_parser(
+        "bound", help="recompute a result set's hold bounds from its reference's traces"
+    )
+    _positionals(b, BoundOptions, ("eval_dir", "set"))
+    add_options(b, BoundOptions)
     t = sub.add_parser("tables", help="print a result set's tables (Markdown)")
     _positionals(t, TablesOptions, ("set",))
     add_options(t, TablesOptions)
@@ -803,6 +885,9 @@ def run(args: argparse.Namespace) -> int:
         co = from_options(CollectOptions, args, eval_dir=args.eval_dir, dest=args.dest)
         dest = collect(co.eval_dir, co.dest, update=co.update)
         print(f"result set: {dest}")
+    elif args.action == "bound":
+        bo = from_options(BoundOptions, args, eval_dir=args.eval_dir, set=args.set)
+        print(f"hold bounds of: {bound(bo.eval_dir, bo.set)}")
     elif args.action == "tables":
         to = from_options(TablesOptions, args, set=args.set)
         if to.controllers:
