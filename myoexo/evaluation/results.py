@@ -147,10 +147,7 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     meta = {
         "commands": [command_of(config)],
         "reference": reference,
-        "subjects_per_level": int(cfg.get("subjects", 0)),
-        "root_seed": int(cfg.get("root_seed", 0)),
-        "twin": cfg.get("twin"),
-        "twin_version": recorded_twin_version(config),
+        **_subjects_of(config),
         "episodes": len(table),
         "versions": config.get("versions", {}),
         "hold_bounds": hold_bounds(eval_dir, table, reference, levels),
@@ -184,40 +181,78 @@ def bound(eval_dir: str | Path, dest: str | Path) -> Path:
     config = load_config(eval_dir)
     table = pool_seed_groups(load_table(eval_dir))
     ref = meta["reference"]
-    cfg = config.get("config", {})
-    ours = {
-        "root_seed": int(cfg.get("root_seed", -1)),
-        "subjects_per_level": int(cfg.get("subjects", 0)),
-        "twin": cfg.get("twin"),
-        "twin_version": recorded_twin_version(config),
-    }
-    theirs = {**meta, "twin_version": recorded_twin_version(meta)}
-    for key, value in ours.items():
-        if theirs.get(key) != value:
-            raise ValueError(
-                f"the evaluation's {key} ({value!r}) is not the set's ({theirs.get(key)!r}): "
-                f"{str(dest)!r} takes bounds from its own subjects only"
-            )
     mine = table[table.controller == ref]
     levels = sorted(set(int(v) for v in mine.level) & set(HOLD_BOUND_LEVELS))
     if not levels:
         raise ValueError(
             f"{str(eval_dir)!r} holds no {ref!r} episodes at levels {list(HOLD_BOUND_LEVELS)}"
         )
-    for name, old, new in (
-        ("summary.csv", summary, summarize_episodes(mine)),
-        ("tail_risk.csv", risk, tail_risk(mine, ref)),
-    ):
-        if not _same_rows(old[old.level.isin(levels)], new[new.level.isin(levels)], ref):
-            raise ValueError(
-                f"the reference {ref!r} has other {name} rows at levels {levels} in the "
-                f"evaluation than in {str(dest)!r}: it did not run on the set's subjects and twin"
-            )
+
+    def at_levels(frame: Any) -> Any:
+        return frame[frame.level.isin(levels)]
+
+    _check_same_subjects(
+        dest,
+        meta,
+        {"reference": ref, **_subjects_of(config)},
+        at_levels(summary),
+        at_levels(risk),
+        at_levels(summarize_episodes(mine)),
+        at_levels(tail_risk(mine, ref)),
+    )
     kept = [b for b in meta.get("hold_bounds", []) if int(b["level"]) not in levels]
     bounds = sorted([*kept, *hold_bounds(eval_dir, mine, ref, levels)], key=lambda b: b["level"])
     meta = {**meta, "hold_bounds": bounds, "hold_bounds_command": command_of(config)}
     write_json_atomic(dest / "meta.json", meta, indent=2)
     return dest
+
+
+#: What names a set's subjects in its ``meta.json`` (:func:`_subjects_of`).
+_SUBJECT_KEYS = ("root_seed", "subjects_per_level", "twin", "twin_version")
+
+
+def _subjects_of(config: dict[str, Any]) -> dict[str, Any]:
+    """The fields of :data:`_SUBJECT_KEYS` of an evaluation folder's config: an episode
+    depends only on them, the controller, the level and the subject index."""
+    cfg = config.get("config", {})
+    return {
+        "root_seed": int(cfg.get("root_seed", 0)),
+        "subjects_per_level": int(cfg.get("subjects", 0)),
+        "twin": cfg.get("twin"),
+        "twin_version": recorded_twin_version(config),
+    }
+
+
+def _check_same_subjects(
+    dest: Path,
+    meta: dict[str, Any],
+    theirs: dict[str, Any],
+    summary: Any,
+    risk: Any,
+    new_summary: Any,
+    new_risk: Any,
+) -> None:
+    """Refuse an evaluation (its reference and :func:`_subjects_of` fields *theirs*, its
+    reference's summary and tail rows) that did not run on the subjects of the set *dest*
+    (its *meta*, *summary* and *risk*): the fields must agree, the reference's rows repeat
+    (:func:`_same_rows`)."""
+    ours = {**meta, "twin_version": recorded_twin_version(meta)}
+    for key, value in theirs.items():
+        if ours.get(key) != value:
+            raise ValueError(
+                f"the evaluation's {key} ({value!r}) is not the set's ({ours.get(key)!r}): "
+                f"{str(dest)!r} can only take runs on its own subjects"
+            )
+    ref = theirs["reference"]
+    for name, old, new in (
+        ("summary.csv", summary, new_summary),
+        ("tail_risk.csv", risk, new_risk),
+    ):
+        if not _same_rows(old, new, ref):
+            raise ValueError(
+                f"the reference {ref!r} has other {name} rows in the evaluation than in "
+                f"{str(dest)!r}: it did not run on the set's subjects and twin"
+            )
 
 
 def _same_rows(old: Any, new: Any, controller: str) -> bool:
@@ -246,25 +281,21 @@ def _updated(
     import pandas as pd
 
     summary, risk, red, heads, old = _read(dest)
-    old = {**old, "twin_version": recorded_twin_version(old)}
-    for key in ("reference", "root_seed", "subjects_per_level", "twin", "twin_version"):
-        if old.get(key) != meta.get(key):
-            raise ValueError(
-                f"the evaluation's {key} ({meta.get(key)!r}) is not the set's ({old.get(key)!r}):"
-                f" {str(dest)!r} can only take controllers run on its own subjects"
-            )
     if set(summary.level) != set(files["summary.csv"].level):
         raise ValueError(
             f"the evaluation's levels {sorted(set(files['summary.csv'].level))} are not the "
             f"set's {sorted(set(summary.level))}"
         )
-    ref = meta["reference"]
-    for name, frame in (("summary.csv", summary), ("tail_risk.csv", risk)):
-        if not _same_rows(frame, files[name], ref):
-            raise ValueError(
-                f"the reference {ref!r} has other {name} rows in the evaluation than in "
-                f"{str(dest)!r}: it did not run on the set's subjects and twin"
-            )
+    _check_same_subjects(
+        dest,
+        old,
+        {k: meta.get(k) for k in ("reference", *_SUBJECT_KEYS)},
+        summary,
+        risk,
+        files["summary.csv"],
+        files["tail_risk.csv"],
+    )
+    old = {**old, "twin_version": recorded_twin_version(old)}
     merged = {}
     for (name, new), frame in zip(files.items(), (summary, risk, red, heads), strict=True):
         kept = frame[~frame.controller.isin(added)]
