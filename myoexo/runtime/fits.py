@@ -20,7 +20,7 @@ from typing import Any
 
 from myoexo.runtime.files import package_versions, write_json_atomic
 
-__all__ = ["fit_path", "fits_dir", "provenance", "read_fit", "write_fit"]
+__all__ = ["fit_path", "fits_dir", "provenance", "read_fit", "write_command_fit", "write_fit"]
 
 #: Where the fits live inside the package.
 FITS_PACKAGE_DIR = ("assets", "fits")
@@ -55,6 +55,17 @@ def write_fit(name: str, result: dict[str, Any], prov: dict[str, Any]) -> Path:
     path = fit_path(name)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(path, {"result": result, "provenance": prov}, indent=2)
+    return path
+
+
+def write_command_fit(
+    name: str, result: dict[str, Any], command: str, twin_version: int, **fields: Any
+) -> Path:
+    """Write the fit *name* that ``command --write`` made: :func:`write_fit` with the
+    :func:`provenance` of that command, *twin_version* and *fields*; prints and returns the
+    file."""
+    path = write_fit(name, result, provenance(f"{command} --write", twin_version, **fields))
+    print(f"written: {path}")
     return path
 
 

@@ -778,18 +778,13 @@ def _write_calibration(
     provenance (the command is the calibration note's, which names every option); with
     *extra*, the fit is ``{"calibration": ..., **extra}``."""
     from myoexo.model import TWIN_VERSION
-    from myoexo.runtime.fits import provenance, write_fit
+    from myoexo.runtime.fits import write_command_fit
 
     command = calibration.note.split(":")[0]
     result = calibration.to_dict()
     if extra is not None:
         result = {"calibration": result, **extra}
-    path = write_fit(
-        name,
-        result,
-        provenance(f"{command} --write", TWIN_VERSION, root_seed=root_seed),
-    )
-    print(f"written: {path}")
+    write_command_fit(name, result, command, TWIN_VERSION, root_seed=root_seed)
 
 
 def fit_table(result: Any) -> Any:

@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     """``myoexo twin hold-slope``: print the slopes; with ``--write``, make them the
     package's."""
     from myoexo.model import TWIN_VERSION
-    from myoexo.runtime.fits import provenance, write_fit
+    from myoexo.runtime.fits import write_command_fit
 
     settings = from_options(HoldSlopeSettings, args)
     output = from_options(HoldSlopeOutput, args)
@@ -201,12 +201,9 @@ def run(args: argparse.Namespace) -> int:
             f"myoexo twin hold-slope --seed {settings.root_seed} --subjects "
             f"{settings.subjects} --levels {levels}"
         )
-        path = write_fit(
-            HOLD_SLOPE_FIT,
-            asdict(result),
-            provenance(f"{command} --write", TWIN_VERSION, root_seed=settings.root_seed),
+        write_command_fit(
+            HOLD_SLOPE_FIT, asdict(result), command, TWIN_VERSION, root_seed=settings.root_seed
         )
-        print(f"written: {path}")
     return 0
 
 

@@ -176,7 +176,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """``myoexo twin strap-lag``: print the fitted lag; with ``--write``, make it the package's."""
     from myoexo.model import TWIN_VERSION
-    from myoexo.runtime.fits import provenance, write_fit
+    from myoexo.runtime.fits import write_command_fit
 
     settings = from_options(StrapLagSettings, args)
     output = from_options(StrapLagOutput, args)
@@ -191,12 +191,9 @@ def run(args: argparse.Namespace) -> int:
         command = (
             f"myoexo twin strap-lag --seed {settings.root_seed} --subjects {settings.subjects}"
         )
-        path = write_fit(
-            STRAP_LAG_FIT,
-            asdict(result),
-            provenance(f"{command} --write", TWIN_VERSION, root_seed=settings.root_seed),
+        write_command_fit(
+            STRAP_LAG_FIT, asdict(result), command, TWIN_VERSION, root_seed=settings.root_seed
         )
-        print(f"written: {path}")
     return 0
 
 
