@@ -405,3 +405,26 @@ def test_a_set_of_an_earlier_twin_says_so(tmp_path):
     other = {"twin_version": TWIN_VERSION, "twin": {"reflex": "stretch"}}
     note = earlier_twin_note(other)
     assert note is not None and "Measured with the `stretch` reflex" in note
+
+
+def test_todays_full_sets_state_what_the_motor_allows_at_levels_2_and_3():
+    """Every committed set of today's default twin that ran levels 2-3 carries the hold bound
+    of both levels, and its level-3 bound uses the package's measured hold slope."""
+    from myoexo.evaluation.bound import hold_slope_nm_per_deg
+    from myoexo.evaluation.paper import PAPER_RESULTS
+    from myoexo.evaluation.results import earlier_twin_note
+
+    root = REPO / RESULTS_DIR
+    todays = []
+    for meta_file in sorted(root.glob("*/meta.json")):
+        meta = json.loads(meta_file.read_text())
+        levels = set(pd.read_csv(meta_file.parent / "summary.csv").level)
+        if earlier_twin_note(meta) is None and {2, 3} <= levels:
+            todays.append(meta_file.parent.name)
+            bounds = {int(b["level"]): b for b in meta["hold_bounds"]}
+            assert set(bounds) == {2, 3}, meta_file
+            assert bounds[2]["slack_deg"] == 0.0
+            assert bounds[3]["hold_slope_nm_per_deg"] == hold_slope_nm_per_deg(3)
+            # the tables read the study's level-3 claim "out of reach"
+            assert bounds[3]["peak_reduction_bound_pct"] < PAPER_RESULTS[3].peak_reduction_pct
+    assert {"eval_1000_tone", "eval_1000_tone_perturbed"} <= set(todays)
