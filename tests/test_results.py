@@ -196,6 +196,12 @@ def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tm
     assert "`myoexo results bound`" in render(dest)
     with pytest.raises(ValueError, match="subjects_per_level"):
         bound(_evaluation(tmp_path / "fewer", ("pid",), subjects=2), dest)
+    traceless = tmp_path / "traceless"
+    shutil.copytree(later, traceless)
+    shutil.rmtree(traceless / "traces")
+    with pytest.raises(ValueError, match=r"no hold bound at levels \[2\]"):
+        bound(traceless, dest)  # the set keeps the bounds it has
+    assert json.loads((dest / "meta.json").read_text())["hold_bounds"] == meta["hold_bounds"]
     frame = pd.read_csv(dest / "summary.csv")
     frame.loc[(frame.controller == "pid") & (frame.level == 2), "final_error_deg_mean"] += 0.1
     frame.to_csv(dest / "summary.csv", index=False)

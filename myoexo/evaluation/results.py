@@ -174,7 +174,8 @@ def bound(eval_dir: str | Path, dest: str | Path) -> Path:
 
     Raises:
         ValueError: *dest* is no result set, or *eval_dir* holds no reference episodes at the
-            bound's levels or is not on the set's subjects.
+            bound's levels, is not on the set's subjects, or gives no bound at one of them
+            (no traces, or no measured hold slope where the claim leaves slack).
     """
     dest = Path(dest)
     summary, risk, _, _, meta = _read(dest)
@@ -200,8 +201,15 @@ def bound(eval_dir: str | Path, dest: str | Path) -> Path:
         at_levels(summarize_episodes(mine)),
         at_levels(tail_risk(mine, ref)),
     )
+    fresh = hold_bounds(eval_dir, mine, ref, levels)
+    missing = sorted(set(levels) - {int(b["level"]) for b in fresh})
+    if missing:
+        raise ValueError(
+            f"{str(eval_dir)!r} gives no hold bound at levels {missing} (no stored traces of "
+            f"{ref!r}, or a level without a measured hold slope: myoexo twin hold-slope)"
+        )
     kept = [b for b in meta.get("hold_bounds", []) if int(b["level"]) not in levels]
-    bounds = sorted([*kept, *hold_bounds(eval_dir, mine, ref, levels)], key=lambda b: b["level"])
+    bounds = sorted([*kept, *fresh], key=lambda b: b["level"])
     meta = {**meta, "hold_bounds": bounds, "hold_bounds_command": command_of(config)}
     write_json_atomic(dest / "meta.json", meta, indent=2)
     return dest
