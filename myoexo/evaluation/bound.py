@@ -55,6 +55,16 @@ HOLD_BOUND_LEVELS: tuple[int, ...] = (2, 3)
 HOLD_SLOPE_FIT = "hold_slope"
 
 
+def mean_over_end(time_s: Any, values: Any, window_s: float = HOLD_WINDOW_S) -> Any:
+    """The mean of *values* (their last axis along *time_s*: one episode, or one row per
+    episode) over the last *window_s* of the episode (the sample exactly *window_s* before
+    the end left out); of the interaction torque over :data:`HOLD_WINDOW_S`, the hold."""
+    import numpy as np
+
+    t = np.asarray(time_s)
+    return np.asarray(values)[..., t >= t[-1] - window_s + 1e-9].mean(axis=-1)
+
+
 def hold_slope_nm_per_deg(level: int) -> float | None:
     """The twin's steepest hold slope at *level* (Nm per degree further short, the package's
     fit :data:`HOLD_SLOPE_FIT`); ``None`` where it has not been measured."""
@@ -114,7 +124,6 @@ def hold_bounds(
     :func:`hold_bound`'s fields. A level without traces, or with slack and no measured hold
     slope, is left out.
     """
-    import numpy as np
 
     from myoexo.evaluation.paper import PAPER_RESULTS
     from myoexo.evaluation.storage import load_traces
@@ -125,8 +134,7 @@ def hold_bounds(
             traces = load_traces(eval_dir, reference, level)
         except ValueError:  # the evaluation stored no traces
             continue
-        end = np.asarray(traces.time_s) >= traces.time_s[-1] - window_s + 1e-9
-        hold = traces["interaction_torque_nm"][:, end].mean(axis=1)
+        hold = mean_over_end(traces.time_s, traces["interaction_torque_nm"], window_s)
         ref = table[(table.controller == reference) & (table.level == level)]
         ref = ref.set_index("subject").loc[traces.subjects]
         hold_nm = float(hold.mean())

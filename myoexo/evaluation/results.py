@@ -95,12 +95,11 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     With *update*, *dest* is an existing set and *eval_dir* an evaluation of more (or
     retrained) controllers on the same subjects: its controllers' rows are added to the set,
     replacing rows of the same name in their place, and the other controllers' rows are
-    kept. "The same
-    subjects" is checked, not assumed: the two must agree on the root seed, the subjects per
-    level, the levels and the twin, and *eval_dir* must hold the set's reference controller
-    with the same summary and tail rows (an episode depends only on controller, level,
-    subject and root seed, so the reference's rows repeat, to 1e-6 relative). The set's
-    ``meta.json`` lists every command it was built from.
+    kept. "The same subjects" is checked, not assumed: the two must agree on the root seed,
+    the subjects per level, the levels and the twin, and *eval_dir* must hold the set's
+    reference controller with the same summary and tail rows (an episode depends only on
+    controller, level, subject and root seed, so the reference's rows repeat, to 1e-6
+    relative). The set's ``meta.json`` lists every command it was built from.
 
     Raises:
         ValueError: *eval_dir* is no evaluation folder, holds no episodes, or no PID; with
@@ -216,7 +215,7 @@ def bound(eval_dir: str | Path, dest: str | Path) -> Path:
 
 
 #: What names a set's subjects in its ``meta.json`` (:func:`_subjects_of`).
-_SUBJECT_KEYS = ("root_seed", "subjects_per_level", "twin", "twin_version")
+_SUBJECT_KEYS = ("subjects_per_level", "root_seed", "twin", "twin_version")
 
 
 def _subjects_of(config: dict[str, Any]) -> dict[str, Any]:
@@ -224,8 +223,8 @@ def _subjects_of(config: dict[str, Any]) -> dict[str, Any]:
     depends only on them, the controller, the level and the subject index."""
     cfg = config.get("config", {})
     return {
-        "root_seed": int(cfg.get("root_seed", 0)),
         "subjects_per_level": int(cfg.get("subjects", 0)),
+        "root_seed": int(cfg.get("root_seed", 0)),
         "twin": cfg.get("twin"),
         "twin_version": recorded_twin_version(config),
     }
@@ -303,7 +302,6 @@ def _updated(
         files["summary.csv"],
         files["tail_risk.csv"],
     )
-    old = {**old, "twin_version": recorded_twin_version(old)}
     merged = {}
     for (name, new), frame in zip(files.items(), (summary, risk, red, heads), strict=True):
         kept = frame[~frame.controller.isin(added)]

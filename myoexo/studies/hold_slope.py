@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from myoexo.evaluation.bound import HOLD_SLOPE_FIT, HOLD_WINDOW_S
+from myoexo.evaluation.bound import HOLD_SLOPE_FIT, mean_over_end
 from myoexo.evaluation.config import check_fit_root
 from myoexo.runtime.fields import add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
@@ -108,18 +108,19 @@ class HoldSlopeFit:
 
 
 def _ends_and_holds(
-    level: int, target_deg: float, settings: HoldSlopeSettings, perturbed: bool
+    level: int, task_target_deg: float, aim_deg: float, settings: HoldSlopeSettings, perturbed: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each subject's end (deg short of the task's own target) and hold (Nm) under the
-    paper's PID aimed at *target_deg*, on the nominal or a *perturbed* twin."""
+    """Each subject's end (deg short of *task_target_deg*: the knee's mean over the last
+    :data:`~myoexo.evaluation.metrics.FINAL_WINDOW_S`) and hold (Nm, the interaction
+    torque's mean over the bound's window), both :func:`~myoexo.evaluation.bound.mean_over_end`,
+    under the paper's PID aimed at *aim_deg*,
+    on the nominal or a *perturbed* twin."""
     from myoexo.control.specs import build_controller, parse_controller_spec
     from myoexo.envs import make_env
-    from myoexo.envs.config import TaskParams
     from myoexo.evaluation.engine import evaluate_controller
     from myoexo.evaluation.metrics import FINAL_WINDOW_S
 
-    task_target = TaskParams().target_angle_deg
-    kwargs = {"target_angle_deg": target_deg, "robustness": perturbed}
+    kwargs = {"target_angle_deg": aim_deg, "robustness": perturbed}
     env = make_env(level, **kwargs)
     try:
         pid = build_controller(parse_controller_spec("pid"), env)
@@ -128,14 +129,15 @@ def _ends_and_holds(
     _, episodes = evaluate_controller(
         pid, level, settings.subjects, root_seed=settings.root_seed, env_kwargs=kwargs
     )
-    ends, holds = [], []
-    for episode in episodes:
-        t = np.asarray(episode.signals["time_s"])
-        last = t[-1]
-        knee = np.asarray(episode.signals["knee_angle_deg"])
-        torque = np.asarray(episode.signals["interaction_torque_nm"])
-        ends.append(knee[t >= last - FINAL_WINDOW_S + 1e-9].mean() - task_target)
-        holds.append(torque[t >= last - HOLD_WINDOW_S + 1e-9].mean())
+    ends = [
+        float(mean_over_end(e.signals["time_s"], e.signals["knee_angle_deg"], FINAL_WINDOW_S))
+        - task_target_deg
+        for e in episodes
+    ]
+    holds = [
+        float(mean_over_end(e.signals["time_s"], e.signals["interaction_torque_nm"]))
+        for e in episodes
+    ]
     return np.asarray(ends), np.asarray(holds)
 
 
@@ -150,11 +152,11 @@ def fit_hold_slope(settings: HoldSlopeSettings, log: Any = None) -> HoldSlopeFit
     for level in settings.levels:
         secants, ends_0, holds_0 = [], [], []
         for perturbed in twins:
-            end_0, hold_0 = _ends_and_holds(level, target, settings, perturbed)
+            end_0, hold_0 = _ends_and_holds(level, target, target, settings, perturbed)
             ends_0.append(end_0)
             holds_0.append(hold_0)
             for offset in settings.offsets_deg:
-                end, hold = _ends_and_holds(level, target + offset, settings, perturbed)
+                end, hold = _ends_and_holds(level, target, target + offset, settings, perturbed)
                 moved = end - end_0 >= settings.min_move_deg
                 secants.extend(((hold_0 - hold)[moved] / (end - end_0)[moved]).tolist())
         if not secants:
