@@ -338,6 +338,50 @@ def test_minimum_jerk_pid_spec_parses():
         parse_controller_spec("pid:reference=cubic,ramp_s=1")
 
 
+def test_ramp_steps_to_the_target_where_the_knee_lags_it():
+    """``step_lag_deg``: the ramp's point while the knee keeps within the lag of it, the
+    target from the first step it lags further (and for the rest of the motion)."""
+    start, target = math.radians(90.0), math.radians(7.0)
+    config = PIDConfig(ramp_s=1.0, reference="minjerk", step_lag_deg=4.0)
+    plain = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
+    lagging = PID(config, dt_s=DT)
+    # a knee that follows the ramp within the lag: the same setpoints as the plain ramp
+    followed = [lagging.setpoint_rad(target, start)]  # the ramp starts where the knee is
+    plain.setpoint_rad(target, start)
+    for _ in range(29):
+        point = plain.setpoint_rad(target, start)
+        followed.append(lagging.setpoint_rad(target, point + math.radians(3.9)))
+    ramp = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
+    assert followed == [ramp.setpoint_rad(target, start) for _ in range(30)]
+    # a knee held at the start: the ramp leaves it behind, then the setpoint is the target
+    held = PID(config, dt_s=DT)
+    setpoints = np.array([held.setpoint_rad(target, start) for _ in range(40)])
+    stepped = np.flatnonzero(setpoints == target)
+    assert stepped.size and np.all(setpoints[stepped[0] :] == target)
+    lag_deg = math.degrees(start - plain_ramp_point(stepped[0]))
+    assert lag_deg > 4.0 and math.degrees(start - plain_ramp_point(stepped[0] - 1)) <= 4.0
+    # once stepped it stays stepped, even where the knee catches up; reset starts afresh
+    assert held.setpoint_rad(target, target) == target
+    held.reset()
+    assert held.setpoint_rad(target, start) == start
+    # its checks, and the spec
+    with pytest.raises(ValueError, match=r"step_lag_deg = 4.0 needs a ramp"):
+        PIDConfig(step_lag_deg=4.0)
+    with pytest.raises(ValueError, match=r"step_lag_deg = -1.0 is outside \(0, 180\]"):
+        PIDConfig(ramp_s=1.0, step_lag_deg=-1.0)
+    spec = parse_controller_spec("pid:reference=minjerk,ramp_s=0.45,step_lag_deg=4")
+    assert pid_config(spec.options) == PIDConfig(ramp_s=0.45, reference="minjerk", step_lag_deg=4.0)
+
+
+def plain_ramp_point(step: int) -> float:
+    """The 1-s minimum-jerk ramp's point from 90 to 7 deg at *step* (rad)."""
+    pid = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
+    point = math.radians(90.0)
+    for _ in range(step + 1):
+        point = pid.setpoint_rad(math.radians(7.0), math.radians(90.0))
+    return point
+
+
 # ----------------------------------------------------------------------------- sensors
 class _Spy:
     """Records the sensor records it is given; commands nothing."""

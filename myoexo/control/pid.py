@@ -32,7 +32,11 @@ clock, the time since the command began; no episode clock) and a **clipped comma
 (``output_limit`` < 1: at most that fraction of the 100 Nm). The ramp's shape is
 ``reference`` (:mod:`myoexo.control.reference`): ``"linear"`` (constant speed, the default)
 or ``"minjerk"`` (minimum jerk, ``s = 10 u^3 - 15 u^4 + 6 u^5``, Flash and Hogan 1985: it
-starts and ends at rest, the bell-shaped speed of a human movement).
+starts and ends at rest, the bell-shaped speed of a human movement). A ramp can give way to
+the step where the leg resists it (``step_lag_deg``): once the knee lags the ramp's point by
+more than that angle, further from the target, the setpoint is the target for the rest of
+the motion, so a ramp that is gentle where nothing resists pushes as the paper's PID does
+where a spastic reflex holds the knee back.
 
 Discretization at the env's control period ``dt``: backward-Euler integral and backward
 difference derivative, no derivative filter (Kd is small); the derivative is zero on the
@@ -138,6 +142,9 @@ class PIDConfig:
             :data:`~myoexo.control.reference.REFERENCE_SHAPES`: ``"linear"`` (constant
             speed) or ``"minjerk"`` (minimum jerk: at rest at both ends). Ignored without a
             ramp.
+        step_lag_deg: With a ramp: the lag (deg, the feedback angle behind the ramp's point,
+            away from the target) beyond which the setpoint steps to the target for the rest
+            of the motion (``None``: it follows the ramp).
     """
 
     gains: PIDGains = field(default_factory=PIDGains)
@@ -148,8 +155,18 @@ class PIDConfig:
     feedback: str = "knee"
     ramp_s: float = 0.0
     reference: str = "linear"
+    step_lag_deg: float | None = None
 
     def __post_init__(self) -> None:
+        if self.step_lag_deg is not None:
+            if not (math.isfinite(self.step_lag_deg) and 0.0 < self.step_lag_deg <= 180.0):
+                raise ValueError(
+                    f"PIDConfig.step_lag_deg = {self.step_lag_deg!r} is outside (0, 180] deg"
+                )
+            if self.ramp_s <= 0.0:
+                raise ValueError(
+                    f"PIDConfig.step_lag_deg = {self.step_lag_deg!r} needs a ramp (ramp_s > 0)"
+                )
         if not (math.isfinite(self.ramp_s) and 0.0 <= self.ramp_s <= 60.0):
             raise ValueError(f"PIDConfig.ramp_s = {self.ramp_s!r} is outside [0, 60] s")
         if self.reference not in REFERENCE_SHAPES:
@@ -235,6 +252,7 @@ class PID:
         self._prev_error_rad: float | None = None
         self._prev_measurement_rad: float | None = None
         self._ramp_start_rad: float | None = None  # first measured angle (ramped setpoint)
+        self._stepped = False  # the ramp gave way to the target (``step_lag_deg``)
         self._steps = 0
         #: The last output's terms (command units): ``p``, ``i``, ``d``, ``unsaturated``.
         self.last_terms: dict[str, float] = {}
@@ -284,18 +302,24 @@ class PID:
 
     def setpoint_rad(self, target_rad: float, measured_rad: float) -> float:
         """The setpoint of this step: the target, or with ``ramp_s`` > 0 the point of the
-        ramp (of shape ``reference``) from the first measured angle (the step counter
-        advances by one)."""
-        ramp = self.config.ramp_s
+        ramp (of shape ``reference``) from the first measured angle, until the measured angle
+        lags it by more than ``step_lag_deg`` (the step counter advances by one)."""
+        cfg = self.config
         self._steps += 1
-        if ramp <= 0.0:
+        if cfg.ramp_s <= 0.0 or self._stepped:
             return target_rad
-        if self._ramp_start_rad is None:
-            self._ramp_start_rad = measured_rad
+        start = self._ramp_start_rad
+        if start is None:
+            start = self._ramp_start_rad = measured_rad
         elapsed_s = (self._steps - 1) * self.dt_s
-        return reference_point(
-            self.config.reference, self._ramp_start_rad, target_rad, elapsed_s, ramp
-        ).angle
+        point = reference_point(cfg.reference, start, target_rad, elapsed_s, cfg.ramp_s).angle
+        lag = cfg.step_lag_deg
+        if lag is not None and (measured_rad - point) * math.copysign(
+            1.0, start - target_rad
+        ) > math.radians(lag):
+            self._stepped = True
+            return target_rad
+        return point
 
     def __repr__(self) -> str:
         g = self.config.gains
@@ -304,5 +328,5 @@ class PID:
             f"feedback={self.config.feedback!r}, anti_windup={self.config.anti_windup!r}, "
             f"derivative_on_measurement={self.config.derivative_on_measurement}, "
             f"output_limit={self.config.output_limit}, ramp_s={self.config.ramp_s}, "
-            f"reference={self.config.reference!r})"
+            f"reference={self.config.reference!r}, step_lag_deg={self.config.step_lag_deg})"
         )

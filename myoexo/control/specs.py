@@ -21,6 +21,10 @@ spec                               controller
                                    or ``minjerk`` (minimum jerk,
                                    :mod:`myoexo.control.reference`), e.g.
                                    ``pid:reference=minjerk,ramp_s=1``
+``pid:step_lag_deg=4``             with a ramp: the setpoint steps to the target once the
+                                   knee lags the ramp by more than 4 deg (where the leg
+                                   resists), e.g.
+                                   ``pid:reference=minjerk,ramp_s=0.45,step_lag_deg=4``
 ``pid:limit=0.6``                  command clipped at 0.6 (60 Nm)
 ``impedance``                      :class:`~myoexo.control.impedance.ImpedanceController`:
                                    a spring-damper (700 Nm/rad, 5 Nm s/rad: the paper's Kp
@@ -109,6 +113,7 @@ _PID_KEYS = (
     "limit",
     "tuned",
     "reference",
+    "step_lag_deg",
 )
 #: Options of the ``impedance`` spec -> :class:`ImpedanceConfig` fields.
 _IMPEDANCE_KEYS: dict[str, str] = {
@@ -342,7 +347,7 @@ def _pid_options(tail: str) -> dict[str, Any]:
         if key == "textbook":
             options["derivative_on_measurement"] = False
             options.setdefault("anti_windup", "none")
-        elif key in ("kp", "ki", "kd", "ramp_s", "limit"):
+        elif key in ("kp", "ki", "kd", "ramp_s", "limit", "step_lag_deg"):
             options["output_limit" if key == "limit" else key] = convert(
                 value, float, f"PID option {key}"
             )
