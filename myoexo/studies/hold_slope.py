@@ -9,8 +9,8 @@ can reach: this command measures it.
 
 For each subject it runs the paper's PID aimed at the target and at targets shifted further
 short by each of ``offsets_deg`` (the PID holds the knee where it is aimed, or stalls short of
-it), and reads each episode's **end** (the knee's mean over the evaluation's final window,
-from the task's own target, deg) and **hold** (the mean interaction torque over the bound's
+it), and reads each episode's **end** (the knee's final value as the final error reads it,
+:func:`~myoexo.evaluation.metrics.final_value`, from the task's own target, deg) and **hold** (the mean interaction torque over the bound's
 window, :data:`~myoexo.evaluation.bound.HOLD_WINDOW_S`, Nm). A shifted run whose end lies at
 least ``min_move_deg`` further short than the subject's own run at the target gives one
 **secant slope**: the hold's fall per degree, ``(hold at the target - hold shifted) / (end
@@ -110,15 +110,15 @@ class HoldSlopeFit:
 def _ends_and_holds(
     level: int, task_target_deg: float, aim_deg: float, settings: HoldSlopeSettings, perturbed: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each subject's end (deg short of *task_target_deg*: the knee's mean over the last
-    :data:`~myoexo.evaluation.metrics.FINAL_WINDOW_S`) and hold (Nm, the interaction
-    torque's mean over the bound's window), both :func:`~myoexo.evaluation.bound.mean_over_end`,
-    under the paper's PID aimed at *aim_deg*,
-    on the nominal or a *perturbed* twin."""
+    """Each subject's end (deg short of *task_target_deg*: the knee's final value, as the
+    final error reads it, :func:`~myoexo.evaluation.metrics.final_value`) and hold (Nm, the
+    interaction torque's mean over the bound's window,
+    :func:`~myoexo.evaluation.bound.mean_over_end`), under the paper's PID aimed at
+    *aim_deg*, on the nominal or a *perturbed* twin."""
     from myoexo.control.specs import build_controller, parse_controller_spec
     from myoexo.envs import make_env
     from myoexo.evaluation.engine import evaluate_controller
-    from myoexo.evaluation.metrics import FINAL_WINDOW_S
+    from myoexo.evaluation.metrics import final_value
 
     kwargs = {"target_angle_deg": aim_deg, "robustness": perturbed}
     env = make_env(level, **kwargs)
@@ -130,8 +130,7 @@ def _ends_and_holds(
         pid, level, settings.subjects, root_seed=settings.root_seed, env_kwargs=kwargs
     )
     ends = [
-        float(mean_over_end(e.signals["time_s"], e.signals["knee_angle_deg"], FINAL_WINDOW_S))
-        - task_target_deg
+        final_value(e.signals["time_s"], e.signals["knee_angle_deg"]) - task_target_deg
         for e in episodes
     ]
     holds = [
