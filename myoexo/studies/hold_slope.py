@@ -10,8 +10,9 @@ can reach: this command measures it.
 For each subject it runs the paper's PID aimed at the target and at targets shifted further
 short by each of ``offsets_deg`` (the PID holds the knee where it is aimed, or stalls short of
 it), and reads each episode's **end** (the knee's final value as the final error reads it,
-:func:`~myoexo.evaluation.metrics.final_value`, from the task's own target, deg) and **hold** (the mean interaction torque over the bound's
-window, :data:`~myoexo.evaluation.bound.HOLD_WINDOW_S`, Nm). A shifted run whose end lies at
+:func:`~myoexo.evaluation.metrics.final_value`, from the task's own target, deg) and **hold**
+(the mean interaction torque over the bound's window,
+:data:`~myoexo.evaluation.bound.HOLD_WINDOW_S`, Nm). A shifted run whose end lies at
 least ``min_move_deg`` further short than the subject's own run at the target gives one
 **secant slope**: the hold's fall per degree, ``(hold at the target - hold shifted) / (end
 shifted - end at the target)``, Nm/deg. The fit keeps, per level, the steepest secant over the
