@@ -62,8 +62,9 @@ from myoexo.spasticity.levels import VALID_LEVELS
 
 #: Ramp durations (s) of the ramped-setpoint PIDs (linear ramps).
 RAMPS_S: tuple[float, ...] = (0.3, 0.6, 1.0, 1.5, 3.0)
-#: Ramp durations (s) of the PIDs whose setpoint follows a minimum-jerk move.
-MINJERK_RAMPS_S: tuple[float, ...] = (0.6, 1.0, 1.5, 2.0, 3.0)
+#: Ramp durations (s) of the PIDs whose setpoint follows a minimum-jerk move (0.4 and 0.45 s:
+#: the paces between 0.35 and 0.5 s on the level-0 frontier of 20 selection subjects).
+MINJERK_RAMPS_S: tuple[float, ...] = (0.4, 0.45, 0.6, 1.0, 1.5, 2.0, 3.0)
 #: Stiffnesses (Nm/rad) of the impedance controllers: the paper's Kp x 100 Nm and twice it;
 #: each with the damping of the paper's ratio Kd / Kp (:data:`IMPEDANCE_DAMPING_PER_STIFFNESS`;
 #: at 1400 Nm/rad the default 5 Nm s/rad leaves the knee cycling at level 1).
