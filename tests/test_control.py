@@ -344,22 +344,17 @@ def test_ramp_steps_to_the_target_where_the_knee_lags_it():
     start, target = math.radians(90.0), math.radians(7.0)
     config = PIDConfig(ramp_s=1.0, reference="minjerk", step_lag_deg=4.0)
     plain = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
+    points = [plain.setpoint_rad(target, start) for _ in range(40)]  # the ramp from the start
+    # a knee that follows the ramp within the lag: the ramp's points
     lagging = PID(config, dt_s=DT)
-    # a knee that follows the ramp within the lag: the same setpoints as the plain ramp
-    followed = [lagging.setpoint_rad(target, start)]  # the ramp starts where the knee is
-    plain.setpoint_rad(target, start)
-    for _ in range(29):
-        point = plain.setpoint_rad(target, start)
-        followed.append(lagging.setpoint_rad(target, point + math.radians(3.9)))
-    ramp = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
-    assert followed == [ramp.setpoint_rad(target, start) for _ in range(30)]
+    knee = [start] + [p + math.radians(3.9) for p in points[1:]]
+    assert [lagging.setpoint_rad(target, k) for k in knee] == points
     # a knee held at the start: the ramp leaves it behind, then the setpoint is the target
     held = PID(config, dt_s=DT)
-    setpoints = np.array([held.setpoint_rad(target, start) for _ in range(40)])
-    stepped = np.flatnonzero(setpoints == target)
-    assert stepped.size and np.all(setpoints[stepped[0] :] == target)
-    lag_deg = math.degrees(start - plain_ramp_point(stepped[0]))
-    assert lag_deg > 4.0 and math.degrees(start - plain_ramp_point(stepped[0] - 1)) <= 4.0
+    setpoints = [held.setpoint_rad(target, start) for _ in range(40)]
+    first = setpoints.index(target)
+    assert setpoints[:first] == points[:first] and set(setpoints[first:]) == {target}
+    assert math.degrees(start - points[first - 1]) <= 4.0 < math.degrees(start - points[first])
     # once stepped it stays stepped, even where the knee catches up; reset starts afresh
     assert held.setpoint_rad(target, target) == target
     held.reset()
@@ -371,15 +366,6 @@ def test_ramp_steps_to_the_target_where_the_knee_lags_it():
         PIDConfig(ramp_s=1.0, step_lag_deg=-1.0)
     spec = parse_controller_spec("pid:reference=minjerk,ramp_s=0.45,step_lag_deg=4")
     assert pid_config(spec.options) == PIDConfig(ramp_s=0.45, reference="minjerk", step_lag_deg=4.0)
-
-
-def plain_ramp_point(step: int) -> float:
-    """The 1-s minimum-jerk ramp's point from 90 to 7 deg at *step* (rad)."""
-    pid = PID(PIDConfig(ramp_s=1.0, reference="minjerk"), dt_s=DT)
-    point = math.radians(90.0)
-    for _ in range(step + 1):
-        point = pid.setpoint_rad(math.radians(7.0), math.radians(90.0))
-    return point
 
 
 # ----------------------------------------------------------------------------- sensors
