@@ -49,6 +49,10 @@ CALIBRATION_ROOT_SEED = 2
 #: Root seed of the simulated people ``myoexo twin recovery`` records and fits (a personal
 #: twin's own test): nothing else draws from it.
 RECOVERY_ROOT_SEED = 5
+#: Root seed of the subjects the device-side fits measure (``myoexo twin strap-lag``,
+#: ``myoexo twin hold-slope``; the encoder guard's threshold was chosen there too): none of
+#: the evaluation's, the selection's or the calibration's.
+DEVICE_FIT_ROOT_SEED = 3
 
 #: The three subject streams, by purpose: each root seeds its own
 #: ``SeedSequence(root, spawn_key=(level, subject))`` stream, so the subjects of one purpose
@@ -61,6 +65,19 @@ SUBJECT_ROOTS: Mapping[str, int] = MappingProxyType(
         "recovery": RECOVERY_ROOT_SEED,
     }
 )
+
+
+def device_fit_root_option() -> Any:
+    """The ``root_seed`` field (option ``--seed``) of a device-side fit: default
+    :data:`DEVICE_FIT_ROOT_SEED`; the fit's ``__post_init__`` refuses the evaluation root with
+    :func:`check_fit_root`."""
+    return option(
+        DEVICE_FIT_ROOT_SEED,
+        f"root seed of the subjects (their own root: the evaluation root {EVALUATION_ROOT_SEED} "
+        "is refused)",
+        low=0,
+        flag="seed",
+    )
 
 
 def check_fit_root(root_seed: int, purpose: str) -> int:

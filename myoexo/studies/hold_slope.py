@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.evaluation.bound import HOLD_SLOPE_FIT, mean_over_end
-from myoexo.evaluation.config import check_fit_root
+from myoexo.evaluation.config import check_fit_root, device_fit_root_option
 from myoexo.runtime.fields import add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -45,12 +45,7 @@ class HoldSlopeSettings:
     """The subjects and the shifted aims (options of ``myoexo twin hold-slope``; the fit
     records every field)."""
 
-    root_seed: int = option(
-        3,
-        "root seed of the subjects (their own root: the evaluation root 0 is refused)",
-        low=0,
-        flag="seed",
-    )
+    root_seed: int = device_fit_root_option()
     subjects: int = option(20, "subjects per level and twin", low=1, high=10_000)
     levels: tuple[int, ...] = option(
         (2, 3), "levels where the motor stalls against the reflex", choices=VALID_LEVELS

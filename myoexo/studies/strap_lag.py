@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.guard import STRAP_LAG_FIT
-from myoexo.evaluation.config import check_fit_root
+from myoexo.evaluation.config import check_fit_root, device_fit_root_option
 from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -32,12 +32,7 @@ class StrapLagSettings:
     """What the fit holds the subjects at (``root_seed`` and ``subjects`` are options of
     ``myoexo twin strap-lag``; the fit records every field)."""
 
-    root_seed: int = option(
-        3,
-        "root seed of the subjects (their own root: the evaluation root 0 is refused)",
-        low=0,
-        flag="seed",
-    )
+    root_seed: int = device_fit_root_option()
     subjects: int = option(20, "subjects per level", low=1, high=10_000)
     levels: tuple[int, ...] = option(
         (2, 3),
