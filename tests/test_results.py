@@ -202,6 +202,14 @@ def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tm
     with pytest.raises(ValueError, match=r"no hold bound at levels \[2\]"):
         bound(traceless, dest)  # the set keeps the bounds it has
     assert json.loads((dest / "meta.json").read_text())["hold_bounds"] == meta["hold_bounds"]
+    # an update without traces keeps the set's bounds and the run they came from
+    untraced = tmp_path / "untraced"
+    shutil.copytree(evaluation, untraced)
+    shutil.rmtree(untraced / "traces")
+    collect(untraced, dest, update=True)
+    kept = json.loads((dest / "meta.json").read_text())
+    assert kept["hold_bounds"] == meta["hold_bounds"]
+    assert kept["hold_bounds_command"] == again["hold_bounds_command"]
     frame = pd.read_csv(dest / "summary.csv")
     frame.loc[(frame.controller == "pid") & (frame.level == 2), "final_error_deg_mean"] += 0.1
     frame.to_csv(dest / "summary.csv", index=False)

@@ -207,11 +207,18 @@ def bound(eval_dir: str | Path, dest: str | Path) -> Path:
             f"{str(eval_dir)!r} gives no hold bound at levels {missing} (no stored traces of "
             f"{ref!r}, or a level without a measured hold slope: myoexo twin hold-slope)"
         )
-    kept = [b for b in meta.get("hold_bounds", []) if int(b["level"]) not in levels]
-    bounds = sorted([*kept, *fresh], key=lambda b: b["level"])
+    bounds = _merged_bounds(meta.get("hold_bounds", []), fresh)
     meta = {**meta, "hold_bounds": bounds, "hold_bounds_command": command_of(config)}
     write_json_atomic(dest / "meta.json", meta, indent=2)
     return dest
+
+
+def _merged_bounds(old: list[dict[str, Any]], fresh: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A set's hold bounds *old* with those of *fresh*'s levels replaced by *fresh*'s, by
+    level."""
+    levels = {int(b["level"]) for b in fresh}
+    kept = [b for b in old if int(b["level"]) not in levels]
+    return sorted([*kept, *fresh], key=lambda b: b["level"])
 
 
 #: What names a set's subjects in its ``meta.json`` (:func:`_subjects_of`).
@@ -310,9 +317,12 @@ def _updated(
         order = {c: i for i, c in enumerate(dict.fromkeys([*frame.controller, *added]))}
         rank = rows.controller.map(order)
         merged[name] = rows.iloc[rank.argsort(kind="stable")].reset_index(drop=True)
+    fresh = meta["hold_bounds"]
+    if not fresh and old.get("hold_bounds_command"):  # the set's bounds stay, and their run
+        meta = {**meta, "hold_bounds_command": old["hold_bounds_command"]}
     meta = {
         **meta,
-        "hold_bounds": meta["hold_bounds"] or old.get("hold_bounds", []),
+        "hold_bounds": _merged_bounds(old.get("hold_bounds", []), fresh),
         "commands": [*old["commands"], *(c for c in meta["commands"] if c not in old["commands"])],
         "episodes": int(merged["summary.csv"].n.sum()),
     }
