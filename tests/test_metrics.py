@@ -108,3 +108,18 @@ def test_episode_metrics_on_a_synthetic_extension():
     assert M.episode_metrics(signals).target_overshoot_deg == pytest.approx(2.5, abs=0.05)
     with pytest.raises(ValueError, match="missing signals"):
         M.episode_metrics({"time_s": t})
+
+
+def test_the_hold_and_the_final_value_average_the_same_end_window():
+    from myoexo.evaluation.bound import mean_over_end
+
+    t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.02), 10)  # the traces' 50-Hz samples
+    y = np.random.default_rng(0).normal(size=(3, t.size))
+    last = t >= 7.5 - 1e-9  # 26 samples: the one exactly 0.5 s before the end included
+    assert last.sum() == 26
+    np.testing.assert_allclose(mean_over_end(t, y, 0.5), y[:, last].mean(axis=1))
+    for row in y:
+        assert float(mean_over_end(t, row, 0.5)) == pytest.approx(M.final_value(t, row, 0.5))
+    assert M.final_value(t, y[0], 0.0) == y[0, -1]
+    with pytest.raises(ValueError, match="window_s"):
+        mean_over_end(t, y, -0.1)

@@ -77,7 +77,8 @@ def test_a_set_states_the_peak_reduction_the_references_hold_allows(evaluation, 
     meta = json.loads((dest / "meta.json").read_text())
     (bound,) = meta["hold_bounds"]  # level 2 only
     traces = load_traces(evaluation, "pid", 2)
-    end = traces.time_s >= traces.time_s[-1] - HOLD_WINDOW_S + 1e-9
+    t = traces.time_s.astype(float)
+    end = t >= t[-1] - HOLD_WINDOW_S - 1e-12  # the last 0.5 s, its first sample included
     hold = float(traces["interaction_torque_nm"][:, end].mean())
     table = load_table(evaluation)
     peak = float(

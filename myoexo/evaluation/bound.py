@@ -57,12 +57,14 @@ HOLD_SLOPE_FIT = "hold_slope"
 
 def mean_over_end(time_s: Any, values: Any, window_s: float = HOLD_WINDOW_S) -> Any:
     """The mean of *values* (their last axis along *time_s*: one episode, or one row per
-    episode) over the last *window_s* of the episode (the sample exactly *window_s* before
-    the end left out); of the interaction torque over :data:`HOLD_WINDOW_S`, the hold."""
+    episode) over the episode's last *window_s*, the window of the final values
+    (:func:`~myoexo.evaluation.metrics.end_window`); of the interaction torque over
+    :data:`HOLD_WINDOW_S`, the hold."""
     import numpy as np
 
-    t = np.asarray(time_s)
-    return np.asarray(values)[..., t >= t[-1] - window_s + 1e-9].mean(axis=-1)
+    from myoexo.evaluation.metrics import end_window
+
+    return np.asarray(values)[..., end_window(time_s, window_s)].mean(axis=-1)
 
 
 def hold_slope_nm_per_deg(level: int) -> float | None:

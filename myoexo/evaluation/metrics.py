@@ -65,12 +65,18 @@ def _as_1d(name: str, x: np.ndarray) -> np.ndarray:
     return a
 
 
-def final_value(t_s: np.ndarray, y: np.ndarray, window_s: float = FINAL_WINDOW_S) -> float:
-    """Mean of ``y`` over the samples with ``t >= t_end - window_s`` (at least the last)."""
-    t, y = _as_1d("t_s", t_s), _as_1d("y", y)
+def end_window(t_s: np.ndarray, window_s: float) -> np.ndarray:
+    """The samples of an episode's last ``window_s``: the mask ``t >= t_end - window_s``, the
+    sample exactly ``window_s`` before the end included (at least the last sample)."""
+    t = _as_1d("t_s", t_s)
     if window_s < 0:
         raise ValueError(f"window_s = {window_s} must be >= 0")
-    return float(np.mean(y[t >= t[-1] - window_s - 1e-12]))
+    return t >= t[-1] - window_s - 1e-12
+
+
+def final_value(t_s: np.ndarray, y: np.ndarray, window_s: float = FINAL_WINDOW_S) -> float:
+    """Mean of ``y`` over the episode's last ``window_s`` (:func:`end_window`)."""
+    return float(np.mean(_as_1d("y", y)[end_window(t_s, window_s)]))
 
 
 def settling_time(
