@@ -40,7 +40,12 @@ from myoexo.clinical.common import (
     print_table,
     resolve_twin,
 )
-from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
+from myoexo.clinical.stretch import (
+    MOVING_PHASES,
+    StretchTestParams,
+    check_two_speeds,
+    simulate_two_speeds,
+)
 from myoexo.runtime.fields import add_options, check_fields, from_options, option
 from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -88,16 +93,7 @@ class StretchHoldParams:
     def __post_init__(self) -> None:
         check_fields(self)
         normalise_levels(self)
-        if not self.fast_rad_s > self.slow_rad_s:
-            raise ValueError(
-                f"StretchHoldParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
-                f"{self.slow_rad_s!r}"
-            )
-        if not self.end_deg < self.start_deg:
-            raise ValueError(
-                f"StretchHoldParams.end_deg = {self.end_deg!r} must be below start_deg = "
-                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)"
-            )
+        check_two_speeds(self)
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one stretch and its hold."""

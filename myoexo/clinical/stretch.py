@@ -68,6 +68,7 @@ __all__ = [
     "StretchTestParams",
     "StretchTestResult",
     "add_arguments",
+    "check_two_speeds",
     "reference_profile",
     "run",
     "run_stretch_test",
@@ -340,9 +341,39 @@ class TwoSpeedTest(Protocol):
         """The fast stretch's speed, rad/s."""
         ...
 
+    @property
+    def start_deg(self) -> float:
+        """Knee flexion where both stretches start, deg."""
+        ...
+
+    @property
+    def end_deg(self) -> float:
+        """Knee flexion where both stretches end, deg."""
+        ...
+
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of the stretch at *vel_rad_s*."""
         ...
+
+
+def check_two_speeds(test: TwoSpeedTest) -> None:
+    """The rules every two-speed test's parameters keep (its ``__post_init__`` calls this):
+    the fast stretch is faster than the slow one, and both extend the knee (``end_deg`` below
+    ``start_deg``, stretching the flexors).
+
+    Raises:
+        ValueError: Naming the test's class, both fields and their values.
+    """
+    name = type(test).__name__
+    if not test.fast_rad_s > test.slow_rad_s:
+        raise ValueError(
+            f"{name}.fast_rad_s = {test.fast_rad_s!r} must exceed slow_rad_s = {test.slow_rad_s!r}"
+        )
+    if not test.end_deg < test.start_deg:
+        raise ValueError(
+            f"{name}.end_deg = {test.end_deg!r} must be below start_deg = "
+            f"{test.start_deg!r}: the test extends the knee (stretches the flexors)"
+        )
 
 
 def simulate_two_speeds(

@@ -71,7 +71,12 @@ from myoexo.clinical.common import (
     print_table,
     resolve_twin,
 )
-from myoexo.clinical.stretch import MOVING_PHASES, StretchTestParams, simulate_two_speeds
+from myoexo.clinical.stretch import (
+    MOVING_PHASES,
+    StretchTestParams,
+    check_two_speeds,
+    simulate_two_speeds,
+)
 from myoexo.runtime.fields import check_fields, from_options, option
 from myoexo.spasticity.levels import SpasticityParams
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -149,16 +154,7 @@ class TardieuParams:
     def __post_init__(self) -> None:
         check_fields(self)
         normalise_levels(self)
-        if not self.fast_rad_s > self.slow_rad_s:
-            raise ValueError(
-                f"TardieuParams.fast_rad_s = {self.fast_rad_s!r} must exceed slow_rad_s = "
-                f"{self.slow_rad_s!r}"
-            )
-        if not self.end_deg < self.start_deg:
-            raise ValueError(
-                f"TardieuParams.end_deg = {self.end_deg!r} must be below start_deg = "
-                f"{self.start_deg!r}: the test extends the knee (stretches the flexors)"
-            )
+        check_two_speeds(self)
 
     def stretch(self, vel_rad_s: float) -> StretchTestParams:
         """The stretch-test parameters of one of the two stretches."""
