@@ -125,6 +125,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "a gentleness-trained policy across its weights against the PID; the default weight",
     ),
     "policy export": ("myoexo.training.export", "export a trained policy (ONNX)"),
+    "policy knee-estimator": (
+        "myoexo.studies.knee_estimator",
+        "give a student a fine-positioning layer: a knee estimator fitted on its own episodes",
+    ),
     "policy distill": (
         "myoexo.studies.distill",
         "distil the full-state teacher into an exo-sensor student with memory (DAgger)",

@@ -300,22 +300,23 @@ def _torch_actor_class() -> type:
 
 
 # ---------------------------------------------------------------------------- files
-def save_actor(actor: MLPActor, path_stem: str | Path) -> tuple[Path, Path]:
-    """Write ``<stem>.npz`` (weights) and ``<stem>.json`` (everything else).
+#: Prefix of the actor's arrays in its ``.npz`` (``layer0.weight``, ``layer0.bias``, ...).
+LAYER_PREFIX = "layer"
 
-    Returns:
-        The two paths written.
-    """
-    stem = Path(path_stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    arrays: dict[str, Any] = {}
+
+def actor_arrays(actor: MLPActor, prefix: str = LAYER_PREFIX) -> dict[str, np.ndarray]:
+    """The actor's layers as float32 arrays named ``<prefix><i>.weight`` / ``.bias``."""
+    arrays: dict[str, np.ndarray] = {}
     for i, (w, b) in enumerate(actor.weights):
-        arrays[f"layer{i}.weight"] = w.astype(np.float32)
-        arrays[f"layer{i}.bias"] = b.astype(np.float32)
-    npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
-    with atomic_path(npz) as tmp, open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-    meta = {
+        arrays[f"{prefix}{i}.weight"] = w.astype(np.float32)
+        arrays[f"{prefix}{i}.bias"] = b.astype(np.float32)
+    return arrays
+
+
+def actor_document(actor: MLPActor) -> dict[str, Any]:
+    """Everything of the actor but its weights, as JSON: format version, activation,
+    normalization, action bounds and its metadata."""
+    return {
         "format_version": FORMAT_VERSION,
         "activation": actor.activation,
         "obs_dim": actor.obs_dim,
@@ -329,7 +330,44 @@ def save_actor(actor: MLPActor, path_stem: str | Path) -> tuple[Path, Path]:
         "action_high": actor.action_high.tolist(),
         **{k: v for k, v in actor.metadata.items() if k not in _STRUCTURAL},
     }
-    write_json_atomic(js, meta, indent=1)
+
+
+def actor_from_document(
+    meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray], prefix: str = LAYER_PREFIX
+) -> MLPActor:
+    """The actor of :func:`actor_document`'s *meta* and :func:`actor_arrays`' *arrays*."""
+    n = sum(1 for k in arrays if k.startswith(prefix) and k.endswith(".weight"))
+    weights = [(arrays[f"{prefix}{i}.weight"], arrays[f"{prefix}{i}.bias"]) for i in range(n)]
+    norm = bool(meta["normalize_obs"])
+    return MLPActor(
+        weights,
+        activation=meta["activation"],
+        obs_mean=np.asarray(meta["obs_mean"]) if norm else None,
+        obs_var=np.asarray(meta["obs_var"]) if norm else None,
+        epsilon=float(meta["epsilon"]),
+        clip_obs=float(meta["clip_obs"]),
+        action_low=np.asarray(meta["action_low"]),
+        action_high=np.asarray(meta["action_high"]),
+        metadata={k: v for k, v in meta.items() if k not in _STRUCTURAL},
+    )
+
+
+def save_actor(
+    actor: MLPActor, path_stem: str | Path, extra_arrays: Mapping[str, np.ndarray] | None = None
+) -> tuple[Path, Path]:
+    """Write ``<stem>.npz`` (weights, and *extra_arrays* beside them) and ``<stem>.json``
+    (everything else, :func:`actor_document`).
+
+    Returns:
+        The two paths written.
+    """
+    stem = Path(path_stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, Any] = {**actor_arrays(actor), **(extra_arrays or {})}
+    npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
+    with atomic_path(npz) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
+    write_json_atomic(js, actor_document(actor), indent=1)
     return npz, js
 
 
@@ -348,8 +386,12 @@ _STRUCTURAL = {
 }
 
 
-def load_actor(path_stem: str | Path) -> MLPActor:
-    """Read an actor written by :func:`save_actor` (``<stem>.npz`` + ``<stem>.json``)."""
+def actor_paths(path_stem: str | Path) -> tuple[Path, Path]:
+    """``(<stem>.npz, <stem>.json)`` of an actor's files (a suffix of *path_stem* is ignored).
+
+    Raises:
+        FileNotFoundError: Either file is missing.
+    """
     stem = Path(path_stem)
     if stem.suffix in (".npz", ".json"):
         stem = stem.with_suffix("")
@@ -357,6 +399,12 @@ def load_actor(path_stem: str | Path) -> MLPActor:
     for p in (npz, js):
         if not p.is_file():
             raise FileNotFoundError(f"actor file {str(p)!r} does not exist")
+    return npz, js
+
+
+def load_actor(path_stem: str | Path) -> MLPActor:
+    """Read an actor written by :func:`save_actor` (``<stem>.npz`` + ``<stem>.json``)."""
+    npz, js = actor_paths(path_stem)
     meta = json.loads(js.read_text())
     if meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(
@@ -364,17 +412,4 @@ def load_actor(path_stem: str | Path) -> MLPActor:
             f"{FORMAT_VERSION}"
         )
     with np.load(npz) as data:
-        n = sum(1 for k in data.files if k.endswith(".weight"))
-        weights = [(data[f"layer{i}.weight"], data[f"layer{i}.bias"]) for i in range(n)]
-    norm = bool(meta["normalize_obs"])
-    return MLPActor(
-        weights,
-        activation=meta["activation"],
-        obs_mean=np.asarray(meta["obs_mean"]) if norm else None,
-        obs_var=np.asarray(meta["obs_var"]) if norm else None,
-        epsilon=float(meta["epsilon"]),
-        clip_obs=float(meta["clip_obs"]),
-        action_low=np.asarray(meta["action_low"]),
-        action_high=np.asarray(meta["action_high"]),
-        metadata={k: v for k, v in meta.items() if k not in _STRUCTURAL},
-    )
+        return actor_from_document(meta, {k: data[k] for k in data.files})

@@ -17,6 +17,12 @@ stride + 1``); the network sees ``n_frames`` of them, ``stride`` steps apart, ne
 frame. The network is a numpy :class:`~myoexo.policies.actor.MLPActor` (input
 normalization, hidden layers, tanh head); inference needs no torch.
 
+A student may carry a *fine-positioning* layer (:class:`FinePositioner`): a second network
+on the same memory that estimates how far the human knee sits from the exo's encoder (the
+straps' give, which the encoder cannot see), and an integral of the target minus that
+estimated knee, added to the command near the target. It is fitted after distillation on the
+student's own episodes (``myoexo policy knee-estimator``) and travels in the student's files.
+
 Files: ``<stem>.npz`` (weights) + ``<stem>.json`` (the actor's normalization and provenance,
 with the controller's own fields under ``"student"``), written by :func:`save_student`
 and read by :func:`load_student`; :func:`export_student_onnx` writes the whole controller
@@ -35,7 +41,9 @@ as ONNX with its memory as an explicit input and output.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +56,16 @@ from myoexo.envs.observation import (
     STATE_OBS_KEYS,
 )
 from myoexo.envs.sensors import Measurements
-from myoexo.policies.actor import MLPActor, load_actor, save_actor
+from myoexo.policies.actor import (
+    MLPActor,
+    actor_arrays,
+    actor_document,
+    actor_from_document,
+    actor_paths,
+    load_actor,
+    save_actor,
+)
+from myoexo.runtime.fields import check_fields, option
 
 #: What one frame of the controller's memory holds (obs-vector keys, in this order): the
 #: exo-sensor preset's keys without its episode clock.
@@ -67,6 +84,10 @@ FORBIDDEN_KEYS: tuple[str, ...] = (
 EXO_PRESET_KEYS: tuple[str, ...] = EXO_SENSOR_OBS_KEYS
 #: Version of the ``"student"`` block of the file format.
 STUDENT_FORMAT_VERSION = 1
+#: Positions of the exo encoder angle (rad) and of the target (rad) in a frame.
+EXO_ANGLE_INDEX, TARGET_INDEX = FRAME_KEYS.index("exo_angle_rad"), FRAME_KEYS.index("target_rad")
+#: The knee estimator's output range, deg (its tanh head spans +-this).
+KNEE_OFFSET_RANGE_DEG = 20.0
 
 
 def frame_indices(obs_keys: Sequence[str]) -> np.ndarray:
@@ -120,6 +141,73 @@ def stack_frames(history: np.ndarray, n_frames: int, stride: int) -> np.ndarray:
     return sel.reshape(*h.shape[:-2], int(n_frames) * h.shape[-1])
 
 
+@dataclass(frozen=True)
+class FinePositioning:
+    """The fine-positioning layer's integral law (:class:`FinePositioner`).
+
+    Each control step the layer computes ``e`` = target - estimated knee angle (rad); while
+    ``|e|`` is below :attr:`window_deg`, its integral state moves by ``gain_per_rad_s x e x
+    control_period_s``, clipped to ``+-limit``; the state is added to the student's command
+    (then clipped to [-1, 1]). Outside the window the state is held.
+
+    Raises:
+        ValueError: A value outside its range (the message names it and the range).
+    """
+
+    gain_per_rad_s: float = option(
+        10.0, "integral gain of the fine-positioning layer", low=0.0, unit="command/(rad s)"
+    )
+    window_deg: float = option(
+        1.5, "the integral runs only this close to the target", low=0.0, above=True, unit="deg"
+    )
+    limit: float = option(0.3, "largest share of the command the integral gives", low=0.0, high=1.0)
+    control_period_s: float = option(
+        0.01, "time between two decisions (the env's dt)", low=0.0, above=True, unit="s", flag=""
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+class FinePositioner:
+    """A student's fine-positioning layer: a knee estimator and an integral on its error.
+
+    The estimator reads the student's network input without the weight (its memory of
+    frames, newest first) and returns the human knee angle minus the exo encoder angle, deg;
+    the knee estimate is the encoder angle plus that offset.
+
+    Args:
+        estimator: The network (input ``n_frames x FRAME_DIM``, output the offset in deg).
+        law: The integral law.
+    """
+
+    def __init__(self, estimator: MLPActor, law: FinePositioning | None = None) -> None:
+        if estimator.action_dim != 1:
+            raise ValueError(f"the knee estimator has {estimator.action_dim} outputs, not 1")
+        self.estimator = estimator
+        self.law = law or FinePositioning()
+        self._window_rad = math.radians(self.law.window_deg)
+        self._step = self.law.gain_per_rad_s * self.law.control_period_s
+        self.integral = 0.0
+
+    def reset(self) -> None:
+        """Start of an episode: the integral is 0."""
+        self.integral = 0.0
+
+    def offset_deg(self, window: np.ndarray) -> float:
+        """The estimated knee angle minus the encoder angle, deg, from one network input."""
+        return float(self.estimator(window)[0])
+
+    def step(self, window: np.ndarray, frame: np.ndarray) -> float:
+        """Update the integral from this step's memory and frame; return it."""
+        knee_rad = frame[EXO_ANGLE_INDEX] + math.radians(self.offset_deg(window))
+        error_rad = frame[TARGET_INDEX] - knee_rad
+        if abs(error_rad) < self._window_rad:
+            limit = self.law.limit
+            self.integral = min(max(self.integral + self._step * error_rad, -limit), limit)
+        return self.integral
+
+
 class StudentController:
     """Exo-sensor MLP controller with a memory of its last frames (a myoexo ``Controller``).
 
@@ -134,6 +222,8 @@ class StudentController:
             last entry of the observation ``act`` receives (what
             :class:`~myoexo.control.policy.GentleController` appends), not stored in the
             memory.
+        fine: The fine-positioning layer (``None``: the network's command alone); its
+            estimator reads the same memory.
     """
 
     def __init__(
@@ -144,6 +234,7 @@ class StudentController:
         obs_keys: Sequence[str] = EXO_PRESET_KEYS,
         metadata: Mapping[str, Any] | None = None,
         gentleness_input: bool = False,
+        fine: FinePositioner | None = None,
     ) -> None:
         if n_frames < 1 or stride < 1:
             raise ValueError(f"n_frames = {n_frames}, stride = {stride} must be >= 1")
@@ -153,7 +244,13 @@ class StudentController:
                 f"actor input {actor.obs_dim} != n_frames {n_frames} x frame size {FRAME_DIM}"
                 + (" + the gentleness weight" if extra else "")
             )
+        if fine is not None and fine.estimator.obs_dim != n_frames * FRAME_DIM:
+            raise ValueError(
+                f"knee estimator input {fine.estimator.obs_dim} != n_frames {n_frames} x "
+                f"frame size {FRAME_DIM}"
+            )
         self.actor = actor
+        self.fine = fine
         self.gentleness_input = bool(gentleness_input)
         self.n_frames = int(n_frames)
         self.stride = int(stride)
@@ -194,6 +291,19 @@ class StudentController:
         """The observation keys the controller reads (:data:`FRAME_KEYS`)."""
         return FRAME_KEYS
 
+    def with_fine(self, fine: FinePositioner | None) -> StudentController:
+        """The same network, memory layout and provenance with *fine* as the
+        fine-positioning layer (``None``: without one)."""
+        return StudentController(
+            self.actor,
+            n_frames=self.n_frames,
+            stride=self.stride,
+            obs_keys=self.obs_keys,
+            metadata=self.metadata,
+            gentleness_input=self.gentleness_input,
+            fine=fine,
+        )
+
     # ------------------------------------------------------------------ memory
     def frame(self, obs: np.ndarray) -> np.ndarray:
         """This step's frame (float64, ``FRAME_DIM``) from an observation vector."""
@@ -220,9 +330,11 @@ class StudentController:
         return None if self._memory is None else self._memory.copy()
 
     def reset(self, seed: int | None = None) -> None:
-        """Start of an episode: forget every frame."""
+        """Start of an episode: forget every frame (and the fine-positioning integral)."""
         del seed
         self._memory = None
+        if self.fine is not None:
+            self.fine.reset()
 
     def push(self, frame: np.ndarray) -> np.ndarray:
         """Add a frame to the memory (the first one fills it); returns the network input."""
@@ -242,21 +354,33 @@ class StudentController:
         frame = self.frame(obs)
         if not np.isfinite(frame).all():
             raise ValueError(f"non-finite exo sensor reading {frame.tolist()}")
-        x = self.push(frame)
-        if self.gentleness_input:
-            x = np.append(x, float(np.asarray(obs).reshape(-1)[-1]))
+        window = self.push(frame)
+        x = (
+            np.append(window, float(np.asarray(obs).reshape(-1)[-1]))
+            if self.gentleness_input
+            else window
+        )
         action = self.actor(x)
         if not np.isfinite(action).all():
             raise ValueError(f"the student returned a non-finite action {action.tolist()}")
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        action = np.clip(action, -1.0, 1.0)
+        if self.fine is not None:
+            action = np.clip(action + self.fine.step(window, frame), -1.0, 1.0)
+        return action.astype(np.float32)
 
     # ------------------------------------------------------------------ torch / ONNX
     def to_torch(self) -> Any:
         """The whole controller as a torch module: ``(frame (B, FRAME_DIM), memory (B,
-        history - 1, FRAME_DIM)[, gentleness (B, 1)]) -> (action (B, 1), new memory)``;
-        memory oldest first; the weight with :attr:`gentleness_input`."""
-        return _torch_student_class(self.gentleness_input)(
-            self.actor.to_torch(), self.n_frames, self.stride
+        history - 1, FRAME_DIM)[, gentleness (B, 1)][, integral (B, 1)]) -> (action (B, 1),
+        new memory[, new integral])``; memory oldest first; the weight with
+        :attr:`gentleness_input`, the integral with a fine-positioning layer (:attr:`fine`)."""
+        return _torch_student_class()(
+            self.actor.to_torch(),
+            self.n_frames,
+            self.stride,
+            self.gentleness_input,
+            None if self.fine is None else self.fine.estimator.to_torch(),
+            None if self.fine is None else self.fine.law,
         )
 
     def initial_memory(self, frame: np.ndarray) -> np.ndarray:
@@ -266,54 +390,66 @@ class StudentController:
         return np.repeat(f, self.history - 1, axis=0)
 
 
-def _torch_student_class(gentleness_input: bool = False) -> type:
+def _torch_student_class() -> type:
     import torch
     from torch import nn
 
     class _TorchStudent(nn.Module):
-        def __init__(self, actor: nn.Module, n_frames: int, stride: int) -> None:
+        def __init__(
+            self,
+            actor: nn.Module,
+            n_frames: int,
+            stride: int,
+            gentleness_input: bool,
+            estimator: nn.Module | None,
+            law: FinePositioning | None,
+        ) -> None:
             super().__init__()
             self.actor = actor
-            self.n_frames = n_frames
-            self.stride = stride
+            self.estimator = estimator
+            self.gentleness_input = gentleness_input
             history = history_length(n_frames, stride)
             # newest-first indices into the (history) frames, oldest first
             idx = [history - 1 - k * stride for k in range(n_frames)]
             self.register_buffer("select", torch.as_tensor(idx, dtype=torch.long))
+            if law is not None:
+                self.window_rad = math.radians(law.window_deg)
+                self.integral_step = law.gain_per_rad_s * law.control_period_s
+                self.limit = law.limit
 
         select: torch.Tensor
 
-        def step(
-            self, frame: torch.Tensor, memory: torch.Tensor, *extra: torch.Tensor
-        ) -> tuple[torch.Tensor, torch.Tensor]:
-            """The action from the memory with this frame (then *extra* inputs, the weight)
-            and the memory for the next step."""
-            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)  # (B, history, F)
-            x = torch.index_select(full, 1, self.select).flatten(1)
-            action = torch.clamp(self.actor(torch.cat([x, *extra], dim=1)), -1.0, 1.0)
-            return action, full[:, 1:, :]
-
         def forward(
-            self, frame: torch.Tensor, memory: torch.Tensor
-        ) -> tuple[torch.Tensor, torch.Tensor]:
-            return self.step(frame, memory)
+            self, frame: torch.Tensor, memory: torch.Tensor, *extra: torch.Tensor
+        ) -> tuple[torch.Tensor, ...]:
+            """The action from the memory with this frame (then the weight and the integral,
+            as the controller has them), the memory for the next step (and the integral)."""
+            full = torch.cat([memory, frame.unsqueeze(1)], dim=1)  # (B, history, F)
+            window = torch.index_select(full, 1, self.select).flatten(1)
+            weight = extra[:1] if self.gentleness_input else ()
+            action = torch.clamp(self.actor(torch.cat([window, *weight], dim=1)), -1.0, 1.0)
+            if self.estimator is None:
+                return action, full[:, 1:, :]
+            integral = extra[-1]
+            offset_rad = self.estimator(window) * (math.pi / 180.0)
+            knee = frame[:, EXO_ANGLE_INDEX : EXO_ANGLE_INDEX + 1] + offset_rad
+            error = frame[:, TARGET_INDEX : TARGET_INDEX + 1] - knee
+            moved = torch.clamp(integral + self.integral_step * error, -self.limit, self.limit)
+            integral = torch.where(torch.abs(error) < self.window_rad, moved, integral)
+            action = torch.clamp(action + integral, -1.0, 1.0)
+            return action, full[:, 1:, :], integral
 
-    class _TorchGentleStudent(_TorchStudent):
-        def forward(  # type: ignore[override]
-            self, frame: torch.Tensor, memory: torch.Tensor, gentleness: torch.Tensor
-        ) -> tuple[torch.Tensor, torch.Tensor]:
-            return self.step(frame, memory, gentleness)
-
-    return _TorchGentleStudent if gentleness_input else _TorchStudent
+    return _TorchStudent
 
 
 def export_student_onnx(student: StudentController, path: str | Path, opset: int = 17) -> Path:
     """Write the controller as ONNX: inputs ``frame`` (batch, FRAME_DIM) float32,
-    ``memory`` (batch, history - 1, FRAME_DIM) and, for a student with
-    :attr:`~StudentController.gentleness_input`, ``gentleness`` (batch, 1), the weight in
-    [0, 1]; outputs ``action`` (batch, 1) and ``memory_out`` (the memory for the next
-    step). At an episode's first step, memory is that step's frame repeated
-    (:meth:`StudentController.initial_memory`)."""
+    ``memory`` (batch, history - 1, FRAME_DIM), for a student with
+    :attr:`~StudentController.gentleness_input` ``gentleness`` (batch, 1), the weight in
+    [0, 1], and for one with a fine-positioning layer ``integral`` (batch, 1); outputs
+    ``action`` (batch, 1), ``memory_out`` (the memory for the next step) and, with the
+    layer, ``integral_out``. At an episode's first step, memory is that step's frame
+    repeated (:meth:`StudentController.initial_memory`) and the integral 0."""
     import warnings
 
     import torch
@@ -325,10 +461,14 @@ def export_student_onnx(student: StudentController, path: str | Path, opset: int
         torch.zeros(1, FRAME_DIM),
         torch.zeros(1, student.history - 1, FRAME_DIM),
     )
-    inputs = ["frame", "memory"]
+    inputs, outputs = ["frame", "memory"], ["action", "memory_out"]
     if student.gentleness_input:
         args = (*args, torch.zeros(1, 1))
         inputs.append("gentleness")
+    if student.fine is not None:
+        args = (*args, torch.zeros(1, 1))
+        inputs.append("integral")
+        outputs.append("integral_out")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         torch.onnx.export(
@@ -336,12 +476,8 @@ def export_student_onnx(student: StudentController, path: str | Path, opset: int
             args,
             str(path),
             input_names=inputs,
-            output_names=["action", "memory_out"],
-            dynamic_axes={
-                **{name: {0: "batch"} for name in inputs},
-                "action": {0: "batch"},
-                "memory_out": {0: "batch"},
-            },
+            output_names=outputs,
+            dynamic_axes={name: {0: "batch"} for name in inputs + outputs},
             opset_version=opset,
             dynamo=False,
         )
@@ -351,27 +487,45 @@ def export_student_onnx(student: StudentController, path: str | Path, opset: int
 # ---------------------------------------------------------------------------- files
 def save_student(student: StudentController, path_stem: str | Path) -> tuple[Path, Path]:
     """Write ``<stem>.npz`` (weights) and ``<stem>.json`` (normalization, the controller's
-    fields under ``"student"``, provenance and reference pairs); returns the two paths."""
-    actor = student.actor
-    meta = dict(actor.metadata)
+    fields under ``"student"``, provenance and reference pairs); returns the two paths. A
+    fine-positioning layer travels in the same files: its estimator's weights as
+    ``knee_layer<i>.*`` in the ``.npz``, the rest of it (normalization, provenance, reference
+    pairs) and its law under ``"student"`` / ``"fine_positioning"``."""
+    meta = dict(student.actor.metadata)
     meta.update(student.metadata)  # provenance: top level, as the shipped actors keep it
-    meta.update(
-        obs_preset=StudentController.obs_preset,
-        obs_keys=list(EXO_PRESET_KEYS),
-        student={
-            "format_version": STUDENT_FORMAT_VERSION,
-            "frame_keys": list(FRAME_KEYS),
-            "frame_dim": FRAME_DIM,
-            "n_frames": student.n_frames,
-            "stride": student.stride,
-            "history": student.history,
-            "ignored_keys": ["time_frac"],
-            "gentleness_input": student.gentleness_input,
-        },
-    )
-    # the files hold float32 weights: the reference is computed with those
+    block: dict[str, Any] = {
+        "format_version": STUDENT_FORMAT_VERSION,
+        "frame_keys": list(FRAME_KEYS),
+        "frame_dim": FRAME_DIM,
+        "n_frames": student.n_frames,
+        "stride": student.stride,
+        "history": student.history,
+        "ignored_keys": ["time_frac"],
+        "gentleness_input": student.gentleness_input,
+    }
+    extra: dict[str, np.ndarray] = {}
+    if student.fine is not None:
+        estimator = _float32_with_reference(student.fine.estimator, None)
+        extra = actor_arrays(estimator, KNEE_PREFIX)
+        block["fine_positioning"] = {
+            "law": asdict(student.fine.law),
+            "estimator": actor_document(estimator),
+        }
+    meta.update(obs_preset=StudentController.obs_preset, obs_keys=list(EXO_PRESET_KEYS))
+    meta["student"] = block
+    return save_actor(_float32_with_reference(student.actor, meta), path_stem, extra)
+
+
+#: Prefix of a fine-positioning layer's estimator arrays in a student's ``.npz``.
+KNEE_PREFIX = "knee_layer"
+
+
+def _float32_with_reference(actor: MLPActor, metadata: Mapping[str, Any] | None) -> MLPActor:
+    """*actor* with its weights rounded to float32 (what the files hold) and *metadata*
+    (default: its own), with reference pairs computed on those weights unless present."""
     weights = [(w.astype(np.float32), b.astype(np.float32)) for w, b in actor.weights]
-    actor = MLPActor(
+    meta = dict(actor.metadata if metadata is None else metadata)
+    out = MLPActor(
         weights,
         activation=actor.activation,
         obs_mean=actor.obs_mean,
@@ -384,11 +538,11 @@ def save_student(student: StudentController, path_stem: str | Path) -> tuple[Pat
     )
     if "reference" not in meta:
         rng = np.random.default_rng(0)
-        mean = np.zeros(actor.obs_dim) if actor.obs_mean is None else actor.obs_mean
-        std = np.ones(actor.obs_dim) if actor.obs_var is None else np.sqrt(actor.obs_var)
-        x = mean + std * rng.standard_normal((8, actor.obs_dim))
-        actor.metadata["reference"] = {"observations": x.tolist(), "actions": actor(x).tolist()}
-    return save_actor(actor, path_stem)
+        mean = np.zeros(out.obs_dim) if out.obs_mean is None else out.obs_mean
+        std = np.ones(out.obs_dim) if out.obs_var is None else np.sqrt(out.obs_var)
+        x = mean + std * rng.standard_normal((8, out.obs_dim))
+        out.metadata["reference"] = {"observations": x.tolist(), "actions": out(x).tolist()}
+    return out
 
 
 def load_student(path_stem: str | Path, check: bool = True) -> StudentController:
@@ -409,6 +563,15 @@ def student_from_actor(
         raise ValueError(f"{path_stem}: frame keys {block['frame_keys']} != {list(FRAME_KEYS)}")
     if check:
         actor.check_reference()
+    fine = None
+    if "fine_positioning" in block:
+        layer = block["fine_positioning"]
+        with np.load(actor_paths(path_stem)[0]) as data:
+            arrays = {k: data[k] for k in data.files if k.startswith(KNEE_PREFIX)}
+        estimator = actor_from_document(layer["estimator"], arrays, KNEE_PREFIX)
+        if check:
+            estimator.check_reference()
+        fine = FinePositioner(estimator, FinePositioning(**layer["law"]))
     extra = {k: v for k, v in actor.metadata.items() if k not in _NOT_PROVENANCE}
     return StudentController(
         actor,
@@ -416,6 +579,7 @@ def student_from_actor(
         stride=int(block["stride"]),
         metadata=extra,
         gentleness_input=bool(block.get("gentleness_input", False)),
+        fine=fine,
     )
 
 

@@ -1150,6 +1150,7 @@ def ship_students(
                 stride=student.stride,
                 metadata={**student.metadata, "seed_group": group},
                 gentleness_input=student.gentleness_input,
+                fine=student.fine,
             )
             save_student(copy, seed_copy_stem(seed_copies, name or "student", len(seeds), seed, r))
     chosen = students[ship][0]

@@ -1,0 +1,206 @@
+"""A student's fine-positioning layer (myoexo.policies.student.FinePositioner) and the command
+that fits it (myoexo.studies.knee_estimator)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+
+import numpy as np
+import pytest
+
+from myoexo.policies.actor import MLPActor
+from myoexo.policies.student import (
+    EXO_ANGLE_INDEX,
+    FRAME_DIM,
+    KNEE_OFFSET_RANGE_DEG,
+    TARGET_INDEX,
+    FinePositioner,
+    FinePositioning,
+    StudentController,
+    export_student_onnx,
+    load_student,
+    save_student,
+)
+
+
+def _mlp(in_dim: int, seed: int, reach: float = 1.0, last_scale: float = 1.0) -> MLPActor:
+    rng = np.random.default_rng(seed)
+    dims = [in_dim, 16, 1]
+    weights = [
+        (rng.normal(0, 1 / math.sqrt(i), (o, i)), rng.normal(0, 0.1, o))
+        for i, o in itertools.pairwise(dims)
+    ]
+    weights[-1] = (weights[-1][0] * last_scale, weights[-1][1] * last_scale)
+    return MLPActor(
+        weights,
+        activation="elu",
+        obs_mean=np.zeros(in_dim),
+        obs_var=np.ones(in_dim),
+        action_low=-reach,
+        action_high=reach,
+    )
+
+
+def _constant_estimator(offset_deg: float, in_dim: int = 4 * FRAME_DIM) -> MLPActor:
+    """An estimator that returns *offset_deg* whatever it reads."""
+    reach = KNEE_OFFSET_RANGE_DEG
+    weights = [
+        (np.zeros((4, in_dim)), np.zeros(4)),
+        (np.zeros((1, 4)), np.array([math.atanh(offset_deg / reach)])),
+    ]
+    return MLPActor(weights, activation="elu", action_low=-reach, action_high=reach)
+
+
+def _frame(exo_rad: float, target_rad: float) -> np.ndarray:
+    f = np.zeros(FRAME_DIM)
+    f[EXO_ANGLE_INDEX], f[TARGET_INDEX] = exo_rad, target_rad
+    return f
+
+
+def _episode_obs(env, seed: int, steps: int) -> list[np.ndarray]:
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for k in range(steps):
+        obs, *_ = env.step(np.array([-0.5 * math.sin(0.2 * k)], np.float32))
+        out.append(obs)
+    return out
+
+
+@pytest.fixture(scope="module")
+def env_exo():
+    from myoexo.envs import make_env
+
+    env = make_env(1, obs_preset="exo", episode_duration_s=0.5)
+    yield env
+    env.close()
+
+
+def test_the_law_refuses_values_outside_their_range():
+    with pytest.raises(ValueError, match=r"limit = 2.0 is outside \[0, 1\]"):
+        FinePositioning(limit=2.0)
+    with pytest.raises(ValueError, match="window_deg"):
+        FinePositioning(window_deg=0.0)
+    with pytest.raises(ValueError, match="gain_per_rad_s"):
+        FinePositioning(gain_per_rad_s=-1.0)
+
+
+def test_the_integral_runs_near_the_estimated_knee_and_stays_within_its_limit():
+    law = FinePositioning(gain_per_rad_s=10.0, window_deg=1.5, limit=0.3, control_period_s=0.01)
+    layer = FinePositioner(_constant_estimator(0.5), law)
+    window = np.zeros(4 * FRAME_DIM)
+    target = math.radians(60.0)
+    # the encoder reads 0.9 deg short, the knee sits 0.5 deg beyond it: 0.4 deg to go
+    exo = target - math.radians(0.9)
+    assert layer.offset_deg(window) == pytest.approx(0.5, abs=1e-9)
+    first = layer.step(window, _frame(exo, target))
+    assert first == pytest.approx(10.0 * math.radians(0.4) * 0.01, rel=1e-9)
+    # 3 deg from the estimated knee: outside the window, held
+    assert layer.step(window, _frame(target - math.radians(3.5), target)) == first
+    for _ in range(2000):
+        value = layer.step(window, _frame(exo, target))
+    assert value == pytest.approx(0.3)
+    # past the target the integral runs back
+    assert layer.step(window, _frame(target, target)) < 0.3
+    layer.reset()
+    assert layer.integral == 0.0
+
+
+def test_a_student_with_the_layer_keeps_it_through_its_files_and_its_onnx(tmp_path, env_exo):
+    ort = pytest.importorskip("onnxruntime")
+    n_frames, stride = 4, 2
+    actor = _mlp(n_frames * FRAME_DIM, seed=0)
+    estimator = _mlp(n_frames * FRAME_DIM, seed=1, reach=KNEE_OFFSET_RANGE_DEG, last_scale=0.05)
+    # a wide window and a steep gain: the integral moves at every step of a short episode
+    law = FinePositioning(gain_per_rad_s=40.0, window_deg=180.0, limit=0.5)
+    raw = StudentController(actor, n_frames=n_frames, stride=stride)
+    student = raw.with_fine(FinePositioner(estimator, law))
+    episode = _episode_obs(env_exo, seed=3, steps=20)
+    raw.reset()
+    student.reset()
+    plain = [float(raw.act(o)[0]) for o in episode]
+    fine = [float(student.act(o)[0]) for o in episode]
+    assert fine != pytest.approx(plain, abs=1e-3)
+    assert fine[-1] == pytest.approx(np.clip(plain[-1] + student.fine.integral, -1, 1), abs=1e-6)
+
+    save_student(student, tmp_path / "s")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json", "s.npz"]  # one controller
+    with np.load(tmp_path / "s.npz") as arrays:
+        assert {k for k in arrays.files if k.startswith("knee_layer")} == {
+            "knee_layer0.weight", "knee_layer0.bias", "knee_layer1.weight", "knee_layer1.bias"
+        }  # fmt: skip
+    block = json.loads((tmp_path / "s.json").read_text())["student"]["fine_positioning"]
+    assert block["law"] == law.__dict__
+    assert block["estimator"]["action_high"] == [KNEE_OFFSET_RANGE_DEG]
+    loaded = load_student(tmp_path / "s")
+    assert loaded.fine is not None and loaded.fine.law == law
+    loaded.reset()
+    assert [float(loaded.act(o)[0]) for o in episode] == pytest.approx(fine, abs=1e-5)
+
+    export_student_onnx(loaded, tmp_path / "s.onnx")
+    sess = ort.InferenceSession(str(tmp_path / "s.onnx"), providers=["CPUExecutionProvider"])
+    assert [i.name for i in sess.get_inputs()] == ["frame", "memory", "integral"]
+    assert [o.name for o in sess.get_outputs()] == ["action", "memory_out", "integral_out"]
+    memory, integral, worst = None, np.zeros((1, 1), np.float32), 0.0
+    for obs, expected in zip(episode, fine, strict=True):
+        frame = loaded.frame(obs).astype(np.float32)
+        if memory is None:
+            memory = loaded.initial_memory(frame)[None]
+        action, memory, integral = sess.run(
+            None, {"frame": frame[None], "memory": memory, "integral": integral}
+        )
+        worst = max(worst, abs(float(action[0, 0]) - expected))
+    assert worst <= 1e-4
+
+
+def test_a_layer_must_read_the_students_memory():
+    actor = _mlp(4 * FRAME_DIM, seed=0)
+    with pytest.raises(ValueError, match="knee estimator input"):
+        StudentController(
+            actor, n_frames=4, stride=2, fine=FinePositioner(_constant_estimator(0.0, 3))
+        )
+
+
+def test_the_fit_refuses_the_evaluation_root():
+    from myoexo.studies.knee_estimator import KneeEstimatorSettings
+
+    with pytest.raises(ValueError, match="evaluation"):
+        KneeEstimatorSettings(root_seed=0)
+
+
+def test_a_tiny_fit_labels_the_knee_offset_and_records_its_provenance(tmp_path):
+    from myoexo.envs import make_env
+    from myoexo.evaluation.config import subject_seed
+    from myoexo.studies.knee_estimator import (
+        KneeEstimatorSettings,
+        collect,
+        fit_knee_estimator,
+    )
+
+    raw = StudentController(_mlp(3 * FRAME_DIM, seed=2), n_frames=3, stride=1)
+    settings = KneeEstimatorSettings(
+        subjects=1, held_out=1, levels=(1,), perturbed=False, hidden=(8,), epochs=2
+    )
+    data, period_s = collect(raw, settings, log=lambda _: None)
+    assert period_s == pytest.approx(0.01)
+    assert data.held_out.sum() == data.held_out.size // 2  # one subject of two
+    # the labels are the twin's knee minus the encoder, step by step, from the reset on
+    env = make_env(1, obs_preset="exo")
+    _, info = env.reset(seed=subject_seed(1, settings.subject_offset, settings.root_seed))
+    env.close()
+    assert data.offsets_deg[0] == pytest.approx(info["knee_angle_deg"] - info["exo_angle_deg"])
+    assert np.ptp(data.offsets_deg) > 0.1  # the straps give as the motor pushes
+
+    logged: list[str] = []
+    student = fit_knee_estimator(raw, settings, FinePositioning(), "myoexo x", logged.append)
+    assert student.actor is raw.actor and student.fine is not None
+    meta = student.fine.estimator.metadata
+    assert meta["command"] == "myoexo x" and meta["root_seed"] == 1
+    assert meta["settings"]["subjects"] == 1 and "versions" in meta
+    assert [r["level"] for r in meta["held_out_errors"]] == [1]
+    assert any("held out, level 1 nominal" in line for line in logged)
+    save_student(student, tmp_path / "fitted")
+    again = load_student(tmp_path / "fitted")
+    assert again.fine is not None
+    assert again.fine.estimator.metadata["held_out_errors"] == meta["held_out_errors"]
