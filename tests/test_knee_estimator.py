@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from test_distill import _episode_obs  # the same fixed command sequence
 
 from myoexo.policies.actor import MLPActor
 from myoexo.policies.student import (
@@ -57,15 +58,6 @@ def _frame(exo_rad: float, target_rad: float) -> np.ndarray:
     f = np.zeros(FRAME_DIM)
     f[EXO_ANGLE_INDEX], f[TARGET_INDEX] = exo_rad, target_rad
     return f
-
-
-def _episode_obs(env, seed: int, steps: int) -> list[np.ndarray]:
-    obs, _ = env.reset(seed=seed)
-    out = [obs]
-    for k in range(steps):
-        obs, *_ = env.step(np.array([-0.5 * math.sin(0.2 * k)], np.float32))
-        out.append(obs)
-    return out
 
 
 @pytest.fixture(scope="module")
