@@ -196,3 +196,32 @@ def test_a_tiny_fit_labels_the_knee_offset_and_records_its_provenance(tmp_path):
     again = load_student(tmp_path / "fitted")
     assert again.fine is not None
     assert again.fine.estimator.metadata["held_out_errors"] == meta["held_out_errors"]
+
+
+def test_the_shipped_knee_student_carries_its_layer_and_ends_at_the_target():
+    """`student_knee`: `student_fine`'s recipe distilled again (five seeds) with a
+    fine-positioning layer fitted on root 1; built on an env it runs at its default weight,
+    and a full level-1 episode ends within 0.05 deg of the target, where the same network
+    without its layer ends further off."""
+    import myoexo
+    from myoexo.control.policy import GentleController
+    from myoexo.control.rollout import rollout
+    from myoexo.envs import make_env
+
+    stored = myoexo.load_policy("student_knee")
+    assert stored.fine is not None and stored.gentleness_input
+    meta = stored.fine.estimator.metadata
+    assert meta["root_seed"] == 1 and meta["command"].startswith("myoexo policy knee-estimator")
+    assert len(stored.metadata["distill_seeds"]) == 5
+    env = make_env(1, obs_preset="exo")
+    try:
+        controller = myoexo.load_policy("student_knee", env)
+        assert isinstance(controller, GentleController)
+        with_layer = rollout(env, controller, seed=5)
+        raw = GentleController(stored.with_fine(None), controller.gentleness)
+        without = rollout(env, raw, seed=5)
+    finally:
+        env.close()
+    end = abs(with_layer.signals["error_deg"][-1])
+    assert not with_layer.unstable and end < 0.05
+    assert end < abs(without.signals["error_deg"][-1])

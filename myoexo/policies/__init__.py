@@ -28,6 +28,14 @@ name                    files (``<stem>.npz/json``)  observation
                                                      a fine-positioning term, the weight its
                                                      last input (default 0.25);
                                                      ``MODEL_CARD_student_fine.md``
+``student_knee``        ``student_knee``             ``obs_preset="exo"`` and a gentleness
+                                                     weight: ``student_fine``'s recipe
+                                                     distilled again, with a fine-positioning
+                                                     layer (a second network on the same
+                                                     memory estimates the knee, an integral
+                                                     on its error near the target; default
+                                                     weight 0.25);
+                                                     ``MODEL_CARD_student_knee.md``
 ======================  ===========================  ===========================================
 
 Retired (their model cards stay as the record of what they measured): ``sac_exo`` (the
@@ -77,6 +85,7 @@ SHIPPED_POLICIES: dict[str, str] = {
     "student_exo": "student_exo",
     "residual": "residual_knee_exo",
     "student_fine": "student_fine",
+    "student_knee": "student_knee",
 }
 
 __all__ = [
