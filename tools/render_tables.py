@@ -117,8 +117,9 @@ class GoalsBlock:
         return "\n".join([self.start, body, self.end])
 
 
-#: The shipped student's five seeds at its default weight, as the result sets name them.
+#: The shipped students' five seeds at their default weight, as the result sets name them.
 FINE = "student_fine_5seeds@0.25"
+KNEE = "student_knee_5seeds@0.25"
 
 #: Every generated block outside the result sets' own ``tables.md``.
 BLOCKS: tuple[Block | GoalsBlock, ...] = (
@@ -216,6 +217,7 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
             "student_fine_5seeds@0",
         )
     ),
+    Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_1000_tone", (KNEE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone", (FINE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone_perturbed", (FINE,)),
     *(
