@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.evaluation.config import check_fit_root
-from myoexo.policies.actor import MLPActor
+from myoexo.policies.actor import MLPActor, actor_paths
 from myoexo.policies.student import (
     KNEE_OFFSET_RANGE_DEG,
     FinePositioner,
@@ -301,7 +301,7 @@ def run(args: argparse.Namespace) -> int:
     law = from_options(FinePositioning, args)
     command = shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])  # as typed; settings in full
     for stem in args.students:
-        path = Path(stem).with_suffix("") if Path(stem).suffix in (".npz", ".json") else Path(stem)
+        path = actor_paths(stem)[0].with_suffix("")  # the files' own rule for a stem
         print(f"[knee] {path}")
         student = fit_knee_estimator(load_student(path), settings, law, command)
         npz, _ = save_student(student, path)
