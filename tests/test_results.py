@@ -184,6 +184,7 @@ def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tm
 
     dest = collect(evaluation, tmp_path / "set")
     meta = json.loads((dest / "meta.json").read_text())
+    assert meta["hold_bounds_command"] == meta["commands"][0]  # the run the bounds came from
     before = {f: (dest / f).read_text() for f in ("summary.csv", "reductions.csv")}
     later = _evaluation(tmp_path / "pid_again", ("pid",))
     stripped = {**meta, "hold_bounds": []}
@@ -195,6 +196,16 @@ def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tm
     assert again["commands"] == meta["commands"]
     assert {f: (dest / f).read_text() for f in before} == before
     assert "`myoexo results bound`" in render(dest)
+    collect(evaluation, dest, update=True)  # traces whose bounds repeat the set's: run kept
+    kept = json.loads((dest / "meta.json").read_text())
+    assert kept["hold_bounds_command"] == again["hold_bounds_command"]
+    moved = {**again, "hold_bounds": [{**b, "hold_torque_nm": 0.5} for b in meta["hold_bounds"]]}
+    (dest / "meta.json").write_text(json.dumps(moved))
+    collect(evaluation, dest, update=True)  # bounds that differ: the new run's, named
+    renewed = json.loads((dest / "meta.json").read_text())
+    assert renewed["hold_bounds"] == meta["hold_bounds"]
+    assert renewed["hold_bounds_command"] == meta["commands"][0]
+    bound(later, dest)
     with pytest.raises(ValueError, match="subjects_per_level"):
         bound(_evaluation(tmp_path / "fewer", ("pid",), subjects=2), dest)
     traceless = tmp_path / "traceless"

@@ -151,6 +151,8 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
         "versions": config.get("versions", {}),
         "hold_bounds": hold_bounds(eval_dir, table, reference, levels),
     }
+    if meta["hold_bounds"]:  # the run whose reference traces gave the bounds
+        meta["hold_bounds_command"] = meta["commands"][0]
     dest = Path(dest)
     if update:
         files, meta = _updated(dest, files, meta, others)
@@ -219,6 +221,23 @@ def _merged_bounds(old: list[dict[str, Any]], fresh: list[dict[str, Any]]) -> li
     levels = {int(b["level"]) for b in fresh}
     kept = [b for b in old if int(b["level"]) not in levels]
     return sorted([*kept, *fresh], key=lambda b: b["level"])
+
+
+def _same_bounds(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> bool:
+    """Whether the hold bounds *a* and *b* are at the same levels with the same numbers, to
+    1e-6 relative (:func:`_same_rows`' tolerance: a re-run of the reference repeats them)."""
+    import math
+
+    if [x["level"] for x in a] != [x["level"] for x in b]:
+        return False
+    return all(
+        x.keys() == y.keys()
+        and all(
+            math.isclose(x[k], y[k], rel_tol=1e-6) if isinstance(x[k], float) else x[k] == y[k]
+            for k in x
+        )
+        for x, y in zip(a, b, strict=True)
+    )
 
 
 #: What names a set's subjects in its ``meta.json`` (:func:`_subjects_of`).
@@ -317,12 +336,14 @@ def _updated(
         order = {c: i for i, c in enumerate(dict.fromkeys([*frame.controller, *added]))}
         rank = rows.controller.map(order)
         merged[name] = rows.iloc[rank.argsort(kind="stable")].reset_index(drop=True)
-    fresh = meta["hold_bounds"]
-    if not fresh and old.get("hold_bounds_command"):  # the set's bounds stay, and their run
+    bounds = _merged_bounds(old.get("hold_bounds", []), meta["hold_bounds"])
+    if old.get("hold_bounds_command") and _same_bounds(bounds, old.get("hold_bounds", [])):
+        # the set's bounds stay (none in the run, or the run's repeat them), and so does
+        # the run they came from
         meta = {**meta, "hold_bounds_command": old["hold_bounds_command"]}
     meta = {
         **meta,
-        "hold_bounds": _merged_bounds(old.get("hold_bounds", []), fresh),
+        "hold_bounds": bounds,
         "commands": [*old["commands"], *(c for c in meta["commands"] if c not in old["commands"])],
         "episodes": int(merged["summary.csv"].n.sum()),
     }
