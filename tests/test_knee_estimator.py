@@ -115,6 +115,9 @@ def test_a_student_with_the_layer_keeps_it_through_its_files_and_its_onnx(tmp_pa
     fine = [float(student.act(o)[0]) for o in episode]
     assert fine != pytest.approx(plain, abs=1e-3)
     assert fine[-1] == pytest.approx(np.clip(plain[-1] + student.fine.integral, -1, 1), abs=1e-6)
+    twin = student.with_fine(student.fine)  # the same layer: its own integral
+    twin.reset()
+    assert twin.fine is not None and twin.fine.integral == 0.0 != student.fine.integral
 
     save_student(student, tmp_path / "s")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json", "s.npz"]  # one controller

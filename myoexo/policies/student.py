@@ -292,8 +292,9 @@ class StudentController:
         return FRAME_KEYS
 
     def with_fine(self, fine: FinePositioner | None) -> StudentController:
-        """The same network, memory layout and provenance with *fine* as the
-        fine-positioning layer (``None``: without one)."""
+        """The same network, memory layout and provenance with *fine*'s estimator and law
+        as the fine-positioning layer (``None``: without one); the layer's integral is the
+        new controller's own."""
         return StudentController(
             self.actor,
             n_frames=self.n_frames,
@@ -301,7 +302,7 @@ class StudentController:
             obs_keys=self.obs_keys,
             metadata=self.metadata,
             gentleness_input=self.gentleness_input,
-            fine=fine,
+            fine=None if fine is None else FinePositioner(fine.estimator, fine.law),
         )
 
     # ------------------------------------------------------------------ memory
