@@ -172,8 +172,44 @@ def test_a_set_takes_controllers_run_later_on_its_own_subjects_only(evaluation, 
     frame = pd.read_csv(other / "summary.csv")
     frame.loc[frame.controller == "pid", "final_error_deg_mean"] += 0.1
     frame.to_csv(other / "summary.csv", index=False)
-    with pytest.raises(ValueError, match="did not run on the set's subjects"):
+    with pytest.raises(
+        ValueError, match=r"at levels \[1, 2\]: it did not run on the set.s subjects"
+    ):
         collect(later, other, update=True)
+
+
+def test_a_reference_rerun_that_differs_at_named_levels_is_paired_and_said(evaluation, tmp_path):
+    """collect --update --rerun-levels: where the set's reference rows differ from the
+    evaluation's (a reference that never settles, re-run by later code), the added
+    controller is paired with its own run there, the set keeps its rows and says so; the
+    other levels must still repeat, and the named ones count the same subjects."""
+    dest = collect(evaluation, tmp_path / "set")
+    frame = pd.read_csv(dest / "summary.csv")
+    frame.loc[(frame.controller == "pid") & (frame.level == 1), "final_error_deg_mean"] += 0.003
+    frame.to_csv(dest / "summary.csv", index=False)
+    set_pid = frame[frame.controller == "pid"].reset_index(drop=True)
+    later = _evaluation(tmp_path / "later", ("pid", "pid:ramp_s=0.2"))
+    with pytest.raises(ValueError, match=r"levels \[1\]"):
+        collect(later, dest, update=True)
+    with pytest.raises(ValueError, match=r"levels \[1\]"):
+        collect(later, dest, update=True, rerun_levels=(2,))
+    with pytest.raises(ValueError, match="update"):
+        collect(later, tmp_path / "new", rerun_levels=(1,))
+    collect(later, dest, update=True, rerun_levels=(1,))
+    summary = pd.read_csv(dest / "summary.csv")
+    pd.testing.assert_frame_equal(
+        summary[summary.controller == "pid"].reset_index(drop=True), set_pid
+    )
+    red = pd.read_csv(dest / "reductions.csv")
+    assert list(red.controller) == ["sac", "sac", "pid:ramp_s=0.2", "pid:ramp_s=0.2"]
+    (rerun,) = json.loads((dest / "meta.json").read_text())["reference_reruns"]
+    assert rerun["levels"] == [1] and rerun["controllers"] == ["pid:ramp_s=0.2"]
+    (mean,) = rerun["final_error_deg_mean"]
+    assert mean["set"] == pytest.approx(mean["run"] + 0.003)
+    assert "are paired with their own run of `pid`" in render(dest)
+    fewer = _evaluation(tmp_path / "fewer", ("pid", "pid:ramp_s=0.2"), subjects=2)
+    with pytest.raises(ValueError, match="subjects_per_level"):
+        collect(fewer, dest, update=True, rerun_levels=(1,))
 
 
 def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tmp_path):

@@ -89,7 +89,12 @@ def command_of(config: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
-def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Path:
+def collect(
+    eval_dir: str | Path,
+    dest: str | Path,
+    update: bool = False,
+    rerun_levels: Sequence[int] = (),
+) -> Path:
     """Write the result set of the evaluation folder *eval_dir* into *dest* (created).
 
     With *update*, *dest* is an existing set and *eval_dir* an evaluation of more (or
@@ -100,6 +105,14 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     reference controller with the same summary and tail rows (an episode depends only on
     controller, level, subject and root seed, so the reference's rows repeat, to 1e-6
     relative). The set's ``meta.json`` lists every command it was built from.
+
+    *rerun_levels* (with *update*) names levels where the evaluation's reference may differ
+    from the set's: where a reference that never settles (the PIDs that limit-cycle under
+    the perturbed twins' latency at level 0) amplifies a last-digit change of the code into
+    another trajectory. The reference's rows must still repeat at every other level and
+    count as many subjects at these; the set keeps its own reference rows, the added
+    controllers are paired with the evaluation's own run of it there, and ``meta.json``
+    (``reference_reruns``) and the set's tables say so, with both means of the final error.
 
     Raises:
         ValueError: *eval_dir* is no evaluation folder, holds no episodes, or no PID; with
@@ -154,8 +167,10 @@ def collect(eval_dir: str | Path, dest: str | Path, update: bool = False) -> Pat
     if meta["hold_bounds"]:  # the run whose reference traces gave the bounds
         meta["hold_bounds_command"] = meta["commands"][0]
     dest = Path(dest)
+    if rerun_levels and not update:
+        raise ValueError("rerun_levels applies to an update of an existing set (update=True)")
     if update:
-        files, meta = _updated(dest, files, meta, others)
+        files, meta = _updated(dest, files, meta, others, tuple(sorted(set(rerun_levels))))
     dest.mkdir(parents=True, exist_ok=True)
     for name, frame in files.items():
         frame.to_csv(dest / name, index=False)
@@ -264,11 +279,13 @@ def _check_same_subjects(
     risk: Any,
     new_summary: Any,
     new_risk: Any,
+    rerun_levels: Sequence[int] = (),
 ) -> None:
     """Refuse an evaluation (its reference and :func:`_subjects_of` fields *theirs*, its
     reference's summary and tail rows) that did not run on the subjects of the set *dest*
     (its *meta*, *summary* and *risk*): the fields must agree, the reference's rows repeat
-    (:func:`_same_rows`)."""
+    (:func:`_same_rows`) at every level but *rerun_levels*, where they must count as many
+    subjects (:func:`collect`)."""
     ours = {**meta, "twin_version": recorded_twin_version(meta)}
     for key, value in theirs.items():
         if ours.get(key) != value:
@@ -277,15 +294,35 @@ def _check_same_subjects(
                 f"{str(dest)!r} can only take runs on its own subjects"
             )
     ref = theirs["reference"]
+
+    def rows(frame: Any, keep: bool) -> Any:
+        return frame[frame.level.isin(rerun_levels) == keep]
+
     for name, old, new in (
         ("summary.csv", summary, new_summary),
         ("tail_risk.csv", risk, new_risk),
     ):
-        if not _same_rows(old, new, ref):
+        if not _same_rows(rows(old, False), rows(new, False), ref):
+            differ = [
+                lv
+                for lv in sorted(set(old.level))
+                if not _same_rows(old[old.level == lv], new[new.level == lv], ref)
+            ]
             raise ValueError(
                 f"the reference {ref!r} has other {name} rows in the evaluation than in "
-                f"{str(dest)!r}: it did not run on the set's subjects and twin"
+                f"{str(dest)!r} at levels {differ}: it did not run on the set's subjects and "
+                "twin (or, where it never settles, a later code's last digits gave another "
+                "trajectory: name those levels with --rerun-levels)"
             )
+    a = rows(summary, True)
+    b = rows(new_summary, True)
+    a, b = a[a.controller == ref], b[b.controller == ref]
+    if list(a.level) != list(b.level) or list(a.n) != list(b.n):
+        raise ValueError(
+            f"the reference {ref!r} is not at levels {list(rerun_levels)} with the set's "
+            f"subjects in the evaluation ({list(zip(b.level, b.n, strict=False))} against "
+            f"{list(zip(a.level, a.n, strict=False))} (level, episodes))"
+        )
 
 
 def _same_rows(old: Any, new: Any, controller: str) -> bool:
@@ -307,7 +344,11 @@ def _same_rows(old: Any, new: Any, controller: str) -> bool:
 
 
 def _updated(
-    dest: Path, files: dict[str, Any], meta: dict[str, Any], added: list[str]
+    dest: Path,
+    files: dict[str, Any],
+    meta: dict[str, Any],
+    added: list[str],
+    rerun_levels: tuple[int, ...] = (),
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The set *dest* with the controllers *added* of a new evaluation (*files*, *meta*)
     put in; see :func:`collect`."""
@@ -327,6 +368,7 @@ def _updated(
         risk,
         files["summary.csv"],
         files["tail_risk.csv"],
+        rerun_levels,
     )
     merged = {}
     for (name, new), frame in zip(files.items(), (summary, risk, red, heads), strict=True):
@@ -341,11 +383,30 @@ def _updated(
         # the set's bounds stay (none in the run, or the run's repeat them), and so does
         # the run they came from
         meta = {**meta, "hold_bounds_command": old["hold_bounds_command"]}
+    reruns = list(old.get("reference_reruns", []))
+    if rerun_levels:
+        ref = meta["reference"]
+        mean = {
+            key: frame[frame.controller == ref].set_index("level").final_error_deg_mean
+            for key, frame in (("set", summary), ("run", files["summary.csv"]))
+        }
+        reruns.append(
+            {
+                "command": meta["commands"][0],
+                "levels": list(rerun_levels),
+                "controllers": list(added),
+                "final_error_deg_mean": [
+                    {"level": lv, "set": float(mean["set"][lv]), "run": float(mean["run"][lv])}
+                    for lv in rerun_levels
+                ],
+            }
+        )
     meta = {
         **meta,
         "hold_bounds": bounds,
         "commands": [*old["commands"], *(c for c in meta["commands"] if c not in old["commands"])],
         "episodes": int(merged["summary.csv"].n.sum()),
+        **({"reference_reruns": reruns} if reruns else {}),
     }
     return merged, meta
 
@@ -365,6 +426,23 @@ def _commands(meta: dict[str, Any]) -> str:
     return (
         f"Commands: `{commands[0]}`, then {later} (controllers added on the same subjects, "
         "checked by the reference's identical rows: `myoexo results collect --update`)"
+    )
+
+
+def _rerun_line(ref: str, rerun: dict[str, Any]) -> str:
+    """The sentence of a set's tables on controllers paired with their own run of the
+    reference where it differs from the set's (:func:`collect`'s *rerun_levels*)."""
+    means = "; ".join(
+        f"level {m['level']}: {m['run']:.3f} against the set's {m['set']:.3f} deg"
+        for m in rerun["final_error_deg_mean"]
+    )
+    names = ", ".join(f"`{c}`" for c in rerun["controllers"])
+    return (
+        f"At levels {', '.join(map(str, rerun['levels']))}, {names} are paired with their own "
+        f"run of `{ref}` (`{rerun['command']}`), which differs there from the set's rows "
+        f"(mean final error {means}): a reference that never settles there turns a later "
+        "code's last digits into another trajectory. The set's rows of "
+        f"`{ref}` are its own run's (`myoexo results collect --update --rerun-levels`)."
     )
 
 
@@ -599,6 +677,7 @@ def render(folder: str | Path, label: str | None = None) -> str:
         parts.append(note)
     if line := hold_bound_line(meta):
         parts.append(line)
+    parts += [_rerun_line(meta["reference"], r) for r in meta.get("reference_reruns", [])]
     for controller in dict.fromkeys(red.controller):
         parts.append(f"**`{controller}`** against `{meta['reference']}` on the same subjects:")
         parts.append(headline_table(folder, controller))
@@ -864,6 +943,15 @@ class CollectOptions:
         "same name) instead of writing a new one; it must hold the set's reference on the "
         "same subjects",
     )
+    rerun_levels: tuple[int, ...] = option(
+        (),
+        "with --update: levels where the evaluation's reference may differ from the set's (a "
+        "reference that never settles there, re-run by later code); the added controllers "
+        "are paired with the evaluation's own reference there, and the set says so",
+        metavar="LEVEL",
+        low=0,
+        high=3,
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -951,7 +1039,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``myoexo results``."""
     if args.action == "collect":
         co = from_options(CollectOptions, args, eval_dir=args.eval_dir, dest=args.dest)
-        dest = collect(co.eval_dir, co.dest, update=co.update)
+        dest = collect(co.eval_dir, co.dest, update=co.update, rerun_levels=co.rerun_levels)
         print(f"result set: {dest}")
     elif args.action == "bound":
         bo = from_options(BoundOptions, args, eval_dir=args.eval_dir, set=args.set)
