@@ -31,6 +31,7 @@ class Demo:
     noisy: bool = option(False, "add noise")
     out: Path | None = option(None, "where to write", folder=True)
     hidden: int = option(3, "not on the command line", flag="")
+    ceiling_nm: float | None = option(5.0, "a bound (none: no bound)", low=0.0, above=True)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -71,6 +72,17 @@ def test_a_bad_value_names_the_field_and_what_it_accepts(kwargs, message):
         Demo(**kwargs)
     assert str(err.value) == message
     assert isinstance(err.value, ValueError)
+
+
+def test_none_is_accepted_where_the_fields_type_admits_it():
+    assert Demo(ceiling_nm=None).ceiling_nm is None
+    with pytest.raises(FieldError, match=r"ceiling_nm = 0\.0 must be > 0"):
+        Demo(ceiling_nm=0.0)
+    with pytest.raises(FieldError, match="subjects = None"):
+        Demo(subjects=None)  # type: ignore[arg-type]
+    for raw, value in (("none", None), ("3", 3.0)):
+        args = _parser().parse_args(["--ceiling-nm", raw])
+        assert from_options(Demo, args).ceiling_nm == value
 
 
 def test_help_shows_each_fields_doc_and_default():

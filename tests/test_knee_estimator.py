@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 from test_distill import _episode_obs  # the same fixed command sequence
 
+from myoexo.envs.observation import OBS_SCALES
 from myoexo.policies.actor import MLPActor
 from myoexo.policies.student import (
     EXO_ANGLE_INDEX,
+    EXO_VEL_INDEX,
     FRAME_DIM,
     KNEE_OFFSET_RANGE_DEG,
     TARGET_INDEX,
@@ -54,9 +56,10 @@ def _constant_estimator(offset_deg: float, in_dim: int = 4 * FRAME_DIM) -> MLPAc
     return MLPActor(weights, activation="elu", action_low=-reach, action_high=reach)
 
 
-def _frame(exo_rad: float, target_rad: float) -> np.ndarray:
+def _frame(exo_rad: float, target_rad: float, speed_deg_s: float = 0.0) -> np.ndarray:
     f = np.zeros(FRAME_DIM)
     f[EXO_ANGLE_INDEX], f[TARGET_INDEX] = exo_rad, target_rad
+    f[EXO_VEL_INDEX] = math.radians(speed_deg_s) * OBS_SCALES["exo_vel_rad_s"]
     return f
 
 
@@ -97,6 +100,23 @@ def test_the_integral_runs_near_the_estimated_knee_and_stays_within_its_limit():
     assert layer.step(window, _frame(target, target)) < 0.3
     layer.reset()
     assert layer.integral == 0.0
+
+
+def test_the_integral_holds_while_the_encoder_turns_faster_than_the_speed_limit():
+    """A knee that swings through the window (a limit cycle under latency) winds nothing up;
+    without a speed limit (layers written before it) the integral runs at any speed."""
+    target = math.radians(60.0)
+    exo = target - math.radians(0.4)
+    window = np.zeros(4 * FRAME_DIM)
+    law = FinePositioning(speed_limit_deg_s=20.0)
+    layer = FinePositioner(_constant_estimator(0.0), law)
+    assert layer.step(window, _frame(exo, target, speed_deg_s=25.0)) == 0.0
+    assert layer.step(window, _frame(exo, target, speed_deg_s=-25.0)) == 0.0
+    assert layer.step(window, _frame(exo, target, speed_deg_s=15.0)) > 0.0
+    anywhere = FinePositioner(_constant_estimator(0.0), FinePositioning(speed_limit_deg_s=None))
+    assert anywhere.step(window, _frame(exo, target, speed_deg_s=500.0)) > 0.0
+    with pytest.raises(ValueError, match="speed_limit_deg_s"):
+        FinePositioning(speed_limit_deg_s=0.0)
 
 
 def test_a_student_with_the_layer_keeps_it_through_its_files_and_its_onnx(tmp_path, env_exo):
@@ -199,6 +219,34 @@ def test_a_tiny_fit_labels_the_knee_offset_and_records_its_provenance(tmp_path):
     again = load_student(tmp_path / "fitted")
     assert again.fine is not None
     assert again.fine.estimator.metadata["held_out_errors"] == meta["held_out_errors"]
+
+
+def test_law_only_keeps_the_estimator_and_writes_the_law(tmp_path, capsys):
+    """myoexo policy knee-estimator --law-only: the student's files get the new law, the
+    estimator and the network stay, the command is recorded; a student without a layer is
+    refused."""
+    from myoexo.cli import main
+
+    n_frames = 4
+    estimator = _mlp(n_frames * FRAME_DIM, seed=1, reach=KNEE_OFFSET_RANGE_DEG)
+    actor = _mlp(n_frames * FRAME_DIM, seed=0)
+    old = FinePositioning(speed_limit_deg_s=None)
+    save_student(
+        StudentController(actor, n_frames=n_frames, stride=2, fine=FinePositioner(estimator, old)),
+        tmp_path / "s",
+    )
+    save_student(StudentController(actor, n_frames=n_frames, stride=2), tmp_path / "plain")
+    assert main(["policy", "knee-estimator", str(tmp_path / "s"), "--law-only",
+                 "--speed-limit-deg-s", "10", "--gain-per-rad-s", "5"]) == 0  # fmt: skip
+    again = load_student(tmp_path / "s")
+    assert again.fine is not None
+    assert again.fine.law == FinePositioning(gain_per_rad_s=5.0, speed_limit_deg_s=10.0)
+    x = np.linspace(-1, 1, n_frames * FRAME_DIM)
+    assert again.fine.offset_deg(x) == pytest.approx(float(estimator(x)[0]), abs=1e-5)
+    assert again.actor(x) == pytest.approx(actor(x), abs=1e-5)
+    assert again.fine.estimator.metadata["law_command"]  # the command line that ran
+    assert main(["policy", "knee-estimator", str(tmp_path / "plain"), "--law-only"]) != 0
+    assert "no fine-positioning layer" in capsys.readouterr().err
 
 
 def test_the_shipped_knee_student_carries_its_layer_and_ends_at_the_target():

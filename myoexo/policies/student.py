@@ -53,6 +53,7 @@ from myoexo.envs.observation import (
     CUFF_OBS_KEYS,
     DEFAULT_OBS_KEYS,
     EXO_SENSOR_OBS_KEYS,
+    OBS_SCALES,
     STATE_OBS_KEYS,
 )
 from myoexo.envs.sensors import Measurements
@@ -86,6 +87,8 @@ EXO_PRESET_KEYS: tuple[str, ...] = EXO_SENSOR_OBS_KEYS
 STUDENT_FORMAT_VERSION = 1
 #: Positions of the exo encoder angle (rad) and of the target (rad) in a frame.
 EXO_ANGLE_INDEX, TARGET_INDEX = FRAME_KEYS.index("exo_angle_rad"), FRAME_KEYS.index("target_rad")
+EXO_VEL_INDEX = FRAME_KEYS.index("exo_vel_rad_s")
+_VEL_SCALE = OBS_SCALES["exo_vel_rad_s"]
 #: The knee estimator's output range, deg (its tanh head spans +-this).
 KNEE_OFFSET_RANGE_DEG = 20.0
 
@@ -146,9 +149,11 @@ class FinePositioning:
     """The fine-positioning layer's integral law (:class:`FinePositioner`).
 
     Each control step the layer computes ``e`` = target - estimated knee angle (rad); while
-    ``|e|`` is below :attr:`window_deg`, its integral state moves by ``gain_per_rad_s x e x
+    ``|e|`` is below :attr:`window_deg` and the encoder's speed below
+    :attr:`speed_limit_deg_s`, its integral state moves by ``gain_per_rad_s x e x
     control_period_s``, clipped to ``+-limit``; the state is added to the student's command
-    (then clipped to [-1, 1]). Outside the window the state is held.
+    (then clipped to [-1, 1]). Otherwise the state is held: a knee that swings through the
+    window (a limit cycle under a device's latency) does not wind it up.
 
     Raises:
         ValueError: A value outside its range (the message names it and the range).
@@ -161,6 +166,14 @@ class FinePositioning:
         1.5, "the integral runs only this close to the target", low=0.0, above=True, unit="deg"
     )
     limit: float = option(0.3, "largest share of the command the integral gives", low=0.0, high=1.0)
+    speed_limit_deg_s: float | None = option(
+        10.0,
+        "the integral runs only while the exo encoder turns slower than this (none: at any "
+        "speed, the law of layers written before the option)",
+        low=0.0,
+        above=True,
+        unit="deg/s",
+    )
     control_period_s: float = option(
         0.01, "time between two decisions (the env's dt)", low=0.0, above=True, unit="s", flag=""
     )
@@ -188,6 +201,9 @@ class FinePositioner:
         self.law = law or FinePositioning()
         self._window_rad = math.radians(self.law.window_deg)
         self._step = self.law.gain_per_rad_s * self.law.control_period_s
+        speed = self.law.speed_limit_deg_s
+        # the frame holds the encoder speed in the observation vector's scale
+        self._speed_limit = math.inf if speed is None else math.radians(speed) * _VEL_SCALE
         self.integral = 0.0
 
     def reset(self) -> None:
@@ -202,7 +218,7 @@ class FinePositioner:
         """Update the integral from this step's memory and frame; return it."""
         knee_rad = frame[EXO_ANGLE_INDEX] + math.radians(self.offset_deg(window))
         error_rad = frame[TARGET_INDEX] - knee_rad
-        if abs(error_rad) < self._window_rad:
+        if abs(error_rad) < self._window_rad and abs(frame[EXO_VEL_INDEX]) < self._speed_limit:
             limit = self.law.limit
             self.integral = min(max(self.integral + self._step * error_rad, -limit), limit)
         return self.integral
@@ -417,6 +433,8 @@ def _torch_student_class() -> type:
                 self.window_rad = math.radians(law.window_deg)
                 self.integral_step = law.gain_per_rad_s * law.control_period_s
                 self.limit = law.limit
+                speed = law.speed_limit_deg_s
+                self.speed_limit = math.inf if speed is None else math.radians(speed) * _VEL_SCALE
 
         select: torch.Tensor
 
@@ -436,7 +454,9 @@ def _torch_student_class() -> type:
             knee = frame[:, EXO_ANGLE_INDEX : EXO_ANGLE_INDEX + 1] + offset_rad
             error = frame[:, TARGET_INDEX : TARGET_INDEX + 1] - knee
             moved = torch.clamp(integral + self.integral_step * error, -self.limit, self.limit)
-            integral = torch.where(torch.abs(error) < self.window_rad, moved, integral)
+            speed = frame[:, EXO_VEL_INDEX : EXO_VEL_INDEX + 1]
+            runs = (torch.abs(error) < self.window_rad) & (torch.abs(speed) < self.speed_limit)
+            integral = torch.where(runs, moved, integral)
             action = torch.clamp(action + integral, -1.0, 1.0)
             return action, full[:, 1:, :], integral
 
@@ -572,7 +592,9 @@ def student_from_actor(
         estimator = actor_from_document(layer["estimator"], arrays, KNEE_PREFIX)
         if check:
             estimator.check_reference()
-        fine = FinePositioner(estimator, FinePositioning(**layer["law"]))
+        # a layer written before the speed condition integrates at any speed
+        law = FinePositioning(**{"speed_limit_deg_s": None, **layer["law"]})
+        fine = FinePositioner(estimator, law)
     extra = {k: v for k, v in actor.metadata.items() if k not in _NOT_PROVENANCE}
     return StudentController(
         actor,

@@ -165,7 +165,7 @@ class FieldError(ValueError):
 def check_fields(obj: Any) -> None:
     """Check every :func:`option` field of the dataclass *obj* (each item of a tuple);
     raise :class:`FieldError` at the first value it does not accept. ``None`` is accepted
-    where it is the field's default."""
+    where it is the field's default or its type admits it (``float | None``)."""
     cls: type = type(obj)
     integers = _integer_fields(cls)
     for f in dataclasses.fields(obj):
@@ -173,7 +173,9 @@ def check_fields(obj: Any) -> None:
         if spec is None:
             continue
         value = getattr(obj, f.name)
-        if value is None and f.default is None:
+        if value is None and (
+            f.default is None or "None" in str(f.type).replace(" ", "").split("|")
+        ):
             continue
         items = value if isinstance(value, (tuple, list)) else (value,)
         if f.name in integers and not all(
@@ -335,7 +337,7 @@ def add_options(
     for f in option_fields(cls, exclude):
         spec = field_spec(f)
         assert spec is not None
-        tp, _ = _unwrap_optional(hints[f.name])
+        tp, optional = _unwrap_optional(hints[f.name])
         if f.name in overrides:
             default = overrides[f.name]
         elif f.default is not dataclasses.MISSING:
@@ -377,8 +379,8 @@ def add_options(
                 )
             elif spec.folder:
                 kwargs["type"] = output_folder
-            else:
-                kwargs["type"] = _converter(item)
+            else:  # an optional scalar also reads "none"
+                kwargs["type"] = _converter(hints[f.name] if optional and origin is None else item)
             if spec.const is not None:
                 kwargs["nargs"], kwargs["const"] = "?", spec.const
             if spec.choices is not None:

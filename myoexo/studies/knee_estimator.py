@@ -18,9 +18,12 @@ student with a weight input. The labels are the twin's true knee angle minus the
 angle at each step. The last ``held_out`` subjects of each level and twin are kept out of the
 fit and report the estimator's error over the last second of their episodes.
 
-The estimator and the law are written into the student's files in place (``<stem>_knee.npz``
-/ ``.json`` beside them, the law in its ``"student"`` block), with the command, the subjects,
-the package versions and the held-out errors as the estimator's provenance.
+The estimator and the law are written into the student's own files in place (the
+estimator's weights as ``knee_layer<i>.*`` arrays in ``<stem>.npz``, the law in the
+``"student"`` block of ``<stem>.json``), with the command, the subjects, the package versions
+and the held-out errors as the estimator's provenance. ``--law-only`` keeps each student's
+estimator and writes the law alone (the command that set it in the estimator's provenance,
+``law_command``).
 """
 
 from __future__ import annotations
@@ -280,6 +283,26 @@ def fit_knee_estimator(
     return student.with_fine(FinePositioner(estimator, replace(law, control_period_s=period_s)))
 
 
+def with_law(
+    student: StudentController, law: FinePositioning, command: str = ""
+) -> StudentController:
+    """The student with its layer's estimator and *law* (at the layer's control period),
+    *command* recorded as the estimator's ``law_command``.
+
+    Raises:
+        ValueError: The student has no fine-positioning layer.
+    """
+    if student.fine is None:
+        raise ValueError(
+            "the student has no fine-positioning layer to give a law to: fit one first "
+            "(myoexo policy knee-estimator without --law-only)"
+        )
+    estimator = student.fine.estimator
+    estimator.metadata["law_command"] = command
+    period_s = student.fine.law.control_period_s
+    return student.with_fine(FinePositioner(estimator, replace(law, control_period_s=period_s)))
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``myoexo policy knee-estimator``: the students, then
     :class:`KneeEstimatorSettings`' and :class:`~myoexo.policies.student.FinePositioning`'s
@@ -290,6 +313,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="STEM",
         help="student files (<stem>.npz + .json, e.g. a distillation's run/student); each "
         "gets its own estimator, written beside it",
+    )
+    parser.add_argument(
+        "--law-only",
+        action="store_true",
+        help="keep each student's estimator and write only the integral law below (students "
+        "that have a layer)",
     )
     add_options(parser, KneeEstimatorSettings)
     add_options(parser.add_argument_group("the integral law"), FinePositioning)
@@ -303,7 +332,11 @@ def run(args: argparse.Namespace) -> int:
     for stem in args.students:
         path = actor_paths(stem)[0].with_suffix("")  # the files' own rule for a stem
         print(f"[knee] {path}")
-        student = fit_knee_estimator(load_student(path), settings, law, command)
+        student = load_student(path)
+        if args.law_only:
+            student = with_law(student, law, command)
+        else:
+            student = fit_knee_estimator(student, settings, law, command)
         npz, _ = save_student(student, path)
         print(f"[knee] written: {npz} and its estimator")
     return 0
@@ -323,4 +356,5 @@ __all__ = [
     "fit_knee_estimator",
     "held_out_errors",
     "train_estimator",
+    "with_law",
 ]
