@@ -218,6 +218,18 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
         )
     ),
     Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_1000_tone", (KNEE,)),
+    Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_200_tone_perturbed", (KNEE,)),
+    *(
+        GoalsBlock(
+            page,
+            KNEE,
+            "eval_1000_tone",
+            "eval_200_tone_perturbed",
+            teacher="res_tone_5seeds",
+            device_baseline="pid:tuned=exo",
+        )
+        for page in ("myoexo/policies/MODEL_CARD_student_knee.md", "docs/results.md")
+    ),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone", (FINE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone_perturbed", (FINE,)),
     *(
