@@ -25,6 +25,8 @@ def test_the_default_demo_runs_the_shipped_controllers_against_the_papers_pid():
         "guard:sac",
         "student_exo",
         "guard:student_exo",
+        "student_fine",
+        "student_knee",
     } <= set(DEMO_CONTROLLERS)
     assert "oracle" not in " ".join(DEMO_CONTROLLERS)
 

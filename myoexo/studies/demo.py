@@ -9,16 +9,18 @@ twin version 3, at its default gentleness weight), the full-state learned policy
 (trained on an earlier twin) alone and with its
 stall guard (``guard:sac``, :mod:`myoexo.control.guard`), and the deployable
 ``student_exo`` (the exoskeleton's own sensors with memory) alone and with its guard
-(``guard:student_exo``), and the deployable student of ``residual`` distilled on the current
-twin (``student_fine``, at its default gentleness weight), on
+(``guard:student_exo``), and the deployable students of ``residual`` distilled on the current
+twin (``student_fine``, and ``student_knee`` with its fine-positioning layer, each at its
+default gentleness weight), on
 :data:`DEMO_SUBJECTS` subjects per spasticity level 0-3 (the protocol: 1000). Subject *i* of
 a level is the same simulated person for every controller.
 
 Prints one table (per level and controller: mean absolute final error, settled episodes,
 settling time, peak interaction torque and its change from the paper's PID, RMS interaction
 torque to settling) and ends with a paragraph of what the run found, computed from that
-table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. About
-160 s of a core in all (200 episodes): a minute or two on 2 cores. The episodes stay in the
+table (:func:`findings`), and the ``myoexo evaluate`` command of the full protocol. 220
+episodes: well under a minute on 2 cores (the 200 of the ten controllers before
+``student_knee`` took 23.9 s, ``make demo`` on a fresh clone). The episodes stay in the
 output folder (default ``results/demo``; re-running reuses them); ``--report`` also writes
 the figures and the Markdown report (:func:`~myoexo.evaluation.report.write_report`).
 
@@ -58,6 +60,7 @@ DEMO_CONTROLLERS = (
     "student_exo",
     "guard:student_exo",
     "student_fine",
+    "student_knee",
 )
 DEMO_OUT = Path("results") / "demo"
 #: Band above the reference PID's mean absolute final error (deg) within which a controller
