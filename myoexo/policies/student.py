@@ -181,6 +181,13 @@ class FinePositioning:
     def __post_init__(self) -> None:
         check_fields(self)
 
+    @property
+    def frame_speed_limit(self) -> float:
+        """:attr:`speed_limit_deg_s` in a frame's scale (the observation vector's; ``inf``
+        for none)."""
+        speed = self.speed_limit_deg_s
+        return math.inf if speed is None else math.radians(speed) * _VEL_SCALE
+
 
 class FinePositioner:
     """A student's fine-positioning layer: a knee estimator and an integral on its error.
@@ -201,9 +208,7 @@ class FinePositioner:
         self.law = law or FinePositioning()
         self._window_rad = math.radians(self.law.window_deg)
         self._step = self.law.gain_per_rad_s * self.law.control_period_s
-        speed = self.law.speed_limit_deg_s
-        # the frame holds the encoder speed in the observation vector's scale
-        self._speed_limit = math.inf if speed is None else math.radians(speed) * _VEL_SCALE
+        self._speed_limit = self.law.frame_speed_limit
         self.integral = 0.0
 
     def reset(self) -> None:
@@ -433,8 +438,7 @@ def _torch_student_class() -> type:
                 self.window_rad = math.radians(law.window_deg)
                 self.integral_step = law.gain_per_rad_s * law.control_period_s
                 self.limit = law.limit
-                speed = law.speed_limit_deg_s
-                self.speed_limit = math.inf if speed is None else math.radians(speed) * _VEL_SCALE
+                self.speed_limit = law.frame_speed_limit
 
         select: torch.Tensor
 
