@@ -312,7 +312,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         metavar="STEM",
         help="student files (<stem>.npz + .json, e.g. a distillation's run/student); each "
-        "gets its own estimator, written beside it",
+        "gets its own estimator, written into its files",
     )
     parser.add_argument(
         "--law-only",
