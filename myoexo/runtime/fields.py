@@ -168,14 +168,13 @@ def check_fields(obj: Any) -> None:
     where it is the field's default or its type admits it (``float | None``)."""
     cls: type = type(obj)
     integers = _integer_fields(cls)
+    optional = _optional_fields(cls)
     for f in dataclasses.fields(obj):
         spec = field_spec(f)
         if spec is None:
             continue
         value = getattr(obj, f.name)
-        if value is None and (
-            f.default is None or "None" in str(f.type).replace(" ", "").split("|")
-        ):
+        if value is None and (f.default is None or f.name in optional):
             continue
         items = value if isinstance(value, (tuple, list)) else (value,)
         if f.name in integers and not all(
@@ -195,6 +194,12 @@ def _integer_fields(cls: type) -> frozenset[str]:
         if tp is int or (typing.get_origin(tp) is tuple and typing.get_args(tp)[:1] == (int,)):
             out.add(name)
     return frozenset(out)
+
+
+@functools.cache
+def _optional_fields(cls: type) -> frozenset[str]:
+    """Fields of *cls* whose type admits ``None`` (``float | None``)."""
+    return frozenset(name for name, tp in _hints(cls).items() if _unwrap_optional(tp)[1])
 
 
 # ----------------------------------------------------------------------------- NAME=VALUE
