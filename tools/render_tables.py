@@ -121,6 +121,16 @@ class GoalsBlock:
 FINE = "student_fine_5seeds@0.25"
 KNEE = "student_knee_5seeds@0.25"
 
+#: The students distilled from `res_tone_5seeds` whose goals are judged on `eval_1000_tone` and
+#: `eval_200_tone_perturbed`, each with the pages that show its goals table.
+TONE_STUDENT_GOALS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("student_tone_5seeds@0.5", ("docs/results.md",)),
+    ("student_guard_5seeds@0.25", ("docs/results.md",)),
+    ("student_fine_5seeds@0", ("docs/results.md",)),
+    (FINE, ("myoexo/policies/MODEL_CARD_student_fine.md", "docs/results.md")),
+    (KNEE, ("myoexo/policies/MODEL_CARD_student_knee.md", "docs/results.md")),
+)
+
 #: Every generated block outside the result sets' own ``tables.md``.
 BLOCKS: tuple[Block | GoalsBlock, ...] = (
     Block("myoexo/policies/MODEL_CARD.md", "eval_1000_twin3", ("sac",)),
@@ -204,45 +214,20 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     ),
     *(
         GoalsBlock(
-            "docs/results.md",
+            page,
             student,
             "eval_1000_tone",
             "eval_200_tone_perturbed",
             teacher="res_tone_5seeds",
             device_baseline="pid:tuned=exo",
         )
-        for student in (
-            "student_tone_5seeds@0.5",
-            "student_guard_5seeds@0.25",
-            "student_fine_5seeds@0",
-        )
+        for student, pages in TONE_STUDENT_GOALS
+        for page in pages
     ),
     Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_1000_tone", (KNEE,)),
     Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_200_tone_perturbed", (KNEE,)),
-    *(
-        GoalsBlock(
-            page,
-            KNEE,
-            "eval_1000_tone",
-            "eval_200_tone_perturbed",
-            teacher="res_tone_5seeds",
-            device_baseline="pid:tuned=exo",
-        )
-        for page in ("myoexo/policies/MODEL_CARD_student_knee.md", "docs/results.md")
-    ),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone", (FINE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone_perturbed", (FINE,)),
-    *(
-        GoalsBlock(
-            page,
-            FINE,
-            "eval_1000_tone",
-            "eval_200_tone_perturbed",
-            teacher="res_tone_5seeds",
-            device_baseline="pid:tuned=exo",
-        )
-        for page in ("myoexo/policies/MODEL_CARD_student_fine.md", "docs/results.md")
-    ),
     *(
         GoalsBlock(
             "myoexo/policies/MODEL_CARD_student_exo.md",
