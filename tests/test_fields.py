@@ -18,6 +18,7 @@ from myoexo.runtime.fields import (
     convert,
     from_options,
     option,
+    option_words,
     parse_assignments,
 )
 
@@ -177,3 +178,67 @@ def test_parse_assignments_is_the_one_name_value_reader():
         parse_assignments("kp")
     with pytest.raises(ValueError, match="given twice"):
         parse_assignments("kp=1,kp=2")
+
+
+def _round_trip(settings, **fixed):
+    parser = argparse.ArgumentParser()
+    add_options(parser, type(settings))
+    words = option_words(settings)
+    return words, from_options(type(settings), parser.parse_args(words), **fixed)
+
+
+def test_option_words_give_the_settings_back():
+    settings = Demo(
+        subjects=9,
+        duration_s=0.1 + 0.2,  # not short in %g: written in full
+        mode="slow",
+        levels=(0, 3),
+        noisy=True,
+        hidden=7,  # no option: never written
+        ceiling_nm=None,
+    )
+    words, back = _round_trip(settings, hidden=7)
+    assert back == settings
+    assert "--hidden" not in words and "--out" not in words  # the default is not written
+    assert words[words.index("--ceiling-nm") + 1] == "none"
+    assert words[words.index("--duration-s") + 1] == repr(0.1 + 0.2)
+    assert option_words(Demo()) == []
+
+
+def _recorded_settings():
+    from myoexo.control.ziegler_nichols import ZieglerNicholsSettings
+    from myoexo.policies.student import FinePositioning
+    from myoexo.studies.knee_estimator import KneeEstimatorSettings
+    from myoexo.studies.recovery import RecoverySettings
+    from myoexo.studies.settling_bound import SettlingBoundSettings
+
+    return [
+        ZieglerNicholsSettings(feedback="exo", latency_s=0.02),
+        RecoverySettings(subjects=3, personalise=False, controllers=("pid", "pid:ramp_s=1")),
+        KneeEstimatorSettings(levels=(0, 1), perturbed=False, hidden=(64,), lr=3e-4),
+        FinePositioning(speed_limit_deg_s=None, window_deg=1.25),
+        SettlingBoundSettings(levels=(3,), subjects=4),
+    ]
+
+
+def test_a_commands_recorded_options_give_its_settings_back():
+    """What a record's command says (``option_words``) is what the command ran with."""
+    for settings in _recorded_settings():
+        assert option_words(settings), settings
+        assert _round_trip(settings)[1] == settings
+
+
+def test_twin_words_give_the_twin_back():
+    from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args, twin_words
+
+    twin = TwinOptions(task=(("episode_duration_s", 4.0),), reflex="stretch", robustness=True)
+    parser = argparse.ArgumentParser()
+    add_twin_arguments(parser)
+    words = twin_words(twin)
+    assert words == ["--episode-duration-s", "4", "--reflex", "stretch", "--robustness"]
+    assert twin_from_args(parser.parse_args(words)) == twin
+    assert twin_words(TwinOptions()) == []
+    trained = TwinOptions(gentleness="random", reward_weights=(("inter", -0.5),))
+    parser = argparse.ArgumentParser()
+    add_twin_arguments(parser, observation=True)
+    assert twin_from_args(parser.parse_args(twin_words(trained, observation=True))) == trained

@@ -32,6 +32,7 @@ import dataclasses
 import itertools
 import json
 import math
+import shlex
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -45,10 +46,9 @@ from myoexo.runtime.fields import (
     FieldError,
     add_options,
     check_fields,
-    flag_of,
     from_options,
     option,
-    option_fields,
+    option_words,
 )
 from myoexo.spasticity.levels import VALID_LEVELS
 
@@ -475,21 +475,10 @@ def _provenance(settings: ZieglerNicholsSettings, name: str) -> dict[str, Any]:
     from myoexo.model import TWIN_VERSION
     from myoexo.runtime.fits import provenance
 
-    default = ZieglerNicholsSettings()
-    parts = ["myoexo twin tune-pid"]
-    for f in option_fields(ZieglerNicholsSettings):
-        value = getattr(settings, f.name)
-        if value == getattr(default, f.name):
-            continue
-        flag = flag_of(f)
-        if isinstance(value, bool):
-            parts.append(flag if value else f"--no-{flag[2:]}")
-        else:
-            parts.append(f"{flag} {value:g}" if isinstance(value, float) else f"{flag} {value}")
-    parts.append(f"--write {name}")
+    parts = ["myoexo", "twin", "tune-pid", *option_words(settings), "--write", name]
     subject = (
         f"the nominal (Table I) subject of level {settings.level}"
         if settings.nominal_subject
         else f"an individual subject of level {settings.level}, seed {settings.seed}"
     )
-    return provenance(" ".join(parts), TWIN_VERSION, subject=subject)
+    return provenance(shlex.join(parts), TWIN_VERSION, subject=subject)

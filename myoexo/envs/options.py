@@ -33,7 +33,14 @@ from myoexo.envs.config import (
     check_gentleness,
 )
 from myoexo.envs.observation import OBS_PRESETS
-from myoexo.runtime.fields import add_options, convert, option, parse_assignments
+from myoexo.runtime.fields import (
+    add_options,
+    convert,
+    option,
+    option_text,
+    option_words,
+    parse_assignments,
+)
 from myoexo.runtime.files import file_sha256
 from myoexo.spasticity.personal import PersonalSubject, load_subject
 from myoexo.spasticity.reflex import DEFAULT_REFLEX
@@ -369,6 +376,21 @@ def _reward_weights(raw: str) -> dict[str, float]:
         return dict(convert(raw, dict[str, float], "--reward-weights"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"{raw!r} is not NAME:VALUE,...") from None
+
+
+def twin_words(twin: TwinOptions, *, observation: bool = False) -> list[str]:
+    """The options of :func:`add_twin_arguments` that give *twin* (:func:`twin_from_args`
+    reads them back): the task fields it overrides, ``--reflex`` when not the default, then
+    its other options that differ from the defaults; with *observation*, the observation,
+    gentleness and reward options too."""
+    words = option_words(TaskParams(**dict(twin.task)))
+    if twin.reflex != DEFAULT_REFLEX:
+        words += ["--reflex", twin.reflex]
+    hidden = () if observation else ("obs_preset", "obs_keys", "gentleness")
+    words += option_words(twin, exclude=hidden)
+    if observation and twin.reward_weights:
+        words += ["--reward-weights", option_text(dict(twin.reward_weights), ":")]
+    return words
 
 
 def twin_from_args(args: Any, base: TwinOptions | None = None) -> TwinOptions:

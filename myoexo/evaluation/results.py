@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.control.specs import seeds_folder_of_spec
-from myoexo.envs.options import TwinOptions
+from myoexo.envs.options import TwinOptions, twin_words
 from myoexo.evaluation.bound import HOLD_BOUND_LEVELS, hold_bounds
 from myoexo.evaluation.config import EVALUATION_ROOT_SEED, load_config
 from myoexo.evaluation.criteria import (
@@ -79,13 +79,7 @@ def command_of(config: dict[str, Any]) -> str:
     parts += ["--levels", *map(str, cfg.get("levels", [])), "--subjects", str(cfg.get("subjects"))]
     if cfg.get("root_seed", 0) != 0:
         parts += ["--seed", str(cfg["root_seed"])]
-    twin = TwinOptions.from_dict(cfg.get("twin") or {})
-    for key, value in twin.task:
-        parts += [f"--{key.replace('_', '-')}", f"{value:g}"]
-    if twin.reflex != TwinOptions().reflex:
-        parts += ["--reflex", twin.reflex]
-    if twin.robustness:
-        parts.append("--robustness")
+    parts += twin_words(TwinOptions.from_dict(cfg.get("twin") or {}))
     return " ".join(parts)
 
 

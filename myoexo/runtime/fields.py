@@ -435,6 +435,51 @@ def from_options(cls: type, args: argparse.Namespace, **fixed: Any) -> Any:
     return cls(**{**values, **fixed})
 
 
+def option_text(value: Any, pair: str = "=") -> str:
+    """One value as :func:`convert` reads it back (a mapping's items joined by *pair*)."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        short = f"{value:g}"
+        return short if float(short) == value else repr(value)
+    if isinstance(value, Mapping):
+        return ",".join(f"{k}{pair}{option_text(v)}" for k, v in value.items())
+    return str(value)
+
+
+def option_words(settings: Any, *, exclude: Iterable[str] = ()) -> list[str]:
+    """The command-line words that give the dataclass instance *settings* to a command whose
+    options :func:`add_options` made: for each option field (not in *exclude*) whose value
+    differs from its default, ``--flag VALUE`` (a ``bool`` as ``--flag`` / ``--no-flag``, a
+    tuple as its items, ``None`` as ``none``). Parsing the words gives *settings* back
+    (:func:`from_options`), so a record's command reproduces the run (``shlex.join`` them
+    behind the command's name)."""
+    hints = _hints(type(settings))
+    words: list[str] = []
+    for f in option_fields(type(settings), exclude):
+        value = getattr(settings, f.name)
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = dataclasses.MISSING
+        if value == default:
+            continue
+        flag = flag_of(f)
+        if isinstance(value, bool):
+            words.append(flag if value else f"--no-{flag[2:]}")
+        elif isinstance(value, tuple):
+            words += [flag, *map(option_text, value)]
+        else:
+            tp, _ = _unwrap_optional(hints[f.name])
+            any_values = typing.get_args(tp)[1:] == (Any,)  # NAME=VALUE items, else k:v
+            words += [flag, option_text(value, "=" if any_values else ":")]
+    return words
+
+
 def option_of(parser: argparse.ArgumentParser, dest: str) -> str | None:
     """The option string of *parser* whose ``dest`` is *dest* (its longest), else ``None``."""
     for action in parser._actions:

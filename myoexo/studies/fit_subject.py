@@ -116,7 +116,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from myoexo.model.passive_knee import scale_passive_knee
-from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    from_options,
+    option,
+    option_words,
+)
 from myoexo.runtime.files import file_sha256
 from myoexo.spasticity.levels import LEVELS, VALID_LEVELS, SpasticityParams
 from myoexo.spasticity.personal import PASSIVE_SCALES, from_unit, to_unit
@@ -1100,16 +1107,9 @@ def _notes(targets: Sequence[Target], reflex: str) -> list[str]:
 
 
 def _command(paths: Sequence[Path], settings: FitSettings, level: int) -> str:
-    words = ["myoexo", "twin", "fit-subject", *map(str, paths), "--out", str(settings.out)]
+    options = option_words(settings, exclude=("level", "progress"))
+    words = ["myoexo", "twin", "fit-subject", *map(str, paths), *options]
     words += ["--level", str(level), "--reflex", str(settings.reflex)]
-    words += ["--budget", str(settings.budget), "--popsize", str(settings.popsize)]
-    words += ["--sigma0", f"{settings.sigma0:g}", "--seed", str(settings.seed)]
-    if settings.parameters != PARAMETER_NAMES:
-        words += ["--parameters", *settings.parameters]
-    words += ["--torque-weight", f"{settings.torque_weight:g}"]
-    words += ["--tardieu-weight", f"{settings.tardieu_weight:g}"]
-    words += ["--mas-weight", f"{settings.mas_weight:g}", "--uncertainty", settings.uncertainty]
-    words += ["--fd-step", f"{settings.fd_step:g}", "--rise", f"{settings.rise:g}"]
     return shlex.join(words)
 
 

@@ -36,13 +36,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
+import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args
+from myoexo.envs.options import TwinOptions, add_twin_arguments, twin_from_args, twin_words
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
 from myoexo.runtime.fields import (
     Execution,
@@ -51,6 +51,7 @@ from myoexo.runtime.fields import (
     check_fields,
     from_options,
     option,
+    option_words,
 )
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.studies.frontier import classical_specs
@@ -286,6 +287,7 @@ def run_gentleness(
         raise ValueError(f"the evaluation was stopped ({run.stopped_by}); run again to finish")
     weights = weight_table(run.table, config)
     means = classical_means(run.table, ["pid", *classical]) if classical else None
+    options = [*option_words(config, exclude=("policy",)), *twin_words(evaluation.twin)]
     record = {
         "policy": config.policy,
         "default_gentleness": choose_default(weights),
@@ -296,7 +298,7 @@ def run_gentleness(
         "against_classical": [],  # written by write_record
         "rule": "smallest shortfall against the study's claims plus settling excess over the "
         "PID; ties: largest mean peak and RMS reduction at levels 1-2",
-        "command": " ".join(["myoexo", *sys.argv[1:]]) if sys.argv else "",
+        "command": shlex.join(["myoexo", "policy", "gentleness", config.policy, *options]),
         "versions": package_versions(),
     }
     return write_record(config.out, record, weights, means)

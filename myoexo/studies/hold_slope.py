@@ -29,6 +29,7 @@ provenance), which :func:`~myoexo.evaluation.bound.hold_bounds` reads.
 from __future__ import annotations
 
 import argparse
+import shlex
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -36,7 +37,7 @@ import numpy as np
 
 from myoexo.evaluation.bound import HOLD_SLOPE_FIT, mean_over_end
 from myoexo.evaluation.config import check_fit_root, device_fit_root_option
-from myoexo.runtime.fields import add_options, check_fields, from_options, option
+from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_words
 from myoexo.spasticity.levels import VALID_LEVELS
 
 
@@ -193,11 +194,7 @@ def run(args: argparse.Namespace) -> int:
     output = from_options(HoldSlopeOutput, args)
     result = fit_hold_slope(settings, log=print)
     if output.write:
-        levels = " ".join(map(str, settings.levels))
-        command = (
-            f"myoexo twin hold-slope --seed {settings.root_seed} --subjects "
-            f"{settings.subjects} --levels {levels}"
-        )
+        command = shlex.join(["myoexo", "twin", "hold-slope", *option_words(settings)])
         write_command_fit(
             HOLD_SLOPE_FIT, asdict(result), command, TWIN_VERSION, root_seed=settings.root_seed
         )

@@ -31,11 +31,9 @@ from __future__ import annotations
 import argparse
 import math
 import shlex
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,7 +49,7 @@ from myoexo.policies.student import (
     save_student,
     stack_frames,
 )
-from myoexo.runtime.fields import add_options, check_fields, from_options, option
+from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_words
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: The last part of an episode the held-out error is read over, s (the hold).
@@ -328,7 +326,9 @@ def run(args: argparse.Namespace) -> int:
     """Fit and write each student's layer."""
     settings = from_options(KneeEstimatorSettings, args)
     law = from_options(FinePositioning, args)
-    command = shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])  # as typed; settings in full
+    law_only = ["--law-only"] if args.law_only else []
+    options = [*law_only, *option_words(settings), *option_words(law)]
+    command = shlex.join(["myoexo", "policy", "knee-estimator", *args.students, *options])
     for stem in args.students:
         path = actor_paths(stem)[0].with_suffix("")  # the files' own rule for a stem
         print(f"[knee] {path}")

@@ -49,6 +49,7 @@ import dataclasses
 import json
 import math
 import os
+import shlex
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -58,7 +59,14 @@ from typing import Any
 import numpy as np
 
 from myoexo.evaluation.config import RECOVERY_ROOT_SEED, check_fit_root, subject_seed
-from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    from_options,
+    option,
+    option_words,
+)
 from myoexo.spasticity.levels import VALID_LEVELS
 
 __all__ = [
@@ -495,11 +503,8 @@ def format_summary(
 
 
 def _command(settings: RecoverySettings) -> str:
-    return (
-        f"myoexo twin recovery --subjects {settings.subjects} --seed {settings.root_seed} "
-        f"--budget {settings.budget} --level0-budget {settings.level0_budget} --controllers "
-        + " ".join(settings.controllers)
-    )
+    options = option_words(settings, exclude=("workers", "summarise_only"))
+    return shlex.join(["myoexo", "twin", "recovery", *options])
 
 
 # ----------------------------------------------------------------------------- CLI

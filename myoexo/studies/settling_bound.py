@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import shlex
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -45,7 +46,7 @@ import numpy as np
 from myoexo.control.policy import ACTION_HIGH, ACTION_LOW
 from myoexo.envs.sensors import Measurements
 from myoexo.evaluation.config import SELECTION_ROOT_SEED, check_fit_root
-from myoexo.runtime.fields import add_options, check_fields, from_options, option
+from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_words
 from myoexo.spasticity.levels import VALID_LEVELS
 
 #: The motor's full command towards the target (extension).
@@ -328,10 +329,9 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         table.to_csv(out / "subjects.csv", index=False)
         (out / "summary.md").write_text(text)
+        options = option_words(settings, exclude=("workers",))
         record = provenance(
-            f"myoexo twin settling-bound --seed {settings.root_seed} --subjects "
-            f"{settings.subjects} --levels {' '.join(map(str, settings.levels))} --workers "
-            f"{settings.workers} --out {out}",
+            shlex.join(["myoexo", "twin", "settling-bound", *options, "--out", str(out)]),
             TWIN_VERSION,
             root_seed=settings.root_seed,
             wall_min=round(wall_min, 2),

@@ -16,6 +16,7 @@ strap_lag.json``, with its provenance), which the encoder guard reads.
 from __future__ import annotations
 
 import argparse
+import shlex
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -23,7 +24,14 @@ import numpy as np
 
 from myoexo.control.guard import STRAP_LAG_FIT
 from myoexo.evaluation.config import check_fit_root, device_fit_root_option
-from myoexo.runtime.fields import FieldError, add_options, check_fields, from_options, option
+from myoexo.runtime.fields import (
+    FieldError,
+    add_options,
+    check_fields,
+    from_options,
+    option,
+    option_words,
+)
 from myoexo.spasticity.levels import VALID_LEVELS
 
 
@@ -183,9 +191,7 @@ def run(args: argparse.Namespace) -> int:
         f"{list(settings.levels)}, {settings.subjects} subjects each of root {settings.root_seed})"
     )
     if output.write:
-        command = (
-            f"myoexo twin strap-lag --seed {settings.root_seed} --subjects {settings.subjects}"
-        )
+        command = shlex.join(["myoexo", "twin", "strap-lag", *option_words(settings)])
         write_command_fit(
             STRAP_LAG_FIT, asdict(result), command, TWIN_VERSION, root_seed=settings.root_seed
         )
