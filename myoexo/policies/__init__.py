@@ -70,7 +70,13 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from myoexo.policies.actor import MLPActor, load_actor, save_actor
+from myoexo.policies.actor import (
+    MLPActor,
+    actor_from_document,
+    load_actor,
+    read_actor_files,
+    save_actor,
+)
 
 if TYPE_CHECKING:
     from myoexo.policies.student import StudentController
@@ -135,11 +141,12 @@ def load_controller(path_stem: str | Path, check: bool = True) -> MLPActor | Stu
         path_stem: The files' path without suffix (a suffix is ignored).
         check: Replay the stored reference pairs; ``ValueError`` if the actor disagrees.
     """
-    actor = load_actor(path_stem)
+    meta, arrays = read_actor_files(path_stem)
+    actor = actor_from_document(meta, arrays)
     if "student" in actor.metadata:  # a controller with memory around its actor
         from myoexo.policies.student import student_from_actor
 
-        return student_from_actor(actor, path_stem, check)
+        return student_from_actor(actor, arrays, path_stem, check)
     if check:
         actor.check_reference()
     return actor

@@ -402,8 +402,13 @@ def actor_paths(path_stem: str | Path) -> tuple[Path, Path]:
     return npz, js
 
 
-def load_actor(path_stem: str | Path) -> MLPActor:
-    """Read an actor written by :func:`save_actor` (``<stem>.npz`` + ``<stem>.json``)."""
+def read_actor_files(path_stem: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The document and every array of the files :func:`save_actor` wrote (``<stem>.json``,
+    ``<stem>.npz``; the arrays include the *extra_arrays* saved beside the weights).
+
+    Raises:
+        ValueError: The document's format is not the one this myoexo reads.
+    """
     npz, js = actor_paths(path_stem)
     meta = json.loads(js.read_text())
     if meta.get("format_version") != FORMAT_VERSION:
@@ -412,4 +417,9 @@ def load_actor(path_stem: str | Path) -> MLPActor:
             f"{FORMAT_VERSION}"
         )
     with np.load(npz) as data:
-        return actor_from_document(meta, {k: data[k] for k in data.files})
+        return meta, {k: data[k] for k in data.files}
+
+
+def load_actor(path_stem: str | Path) -> MLPActor:
+    """Read an actor written by :func:`save_actor` (``<stem>.npz`` + ``<stem>.json``)."""
+    return actor_from_document(*read_actor_files(path_stem))

@@ -62,8 +62,7 @@ from myoexo.policies.actor import (
     actor_arrays,
     actor_document,
     actor_from_document,
-    actor_paths,
-    load_actor,
+    read_actor_files,
     save_actor,
 )
 from myoexo.runtime.fields import check_fields, option
@@ -573,14 +572,17 @@ def _float32_with_reference(actor: MLPActor, metadata: Mapping[str, Any] | None)
 def load_student(path_stem: str | Path, check: bool = True) -> StudentController:
     """Read a controller written by :func:`save_student` (``check``: replay its reference
     pairs, ``ValueError`` if the files disagree with them)."""
-    return student_from_actor(load_actor(path_stem), path_stem, check)
+    meta, arrays = read_actor_files(path_stem)
+    return student_from_actor(actor_from_document(meta, arrays), arrays, path_stem, check)
 
 
 def student_from_actor(
-    actor: MLPActor, path_stem: str | Path, check: bool = True
+    actor: MLPActor, arrays: Mapping[str, np.ndarray], path_stem: str | Path, check: bool = True
 ) -> StudentController:
     """The controller around an actor read from a student file (*path_stem*, for the
-    messages): :func:`load_student` without reading the files again."""
+    messages) and the file's *arrays* (:func:`~myoexo.policies.actor.read_actor_files`; a
+    fine-positioning layer's estimator is among them): :func:`load_student` without reading
+    the files again."""
     block = actor.metadata.get("student")
     if not isinstance(block, dict) or block.get("format_version") != STUDENT_FORMAT_VERSION:
         raise ValueError(f"{path_stem}: not a student controller file (no 'student' block)")
@@ -591,8 +593,6 @@ def student_from_actor(
     fine = None
     if "fine_positioning" in block:
         layer = block["fine_positioning"]
-        with np.load(actor_paths(path_stem)[0]) as data:
-            arrays = {k: data[k] for k in data.files if k.startswith(KNEE_PREFIX)}
         estimator = actor_from_document(layer["estimator"], arrays, KNEE_PREFIX)
         if check:
             estimator.check_reference()

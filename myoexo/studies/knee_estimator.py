@@ -278,6 +278,13 @@ def fit_knee_estimator(
         wall_time_s=round(time.time() - started, 1),
         **provenance(command, TWIN_VERSION, root_seed=settings.root_seed),
     )
+    return _with_layer(student, estimator, law, period_s)
+
+
+def _with_layer(
+    student: StudentController, estimator: MLPActor, law: FinePositioning, period_s: float
+) -> StudentController:
+    """*student* with the layer of *estimator* and *law* at the control period *period_s*."""
     return student.with_fine(FinePositioner(estimator, replace(law, control_period_s=period_s)))
 
 
@@ -297,8 +304,7 @@ def with_law(
         )
     estimator = student.fine.estimator
     estimator.metadata["law_command"] = command
-    period_s = student.fine.law.control_period_s
-    return student.with_fine(FinePositioner(estimator, replace(law, control_period_s=period_s)))
+    return _with_layer(student, estimator, law, student.fine.law.control_period_s)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
