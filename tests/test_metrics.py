@@ -123,3 +123,30 @@ def test_the_hold_and_the_final_value_average_the_same_end_window():
     assert M.final_value(t, y[0], 0.0) == y[0, -1]
     with pytest.raises(ValueError, match="window_s"):
         mean_over_end(t, y, -0.1)
+
+
+def test_the_final_swing_sees_a_limit_cycle_the_final_error_misses():
+    """A knee circling the target at 4 Hz: the 0.1-s final error reads the phase the episode
+    ends in (+-2.1 deg for cycles half a period apart), the final swing the cycle's
+    peak-to-peak amplitude."""
+    t = np.arange(0.0, 8.0 + DT / 2, DT)
+    settled = 7.0 + 83.0 * np.exp(-t / 0.3)
+    signals = {
+        "time_s": t,
+        "target_angle_deg": np.full_like(t, 7.0),
+        "command": np.zeros_like(t),
+        "exo_torque_nm": np.zeros_like(t),
+        "interaction_torque_nm": np.zeros_like(t),
+    }
+    ends = []
+    for phase in (0.0, np.pi):
+        cycle = np.where(t > 5.0, 3.0 * np.sin(2 * np.pi * 4.0 * t + phase), 0.0)
+        m = M.episode_metrics({**signals, "knee_angle_deg": settled + cycle})
+        assert m.final_swing_deg == pytest.approx(6.0, abs=0.01)
+        ends.append(m.final_error_deg)
+    assert ends[0] == pytest.approx(-ends[1], abs=1e-3) and abs(ends[0]) > 2.0
+    at_rest = {**signals, "knee_angle_deg": settled}
+    assert M.episode_metrics(at_rest).final_swing_deg < 1e-6
+    assert M.episode_metrics(at_rest, swing_window_s=8.0).final_swing_deg == pytest.approx(
+        settled.max() - settled.min()
+    )

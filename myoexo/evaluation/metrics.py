@@ -24,6 +24,9 @@ Task quantities:
   knee stayed flexed short of the target; the paper's 6.3 and 9.3 deg of the PID).
 * **target overshoot** (deg): how far the knee went past the target,
   ``max(0, max(target - knee))``; the paper's "overshoot" of the PID at levels 0 and 1.
+* **final swing** (deg): ``max(knee) - min(knee)`` over the last ``swing_window_s`` (1 s) of
+  the episode: 0 for a knee at rest, the peak-to-peak amplitude of a limit cycle that the
+  final error, a mean over 0.1 s, reads at one phase of the cycle.
 
 Torque and command quantities (interaction torque: the env's ``interaction_torque_nm``, the
 paper's "sum of the torques applied at the knee: exo + spastic reflexes"):
@@ -54,6 +57,8 @@ import numpy as np
 SETTLING_THRESHOLD = 0.02
 #: Default window over which the final value is averaged (s).
 FINAL_WINDOW_S = 0.1
+#: Default window of the final swing (s): several periods of a limit cycle at the hold.
+FINAL_SWING_WINDOW_S = 1.0
 #: Default rise-time limits (fractions of the step).
 RISE_TIME_LIMITS = (0.1, 0.9)
 
@@ -188,6 +193,7 @@ class EpisodeMetrics:
 
     final_error_deg: float
     abs_final_error_deg: float
+    final_swing_deg: float
     target_overshoot_deg: float
     overshoot_pct: float
     rise_time_s: float
@@ -220,6 +226,7 @@ def episode_metrics(
     signals: Mapping[str, np.ndarray],
     threshold: float = SETTLING_THRESHOLD,
     final_window_s: float = FINAL_WINDOW_S,
+    swing_window_s: float = FINAL_SWING_WINDOW_S,
 ) -> EpisodeMetrics:
     """All metrics of one episode from its per-step signals.
 
@@ -229,6 +236,7 @@ def episode_metrics(
             ``exo_angle_deg`` too for the peak misalignment.
         threshold: Settling band (fraction of the step).
         final_window_s: Window of the final value (s).
+        swing_window_s: Window of the final swing (s).
     """
     missing = [k for k in REQUIRED_SIGNALS if k not in signals]
     if missing:
@@ -255,6 +263,7 @@ def episode_metrics(
     return EpisodeMetrics(
         final_error_deg=final_err,
         abs_final_error_deg=abs(final_err),
+        final_swing_deg=float(np.ptp(knee[end_window(t, swing_window_s)])),
         target_overshoot_deg=float(max(0.0, np.max(target - knee))),
         overshoot_pct=overshoot_pct(knee, y_final=yf, y_initial=y0),
         rise_time_s=rise_time(t, knee, y_final=yf, y_initial=y0),

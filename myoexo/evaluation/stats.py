@@ -44,6 +44,7 @@ CONFIDENCE = 0.95
 #: Metrics summarized per controller and level (column -> label in the report).
 SUMMARY_METRICS: dict[str, str] = {
     "final_error_deg": "final error (deg)",
+    "final_swing_deg": "knee swing over the last second (deg)",
     "target_overshoot_deg": "overshoot past target (deg)",
     "settling_time_s": "settling time (s)",
     "rms_interaction_torque_nm": "RMS torque to settling (Nm)",
