@@ -159,7 +159,7 @@ class FinePositioning:
     """
 
     gain_per_rad_s: float = option(
-        10.0, "integral gain of the fine-positioning layer", low=0.0, unit="command/(rad s)"
+        1.25, "integral gain of the fine-positioning layer", low=0.0, unit="command/(rad s)"
     )
     window_deg: float = option(
         1.5, "the integral runs only this close to the target", low=0.0, above=True, unit="deg"
