@@ -212,6 +212,26 @@ def test_a_reference_rerun_that_differs_at_named_levels_is_paired_and_said(evalu
         collect(fewer, dest, update=True, rerun_levels=(1,))
 
 
+def test_a_set_older_than_a_metric_still_takes_runs_on_its_subjects(evaluation, tmp_path):
+    """A set collected before a metric existed (its summary lacks the metric's columns)
+    takes a later evaluation on its subjects: the reference is compared on the columns both
+    have; a changed number in a shared column is still refused."""
+    dest = collect(evaluation, tmp_path / "set")
+    frame = pd.read_csv(dest / "summary.csv")
+    swing = [c for c in frame.columns if c.startswith("final_swing_deg")]
+    assert swing  # the metric the set is made to lack
+    frame.drop(columns=swing).to_csv(dest / "summary.csv", index=False)
+    later = _evaluation(tmp_path / "later", ("pid", "pid:ramp_s=0.2"))
+    collect(later, dest, update=True)
+    red = pd.read_csv(dest / "reductions.csv")
+    assert "pid:ramp_s=0.2" in set(red.controller)
+    frame = pd.read_csv(dest / "summary.csv")
+    frame.loc[frame.controller == "pid", "settling_time_s_mean"] += 0.01
+    frame.drop(columns=swing).to_csv(dest / "summary.csv", index=False)
+    with pytest.raises(ValueError, match="other summary.csv rows"):
+        collect(later, dest, update=True)
+
+
 def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tmp_path):
     """results bound: a set's hold bounds recomputed from a run of its reference on its own
     subjects (the other files untouched, the command recorded); a run on other subjects, or
