@@ -228,7 +228,7 @@ def test_a_set_older_than_a_metric_still_takes_runs_on_its_subjects(evaluation, 
     frame = pd.read_csv(dest / "summary.csv")
     frame.loc[frame.controller == "pid", "settling_time_s_mean"] += 0.01
     frame.drop(columns=swing).to_csv(dest / "summary.csv", index=False)
-    with pytest.raises(ValueError, match="other summary.csv rows"):
+    with pytest.raises(ValueError, match=r"other summary\.csv rows"):
         collect(later, dest, update=True)
 
 
