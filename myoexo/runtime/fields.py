@@ -306,6 +306,15 @@ def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls, vars(module) if module else None)
 
 
+def _default_of(f: dataclasses.Field[Any]) -> Any:
+    """The default of field *f* (its factory's value), or ``dataclasses.MISSING``."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return dataclasses.MISSING
+
+
 def option_fields(cls: type, exclude: Iterable[str] = ()) -> list[dataclasses.Field[Any]]:
     """The fields of *cls* that have a command-line option."""
     skip = set(exclude)
@@ -345,12 +354,9 @@ def add_options(
         tp, optional = _unwrap_optional(hints[f.name])
         if f.name in overrides:
             default = overrides[f.name]
-        elif f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
         else:
-            default = None
+            default = _default_of(f)
+            default = None if default is dataclasses.MISSING else default
         shown = ", ".join(map(str, default)) if isinstance(default, tuple) else default
         if isinstance(shown, str) and not shown:
             shown = "none"
@@ -460,13 +466,7 @@ def option_words(settings: Any, *, exclude: Iterable[str] = ()) -> list[str]:
     words: list[str] = []
     for f in option_fields(type(settings), exclude):
         value = getattr(settings, f.name)
-        if f.default is not dataclasses.MISSING:
-            default = f.default
-        elif f.default_factory is not dataclasses.MISSING:
-            default = f.default_factory()
-        else:
-            default = dataclasses.MISSING
-        if value == default:
+        if value == _default_of(f):
             continue
         flag = flag_of(f)
         if isinstance(value, bool):
