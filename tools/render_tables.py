@@ -226,6 +226,7 @@ BLOCKS: tuple[Block | GoalsBlock, ...] = (
     ),
     Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_1000_tone", (KNEE,)),
     Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_200_tone_perturbed", (KNEE,)),
+    Block("myoexo/policies/MODEL_CARD_student_knee.md", "eval_1000_tone_perturbed", (KNEE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone", (FINE,)),
     Block("myoexo/policies/MODEL_CARD_student_fine.md", "eval_1000_tone_perturbed", (FINE,)),
     *(
