@@ -287,6 +287,19 @@ def test_training_stacks_equal_the_controller_memory():
     np.testing.assert_array_equal(stack_frames(mem, 3, 2), [8, 9, 4, 5, 0, 1])
 
 
+@pytest.mark.parametrize(("n_frames", "stride"), [(1, 1), (3, 2)])
+def test_an_input_push_returned_is_not_changed_by_later_pushes(n_frames, stride):
+    """The memory shifts in place: what push returned before stays as it was."""
+    student = _random_student(n_frames=n_frames, stride=stride)
+    frames = np.random.default_rng(1).normal(size=(6, FRAME_DIM))
+    inputs = [student.push(f) for f in frames]
+    kept = [x.copy() for x in inputs]
+    student.push(frames[0] + 1.0)
+    for x, y in zip(inputs, kept, strict=True):
+        np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(inputs[-1][:FRAME_DIM], frames[-1])  # the newest frame first
+
+
 def test_save_load_roundtrip(tmp_path, env_exo):
     student = _random_student()
     student.metadata["note"] = "x"

@@ -143,6 +143,12 @@ def stack_frames(history: np.ndarray, n_frames: int, stride: int) -> np.ndarray:
     return sel.reshape(*h.shape[:-2], int(n_frames) * h.shape[-1])
 
 
+def _clip_unit(x: np.ndarray) -> np.ndarray:
+    """*x* clipped to [-1, 1] in place (two ufuncs: np.clip's wrapper costs several us)."""
+    np.maximum(x, -1.0, out=x)
+    return np.minimum(x, 1.0, out=x)
+
+
 @dataclass(frozen=True)
 class FinePositioning:
     """The fine-positioning layer's integral law (:class:`FinePositioner`).
@@ -220,9 +226,11 @@ class FinePositioner:
 
     def step(self, window: np.ndarray, frame: np.ndarray) -> float:
         """Update the integral from this step's memory and frame; return it."""
+        if not abs(frame[EXO_VEL_INDEX]) < self._speed_limit:
+            return self.integral  # held while the knee moves: no estimate needed
         knee_rad = frame[EXO_ANGLE_INDEX] + math.radians(self.offset_deg(window))
         error_rad = frame[TARGET_INDEX] - knee_rad
-        if abs(error_rad) < self._window_rad and abs(frame[EXO_VEL_INDEX]) < self._speed_limit:
+        if abs(error_rad) < self._window_rad:
             limit = self.law.limit
             self.integral = min(max(self.integral + self._step * error_rad, -limit), limit)
         return self.integral
@@ -360,12 +368,15 @@ class StudentController:
     def push(self, frame: np.ndarray) -> np.ndarray:
         """Add a frame to the memory (the first one fills it); returns the network input."""
         f = np.asarray(frame, dtype=np.float64).reshape(FRAME_DIM)
-        if self._memory is None:
-            self._memory = np.repeat(f[None, :], self.history, axis=0)
-        else:
-            self._memory = np.roll(self._memory, -1, axis=0)
-            self._memory[-1] = f
-        return stack_frames(self._memory, self.n_frames, self.stride)
+        memory = self._memory
+        if memory is None:
+            memory = self._memory = np.repeat(f[None, :], self.history, axis=0)
+        else:  # one frame older, in place (np.roll would allocate a new memory each step)
+            memory[:-1] = memory[1:]
+            memory[-1] = f
+        window = stack_frames(memory, self.n_frames, self.stride)
+        # one frame is a view of the memory, which the next push changes: the input is a copy
+        return window.copy() if self.n_frames == 1 else window
 
     def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """One decision: push this observation's frame, return the command ``(1,)`` float32
@@ -377,17 +388,17 @@ class StudentController:
             raise ValueError(f"non-finite exo sensor reading {frame.tolist()}")
         window = self.push(frame)
         x = (
-            np.append(window, float(np.asarray(obs).reshape(-1)[-1]))
+            np.concatenate((window, (float(np.asarray(obs).reshape(-1)[-1]),)))
             if self.gentleness_input
             else window
         )
         action = self.actor(x)
         if not np.isfinite(action).all():
             raise ValueError(f"the student returned a non-finite action {action.tolist()}")
-        action = np.clip(action, -1.0, 1.0)
         if self.fine is not None:
-            action = np.clip(action + self.fine.step(window, frame), -1.0, 1.0)
-        return action.astype(np.float32)
+            action = _clip_unit(action)
+            action += self.fine.step(window, frame)
+        return _clip_unit(action).astype(np.float32)
 
     # ------------------------------------------------------------------ torch / ONNX
     def to_torch(self) -> Any:
