@@ -1,10 +1,13 @@
-"""The deployable controller (``student_exo``) exported whole to ONNX: closed-loop parity with
-the numpy controller and its decision latency in ONNX Runtime (one thread).
+"""A deployable student exported whole to ONNX: closed-loop parity with the numpy controller
+and its decision latency in ONNX Runtime (one thread).
 
 Eight nominal episodes (levels 0-3 twice, the student driving, 6,400 steps); prints the
-largest action difference, the p50 / p99 latency of both runtimes and, last, their ratio::
+largest action difference, the p50 / p99 latency of both runtimes and, last, their ratio. A
+student with a gentleness input runs at its default weight (or ``--weight``), fed to the ONNX
+file as its ``gentleness`` input; one with a fine-positioning layer carries the layer's
+integral from step to step through ``integral`` / ``integral_out``::
 
-    python benchmarks/bench_student_onnx.py [--policy student_exo]
+    python benchmarks/bench_student_onnx.py [--policy student_exo] [--weight W]
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 
 import myoexo
 from myoexo.envs import make_env
+from myoexo.envs.config import check_gentleness
 from myoexo.policies.student import StudentController, export_student_onnx
 
 
@@ -27,10 +31,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="student_exo", help="a shipped student")
     parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument(
+        "--weight",
+        type=float,
+        default=None,
+        help="gentleness weight of a student that takes one (default: its default weight)",
+    )
     args = parser.parse_args()
-    student = myoexo.load_policy(args.policy)
+    controller = myoexo.load_policy(args.policy, make_env(0, obs_preset="exo"))
+    student = getattr(controller, "controller", controller)  # a gentle policy's student
     if not isinstance(student, StudentController):
         raise SystemExit(f"{args.policy!r} is not a student controller")
+    weight = args.weight if args.weight is not None else getattr(controller, "gentleness", None)
+    if student.gentleness_input:
+        weight = check_gentleness(weight if weight is not None else 0.0)
+        print(f"{args.policy}: gentleness weight {weight}")
     with tempfile.TemporaryDirectory() as tmp:
         path = export_student_onnx(student, Path(tmp) / "student.onnx")
         opts = ort.SessionOptions()
@@ -42,13 +57,24 @@ def main() -> None:
             obs, _ = env.reset(seed=100 + k)
             student.reset()
             memory, done = None, False
+            integral = np.zeros((1, 1), np.float32)
             while not done:
+                if student.gentleness_input:
+                    obs = np.append(obs, np.float32(weight))  # what a GentleController does
                 frame = student.frame(obs).astype(np.float32)
                 if memory is None:
                     memory = student.initial_memory(frame)[None]
+                feeds = {"frame": frame[None], "memory": memory}
+                if student.gentleness_input:
+                    feeds["gentleness"] = np.full((1, 1), weight, np.float32)
+                if student.fine is not None:
+                    feeds["integral"] = integral
                 t0 = time.perf_counter()
-                onnx_action, memory = sess.run(None, {"frame": frame[None], "memory": memory})
+                outputs = sess.run(None, feeds)
                 t_onnx.append(time.perf_counter() - t0)
+                onnx_action, memory = outputs[0], outputs[1]
+                if student.fine is not None:
+                    integral = outputs[2]
                 t0 = time.perf_counter()
                 action = student.act(obs)
                 t_numpy.append(time.perf_counter() - t0)
