@@ -42,9 +42,12 @@ def main() -> None:
     student = getattr(controller, "controller", controller)  # a gentle policy's student
     if not isinstance(student, StudentController):
         raise SystemExit(f"{args.policy!r} is not a student controller")
-    weight = args.weight if args.weight is not None else getattr(controller, "gentleness", None)
-    if student.gentleness_input:
-        weight = check_gentleness(weight if weight is not None else 0.0)
+    weight = getattr(controller, "gentleness", None)  # the policy's default, if it takes one
+    if args.weight is not None:
+        if weight is None:
+            raise SystemExit(f"{args.policy!r} takes no gentleness weight; drop --weight")
+        weight = check_gentleness(args.weight)
+    if weight is not None:
         print(f"{args.policy}: gentleness weight {weight}")
     with tempfile.TemporaryDirectory() as tmp:
         path = export_student_onnx(student, Path(tmp) / "student.onnx")

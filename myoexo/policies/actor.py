@@ -239,9 +239,7 @@ class MLPActor:
             layers.append(lin)
             layers.append(acts[self.activation]() if i < len(self.weights) - 1 else nn.Tanh())
         mean = np.zeros(self.obs_dim) if self.obs_mean is None else self.obs_mean
-        std = (
-            np.ones(self.obs_dim) if self.obs_var is None else np.sqrt(self.obs_var + self.epsilon)
-        )
+        std = np.ones(self.obs_dim) if self._obs_std is None else self._obs_std
         clip = math.inf if self.obs_mean is None else self.clip_obs
         return _torch_actor_class()(
             nn.Sequential(*layers), mean, std, clip, self.action_low, self.action_high

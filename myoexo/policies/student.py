@@ -136,11 +136,11 @@ def stack_frames(history: np.ndarray, n_frames: int, stride: int) -> np.ndarray:
 
     Returns:
         ``(..., n_frames * FRAME_DIM)``: the newest frame, then the one ``stride`` steps
-        before it, ... (newest first).
+        before it, ... (newest first); a new array, never a view of *history*.
     """
     h = np.asarray(history)
-    sel = h[..., ::-1, :][..., :: int(stride), :][..., : int(n_frames), :]
-    return sel.reshape(*h.shape[:-2], int(n_frames) * h.shape[-1])
+    newest_first = np.arange(h.shape[-2] - 1, -1, -int(stride))[: int(n_frames)]
+    return h[..., newest_first, :].reshape(*h.shape[:-2], int(n_frames) * h.shape[-1])
 
 
 def _clip_unit(x: np.ndarray) -> np.ndarray:
@@ -374,9 +374,7 @@ class StudentController:
         else:  # one frame older, in place (np.roll would allocate a new memory each step)
             memory[:-1] = memory[1:]
             memory[-1] = f
-        window = stack_frames(memory, self.n_frames, self.stride)
-        # one frame is a view of the memory, which the next push changes: the input is a copy
-        return window.copy() if self.n_frames == 1 else window
+        return stack_frames(memory, self.n_frames, self.stride)  # a copy: memory changes
 
     def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """One decision: push this observation's frame, return the command ``(1,)`` float32
