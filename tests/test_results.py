@@ -232,6 +232,27 @@ def test_a_set_older_than_a_metric_still_takes_runs_on_its_subjects(evaluation, 
         collect(later, dest, update=True)
 
 
+def test_an_evaluation_of_the_reference_alone_is_refused_with_a_reason(tmp_path):
+    """A result set compares controllers with the reference: a run of the PID alone gets one
+    message saying so, not pandas' error about an empty concatenation."""
+    alone = _evaluation(tmp_path / "alone", ("pid",))
+    with pytest.raises(ValueError, match="holds only the reference 'pid'"):
+        collect(alone, tmp_path / "set")
+
+
+def test_a_run_that_lacks_a_column_of_the_set_is_refused_by_name(evaluation, tmp_path):
+    """A set with a column a later evaluation does not have (a metric this code no longer
+    computes) does not take that evaluation: the reference's rows could not be compared on
+    it, and the error names the column."""
+    dest = collect(evaluation, tmp_path / "set")
+    frame = pd.read_csv(dest / "summary.csv")
+    frame["retired_metric"] = 1.0
+    frame.to_csv(dest / "summary.csv", index=False)
+    later = _evaluation(tmp_path / "later", ("pid", "pid:ramp_s=0.2"))
+    with pytest.raises(ValueError, match=r"lack the set's columns \['retired_metric'\]"):
+        collect(later, dest, update=True)
+
+
 def test_a_sets_hold_bounds_come_again_from_its_references_traces(evaluation, tmp_path):
     """results bound: a set's hold bounds recomputed from a run of its reference on its own
     subjects (the other files untouched, the command recorded); a run on other subjects, or

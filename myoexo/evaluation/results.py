@@ -131,6 +131,11 @@ def collect(
     if reference is None:
         raise ValueError(f"{str(eval_dir)!r} has no PID to compare with")
     others = [c for c in labels if c != reference]
+    if not others:
+        raise ValueError(
+            f"{str(eval_dir)!r} holds only the reference {reference!r}: a result set compares "
+            "other controllers with it (evaluate one or more beside it)"
+        )
     levels = sorted(int(v) for v in set(table.level))
     heads = []
     for c in others:
@@ -323,11 +328,22 @@ def _same_rows(old: Any, new: Any, controller: str) -> bool:
     """Whether *old* and *new* hold the same numbers for *controller*, to 1e-6 relative: a
     CSV round trip may change the last digit, and a re-run of the perturbed 1000-subject set's
     PID gave two quantiles that differ in the ninth significant digit (every mean agreed to
-    1e-9); other subjects or another twin differ in the first few. Only the columns both
-    have are compared: a metric added since the set was made is in the new rows alone."""
+    1e-9); other subjects or another twin differ in the first few. A metric added since the
+    set was made is in the new rows alone and is not compared.
+
+    Raises:
+        ValueError: If *new* lacks a column *old* has (a run of an older code or another
+            table: its rows cannot stand beside the set's).
+    """
     import numpy as np
 
-    shared = [c for c in old.columns if c in new.columns]
+    lacking = [c for c in old.columns if c not in new.columns]
+    if lacking:
+        raise ValueError(
+            f"the evaluation's rows lack the set's columns {lacking}: it was made by another "
+            "code than the set's; re-run it with this one"
+        )
+    shared = list(old.columns)
     a = old.loc[old.controller == controller, shared].reset_index(drop=True)
     b = new.loc[new.controller == controller, shared].reset_index(drop=True)
     if a.shape != b.shape:
