@@ -240,6 +240,26 @@ def test_an_evaluation_of_the_reference_alone_is_refused_with_a_reason(tmp_path)
         collect(alone, tmp_path / "set")
 
 
+def test_a_metric_empty_in_the_sets_reference_rows_is_not_compared(evaluation, tmp_path):
+    """A set whose reference rows predate a metric that later controllers brought in (the
+    column is there, NaN in every reference row) takes a run on its subjects; a changed
+    number in a column the reference rows have is still refused."""
+    dest = collect(evaluation, tmp_path / "set")
+    frame = pd.read_csv(dest / "summary.csv")
+    swing = [c for c in frame.columns if c.startswith("final_swing_deg")]
+    frame.loc[frame.controller == "pid", swing] = float("nan")
+    frame.to_csv(dest / "summary.csv", index=False)
+    later = _evaluation(tmp_path / "later", ("pid", "pid:ramp_s=0.2"))
+    collect(later, dest, update=True)
+    assert "pid:ramp_s=0.2" in set(pd.read_csv(dest / "reductions.csv").controller)
+    frame = pd.read_csv(dest / "summary.csv")
+    frame.loc[frame.controller == "pid", swing] = float("nan")
+    frame.loc[frame.controller == "pid", "settling_time_s_mean"] += 0.01
+    frame.to_csv(dest / "summary.csv", index=False)
+    with pytest.raises(ValueError, match=r"other summary\.csv rows"):
+        collect(later, dest, update=True)
+
+
 def test_a_run_that_lacks_a_column_of_the_set_is_refused_by_name(evaluation, tmp_path):
     """A set with a column a later evaluation does not have (a metric this code no longer
     computes) does not take that evaluation: the reference's rows could not be compared on

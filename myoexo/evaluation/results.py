@@ -329,7 +329,8 @@ def _same_rows(old: Any, new: Any, controller: str) -> bool:
     CSV round trip may change the last digit, and a re-run of the perturbed 1000-subject set's
     PID gave two quantiles that differ in the ninth significant digit (every mean agreed to
     1e-9); other subjects or another twin differ in the first few. A metric added since the
-    set was made is in the new rows alone and is not compared.
+    set's rows of *controller* were made is not compared: it is in the new rows alone, or
+    empty (NaN) in every one of the set's rows (the set took later controllers that have it).
 
     Raises:
         ValueError: If *new* lacks a column *old* has (a run of an older code or another
@@ -343,8 +344,9 @@ def _same_rows(old: Any, new: Any, controller: str) -> bool:
             f"the evaluation's rows lack the set's columns {lacking}: it was made by another "
             "code than the set's; re-run it with this one"
         )
-    shared = list(old.columns)
-    a = old.loc[old.controller == controller, shared].reset_index(drop=True)
+    a = old.loc[old.controller == controller].reset_index(drop=True)
+    shared = [c for c in a.columns if not (len(a) and a[c].isna().all())]
+    a = a[shared]
     b = new.loc[new.controller == controller, shared].reset_index(drop=True)
     if a.shape != b.shape:
         return False
