@@ -301,11 +301,13 @@ def _check_same_subjects(
         ("summary.csv", summary, new_summary),
         ("tail_risk.csv", risk, new_risk),
     ):
-        if not _same_rows(rows(old, False), rows(new, False), ref):
+        set_ref = old[old.controller == ref]  # a metric empty in all of them came later
+        later = [c for c in old.columns if len(set_ref) and set_ref[c].isna().all()]
+        if not _same_rows(rows(old, False), rows(new, False), ref, later):
             differ = [
                 lv
                 for lv in sorted(set(old.level))
-                if not _same_rows(old[old.level == lv], new[new.level == lv], ref)
+                if not _same_rows(old[old.level == lv], new[new.level == lv], ref, later)
             ]
             raise ValueError(
                 f"the reference {ref!r} has other {name} rows in the evaluation than in "
@@ -324,13 +326,14 @@ def _check_same_subjects(
         )
 
 
-def _same_rows(old: Any, new: Any, controller: str) -> bool:
+def _same_rows(old: Any, new: Any, controller: str, later: Sequence[str] = ()) -> bool:
     """Whether *old* and *new* hold the same numbers for *controller*, to 1e-6 relative: a
     CSV round trip may change the last digit, and a re-run of the perturbed 1000-subject set's
     PID gave two quantiles that differ in the ninth significant digit (every mean agreed to
     1e-9); other subjects or another twin differ in the first few. A metric added since the
-    set's rows of *controller* were made is not compared: it is in the new rows alone, or
-    empty (NaN) in every one of the set's rows (the set took later controllers that have it).
+    set's rows of *controller* were made is not compared: it is in the new rows alone, or one
+    of *later* (the caller's: empty in every one of the set's rows of *controller*, the set
+    having taken later controllers that have it).
 
     Raises:
         ValueError: If *new* lacks a column *old* has (a run of an older code or another
@@ -344,9 +347,8 @@ def _same_rows(old: Any, new: Any, controller: str) -> bool:
             f"the evaluation's rows lack the set's columns {lacking}: it was made by another "
             "code than the set's; re-run it with this one"
         )
-    a = old.loc[old.controller == controller].reset_index(drop=True)
-    shared = [c for c in a.columns if not (len(a) and a[c].isna().all())]
-    a = a[shared]
+    shared = [c for c in old.columns if c not in later]
+    a = old.loc[old.controller == controller, shared].reset_index(drop=True)
     b = new.loc[new.controller == controller, shared].reset_index(drop=True)
     if a.shape != b.shape:
         return False
