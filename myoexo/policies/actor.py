@@ -41,6 +41,13 @@ def _gelu(x: np.ndarray) -> np.ndarray:
     return 0.5 * x * (1.0 + erf)
 
 
+def clip_in_place(x: np.ndarray, bound: float) -> np.ndarray:
+    """*x* clipped to ``[-bound, bound]`` in place and returned (two ufuncs: ``np.clip``'s
+    wrapper costs several us per call, which a decision every control step pays)."""
+    np.maximum(x, -bound, out=x)
+    return np.minimum(x, bound, out=x)
+
+
 #: The hidden activations a numpy actor computes, by name.
 ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "gelu": _gelu,
@@ -175,11 +182,7 @@ class MLPActor:
             )
         if self.obs_mean is None or self._obs_std is None:
             return x
-        z = (x - self.obs_mean) / self._obs_std
-        # the clip as two ufuncs in place (np.clip's wrapper costs several us per call)
-        np.maximum(z, -self.clip_obs, out=z)
-        np.minimum(z, self.clip_obs, out=z)
-        return z
+        return clip_in_place((x - self.obs_mean) / self._obs_std, self.clip_obs)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """Deterministic action(s) in [action_low, action_high], float32, shape

@@ -62,6 +62,7 @@ from myoexo.policies.actor import (
     actor_arrays,
     actor_document,
     actor_from_document,
+    clip_in_place,
     read_actor_files,
     save_actor,
 )
@@ -141,12 +142,6 @@ def stack_frames(history: np.ndarray, n_frames: int, stride: int) -> np.ndarray:
     h = np.asarray(history)
     newest_first = np.arange(h.shape[-2] - 1, -1, -int(stride))[: int(n_frames)]
     return h[..., newest_first, :].reshape(*h.shape[:-2], int(n_frames) * h.shape[-1])
-
-
-def _clip_unit(x: np.ndarray) -> np.ndarray:
-    """*x* clipped to [-1, 1] in place (two ufuncs: np.clip's wrapper costs several us)."""
-    np.maximum(x, -1.0, out=x)
-    return np.minimum(x, 1.0, out=x)
 
 
 @dataclass(frozen=True)
@@ -394,9 +389,9 @@ class StudentController:
         if not np.isfinite(action).all():
             raise ValueError(f"the student returned a non-finite action {action.tolist()}")
         if self.fine is not None:
-            action = _clip_unit(action)
+            action = clip_in_place(action, 1.0)
             action += self.fine.step(window, frame)
-        return _clip_unit(action).astype(np.float32)
+        return clip_in_place(action, 1.0).astype(np.float32)
 
     # ------------------------------------------------------------------ torch / ONNX
     def to_torch(self) -> Any:
