@@ -471,6 +471,21 @@ def test_exo_preset_and_robustness_reach_the_training_envs():
     assert get_preset("cpu", robustness="true").twin.robustness is True  # a twin option
 
 
+def test_nominal_envs_share_the_training_envs_between_twins():
+    from myoexo.training.train import make_vec_env
+
+    config = _tiny_preset(robustness=True, n_envs=3, nominal_envs=1)
+    venv = make_vec_env(config, seed=0)
+    perturbed = [r is not None for r in venv.get_attr("robustness")]
+    assert perturbed == [True, True, False]  # the last nominal_envs: the nominal twin
+    venv.close()
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    with pytest.raises(FieldError, match="nominal_envs.*robustness"):
+        _tiny_preset(n_envs=3, nominal_envs=1)
+    with pytest.raises(FieldError, match="nominal_envs.*below n_envs = 3"):
+        _tiny_preset(robustness=True, n_envs=3, nominal_envs=3)
+
+
 # ---------------------------------------------------------------------------- on-policy (PPO)
 def test_ppo_preset_fields_are_validated():
     p = get_preset("ppo")

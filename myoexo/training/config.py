@@ -195,6 +195,12 @@ class TrainConfig:
     )
     total_timesteps: int = option(1_000_000, "env transitions (all envs) to train for", low=1)
     n_envs: int = option(1, "parallel envs; a vector step adds n_envs transitions", low=1)
+    nominal_envs: int = option(
+        0,
+        "with the twin's robustness: how many of the n_envs (the last ones) train on the "
+        "nominal twin, the others on perturbed twins (0: all perturbed)",
+        low=0,
+    )
     vec_env: str = option(
         "dummy", "envs in this process (dummy) or one process each (subproc)",
         choices=("dummy", "subproc"),
@@ -329,6 +335,17 @@ class TrainConfig:
             raise FieldError(
                 "TrainConfig", name, getattr(self, name),
                 "shapes a correction, but no residual_base names what it corrects",
+            )  # fmt: skip
+        if self.nominal_envs and not self.twin.robustness:
+            raise FieldError(
+                "TrainConfig", "nominal_envs", self.nominal_envs,
+                "shares the envs between nominal and perturbed twins: it needs the twin's "
+                "robustness",
+            )  # fmt: skip
+        if self.nominal_envs >= self.n_envs and self.nominal_envs:
+            raise FieldError(
+                "TrainConfig", "nominal_envs", self.nominal_envs,
+                f"must be below n_envs = {self.n_envs} (at least one perturbed env)",
             )  # fmt: skip
         for name in ("net_arch_pi", "net_arch_qf", "eval_levels"):
             if not getattr(self, name):

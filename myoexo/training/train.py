@@ -139,15 +139,23 @@ def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
     """The training envs: ``n_envs`` copies in a vector env (``"dummy"``:
     :class:`~myoexo.training.plumbing.FreshInfoVecEnv`, SB3's ``DummyVecEnv`` without its
     copy of every info; ``"subproc"``: ``SubprocVecEnv``), seeded ``seed + i`` (default: the
-    config's seed), wrapped in ``VecNormalize`` (observations and/or rewards) if the config
+    config's seed), the last ``nominal_envs`` of them on the nominal twin, wrapped in ``VecNormalize`` (observations and/or rewards) if the config
     says so."""
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from myoexo.training.plumbing import FreshInfoVecEnv
 
     subproc = config.vec_env == "subproc"
+    nominal = config.twin.replace(robustness=False)
+    first_nominal = config.n_envs - config.nominal_envs  # the last nominal_envs: nominal
     fns: list[Callable[[], Any]] = [
-        _EnvFactory(config.env_id, i, config.twin, in_worker=subproc, residual=config.residual)
+        _EnvFactory(
+            config.env_id,
+            i,
+            config.twin if i < first_nominal else nominal,
+            in_worker=subproc,
+            residual=config.residual,
+        )
         for i in range(config.n_envs)
     ]
     venv: Any = FreshInfoVecEnv(fns) if config.vec_env == "dummy" else SubprocVecEnv(fns)
