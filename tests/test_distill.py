@@ -96,8 +96,13 @@ def test_reset_clears_memory(env_exo):
     assert student.memory is None
     first = [student.act(o) for o in obs]
     assert student.memory is not None
+    window = student.last_window  # the last decision's input, the memory stacked
+    assert window is not None
+    np.testing.assert_array_equal(
+        window, stack_frames(student.memory, student.n_frames, student.stride)
+    )
     student.reset(seed=1)
-    assert student.memory is None
+    assert student.memory is None and student.last_window is None
     again = [student.act(o) for o in obs]
     np.testing.assert_array_equal(np.concatenate(first), np.concatenate(again))
     # the memory matters: the same last observation after another history acts differently

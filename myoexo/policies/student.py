@@ -281,6 +281,7 @@ class StudentController:
         self.metadata = dict(metadata or {})
         self.metadata["obs_preset"] = self.obs_preset  # what the evaluation's env reads
         self._memory: np.ndarray | None = None
+        self._window: np.ndarray | None = None
         self.bind_obs_keys(obs_keys)
 
     #: What :func:`~myoexo.evaluation.engine.evaluate_controller` builds the env with.
@@ -353,10 +354,18 @@ class StudentController:
         """The last ``history`` frames, oldest first (``None`` right after :meth:`reset`)."""
         return None if self._memory is None else self._memory.copy()
 
+    @property
+    def last_window(self) -> np.ndarray | None:
+        """The network input the last :meth:`push` made of the memory (newest frame first;
+        ``None`` right after :meth:`reset`); a new array at every push, never changed
+        afterwards."""
+        return self._window
+
     def reset(self, seed: int | None = None) -> None:
         """Start of an episode: forget every frame (and the fine-positioning integral)."""
         del seed
         self._memory = None
+        self._window = None
         if self.fine is not None:
             self.fine.reset()
 
@@ -369,7 +378,8 @@ class StudentController:
         else:  # one frame older, in place (np.roll would allocate a new memory each step)
             memory[:-1] = memory[1:]
             memory[-1] = f
-        return stack_frames(memory, self.n_frames, self.stride)  # a copy: memory changes
+        self._window = stack_frames(memory, self.n_frames, self.stride)  # a copy
+        return self._window
 
     def act(self, obs: np.ndarray, measurements: Measurements | None = None) -> np.ndarray:
         """One decision: push this observation's frame, return the command ``(1,)`` float32

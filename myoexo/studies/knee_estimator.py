@@ -47,7 +47,6 @@ from myoexo.policies.student import (
     StudentController,
     load_student,
     save_student,
-    stack_frames,
 )
 from myoexo.runtime.fields import add_options, check_fields, from_options, option, option_words
 from myoexo.spasticity.levels import VALID_LEVELS
@@ -129,9 +128,9 @@ def collect(
                 done = False
                 while not done:
                     action = ctrl.act(obs, None)  # type: ignore[arg-type]
-                    memory = raw.memory
-                    assert memory is not None
-                    windows.append(stack_frames(memory, raw.n_frames, raw.stride))
+                    window = raw.last_window  # what the network read at this step
+                    assert window is not None
+                    windows.append(window)
                     offsets.append(info["knee_angle_deg"] - info["exo_angle_deg"])
                     obs, _, terminated, truncated, info = env.step(action)
                     done = terminated or truncated
