@@ -480,9 +480,9 @@ def test_nominal_envs_share_the_training_envs_between_twins():
     assert perturbed == [True, True, False]  # the last nominal_envs: the nominal twin
     venv.close()
     assert TrainConfig.from_dict(config.to_dict()) == config
-    with pytest.raises(FieldError, match="nominal_envs.*robustness"):
+    with pytest.raises(FieldError, match=r"nominal_envs.*robustness"):
         _tiny_preset(n_envs=3, nominal_envs=1)
-    with pytest.raises(FieldError, match="nominal_envs.*below n_envs = 3"):
+    with pytest.raises(FieldError, match=r"nominal_envs.*below n_envs = 3"):
         _tiny_preset(robustness=True, n_envs=3, nominal_envs=3)
 
 

@@ -139,8 +139,8 @@ def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
     """The training envs: ``n_envs`` copies in a vector env (``"dummy"``:
     :class:`~myoexo.training.plumbing.FreshInfoVecEnv`, SB3's ``DummyVecEnv`` without its
     copy of every info; ``"subproc"``: ``SubprocVecEnv``), seeded ``seed + i`` (default: the
-    config's seed), the last ``nominal_envs`` of them on the nominal twin, wrapped in ``VecNormalize`` (observations and/or rewards) if the config
-    says so."""
+    config's seed), the last ``nominal_envs`` of them on the nominal twin, wrapped in
+    ``VecNormalize`` (observations and/or rewards) if the config says so."""
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from myoexo.training.plumbing import FreshInfoVecEnv
