@@ -214,9 +214,10 @@ def run(args: argparse.Namespace) -> int:
         run_dir = Path(
             args.run_dir or f"runs/{config.algorithm}_{config.name}_seed{config.seed}_{stamp}"
         )
+        share = f" ({config.nominal_envs} of {config.n_envs} envs nominal)"
         print(
             f"[train] {config.algorithm} ({config.name}), seed {config.seed}, "
-            f"{config.twin.describe()} -> {run_dir}",
+            f"{config.twin.describe()}{share if config.nominal_envs else ''} -> {run_dir}",
             flush=True,
         )
         result = train(config, run_dir, progress, options.verbose)
