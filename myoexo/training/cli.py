@@ -214,10 +214,11 @@ def run(args: argparse.Namespace) -> int:
         run_dir = Path(
             args.run_dir or f"runs/{config.algorithm}_{config.name}_seed{config.seed}_{stamp}"
         )
-        share = f" ({config.nominal_envs} of {config.n_envs} envs nominal)"
+        nominal = config.nominal_envs
+        share = f" ({nominal} of {config.n_envs} envs nominal)" if nominal else ""
         print(
             f"[train] {config.algorithm} ({config.name}), seed {config.seed}, "
-            f"{config.twin.describe()}{share if config.nominal_envs else ''} -> {run_dir}",
+            f"{config.twin.describe()}{share} -> {run_dir}",
             flush=True,
         )
         result = train(config, run_dir, progress, options.verbose)

@@ -342,7 +342,7 @@ class TrainConfig:
                 "shares the envs between nominal and perturbed twins: it needs the twin's "
                 "robustness",
             )  # fmt: skip
-        if self.nominal_envs >= self.n_envs and self.nominal_envs:
+        if self.nominal_envs >= self.n_envs:
             raise FieldError(
                 "TrainConfig", "nominal_envs", self.nominal_envs,
                 f"must be below n_envs = {self.n_envs} (at least one perturbed env)",
