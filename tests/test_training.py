@@ -471,7 +471,8 @@ def test_exo_preset_and_robustness_reach_the_training_envs():
     assert get_preset("cpu", robustness="true").twin.robustness is True  # a twin option
 
 
-def test_nominal_envs_share_the_training_envs_between_twins():
+def test_nominal_envs_share_the_training_envs_between_twins(tiny_run, tmp_path):
+    from myoexo.training.export import load_checkpoint_actor
     from myoexo.training.train import make_vec_env
 
     config = _tiny_preset(robustness=True, n_envs=3, nominal_envs=1)
@@ -484,6 +485,12 @@ def test_nominal_envs_share_the_training_envs_between_twins():
         _tiny_preset(n_envs=3, nominal_envs=1)
     with pytest.raises(FieldError, match=r"nominal_envs.*below n_envs = 3"):
         _tiny_preset(robustness=True, n_envs=3, nominal_envs=3)
+    # the exported policy records the share (its twin says robustness alone)
+    train(_tiny_preset(robustness=True, nominal_envs=1, total_timesteps=200), tmp_path / "r")
+    actor = load_checkpoint_actor(ck.resolve_checkpoint(tmp_path / "r", "latest"), False)
+    assert actor.metadata["training_envs"] == {"n_envs": 2, "nominal_envs": 1}
+    plain = load_checkpoint_actor(ck.resolve_checkpoint(tiny_run[0], "latest"), False)
+    assert "training_envs" not in plain.metadata
 
 
 # ---------------------------------------------------------------------------- on-policy (PPO)

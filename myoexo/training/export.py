@@ -194,6 +194,11 @@ def _checkpoint_parts(
     }
     if state.get(RESIDUAL_KEY):  # a residual policy: the classical controller it corrects
         meta[RESIDUAL_KEY] = dict(state[RESIDUAL_KEY])
+    if train_config is not None and train_config.nominal_envs:  # trained on both twins
+        meta["training_envs"] = {
+            "n_envs": train_config.n_envs,
+            "nominal_envs": train_config.nominal_envs,
+        }
     return model, vn, meta
 
 
