@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -487,10 +488,23 @@ def test_nominal_envs_share_the_training_envs_between_twins(tiny_run, tmp_path):
         _tiny_preset(robustness=True, n_envs=3, nominal_envs=3)
     # the exported policy records the share (its twin says robustness alone)
     train(_tiny_preset(robustness=True, nominal_envs=1, total_timesteps=200), tmp_path / "r")
-    actor = load_checkpoint_actor(ck.resolve_checkpoint(tmp_path / "r", "latest"), False)
+    actor = load_checkpoint_actor(ck.resolve_checkpoint(tmp_path / "r", "latest"))
     assert actor.metadata["training_envs"] == {"n_envs": 2, "nominal_envs": 1}
     plain = load_checkpoint_actor(ck.resolve_checkpoint(tiny_run[0], "latest"), False)
     assert "training_envs" not in plain.metadata
+    # it was trained on the perturbed twin and on its nominal one: evaluated on either, no
+    # mismatch; on another reflex, the warning names both
+    from myoexo.evaluation.engine import TwinMismatchWarning, resolve_controllers
+    from myoexo.policies.actor import save_actor
+
+    npz, _ = save_actor(actor, tmp_path / "half")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TwinMismatchWarning)
+        for twin in (config.twin, config.twin.nominal()):
+            resolve_controllers([str(npz)], log=lambda _: None, twin=twin)
+    other = config.twin.replace(reflex="spindle")
+    with pytest.warns(TwinMismatchWarning, match=r"trained on \[.*robustness=true and .*\]"):
+        resolve_controllers([str(npz)], log=lambda _: None, twin=other)
 
 
 # ---------------------------------------------------------------------------- on-policy (PPO)

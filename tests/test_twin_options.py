@@ -63,6 +63,18 @@ def test_a_mismatch_names_both_twins_and_ignores_reward_and_observation():
     assert message == "trained on [default twin], evaluated on [reflex=persistent robustness=true]"
 
 
+def test_a_policy_trained_on_a_twin_and_its_nominal_one_matches_either():
+    perturbed = TwinOptions(robustness=True)
+    assert perturbed.nominal() == TwinOptions()
+    assert twin_mismatch(perturbed, TwinOptions(), nominal_too=True) is None
+    assert twin_mismatch(perturbed, TwinOptions()) == (
+        "trained on [robustness=true], evaluated on [default twin]"
+    )
+    assert twin_mismatch(perturbed, TwinOptions(reflex="persistent"), nominal_too=True) == (
+        "trained on [robustness=true and default twin], evaluated on [reflex=persistent]"
+    )
+
+
 def test_the_options_reach_any_env_id_that_takes_them_and_are_refused_by_one_that_does_not():
     import myoexo  # noqa: F401
     from myoexo.training.train import make_env_fn

@@ -219,6 +219,10 @@ class TwinOptions:
             kwargs["subject_noise"] = True  # draws from the fit's uncertainty
         return kwargs
 
+    def nominal(self) -> TwinOptions:
+        """These options on the nominal twin: robustness off, all else the same."""
+        return self.replace(robustness=False)
+
     def dynamics(self) -> TwinOptions:
         """These options without the reward and the observation: what decides the twin's
         behaviour, and so whether two evaluations are of the same twin."""
@@ -330,13 +334,20 @@ class TwinOptions:
         return options
 
 
-def twin_mismatch(trained: TwinOptions, evaluated: TwinOptions) -> str | None:
+def twin_mismatch(
+    trained: TwinOptions, evaluated: TwinOptions, *, nominal_too: bool = False
+) -> str | None:
     """A warning if a policy trained on *trained* is evaluated on another twin (task, reflex
-    or robustness differ; reward and observation do not count), naming both; else ``None``."""
-    if trained.dynamics() == evaluated.dynamics():
+    or robustness differ; reward and observation do not count), naming both; else ``None``.
+    *nominal_too*: some of the policy's training envs ran on the nominal twin of *trained*
+    (``--nominal-envs``), so that twin is one it was trained on too."""
+    seen = [trained.dynamics()]
+    if nominal_too and trained.robustness:
+        seen.append(trained.nominal().dynamics())
+    if evaluated.dynamics() in seen:
         return None
     return (
-        f"trained on [{trained.dynamics().describe()}], evaluated on "
+        f"trained on [{' and '.join(t.describe() for t in seen)}], evaluated on "
         f"[{evaluated.dynamics().describe()}]"
     )
 

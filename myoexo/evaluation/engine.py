@@ -317,7 +317,10 @@ def resolve_controllers(
         trained = policy_twin(spec) if twin is not None else None
         mismatch = None
         if trained is not None and twin is not None:
-            options = twin_mismatch(trained, twin)  # another reflex, task or robustness
+            envs = policy_metadata(spec).get("training_envs") or {}
+            # another reflex, task or robustness (a policy trained with some envs on the
+            # nominal twin was trained on both)
+            options = twin_mismatch(trained, twin, nominal_too=bool(envs.get("nominal_envs")))
             found = (
                 options,
                 _version_mismatch(spec),

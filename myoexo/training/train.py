@@ -146,7 +146,7 @@ def make_vec_env(config: TrainConfig, seed: int | None = None) -> Any:
     from myoexo.training.plumbing import FreshInfoVecEnv
 
     subproc = config.vec_env == "subproc"
-    nominal = config.twin.replace(robustness=False)
+    nominal = config.twin.nominal()
     first_nominal = config.n_envs - config.nominal_envs  # the last nominal_envs: nominal
     fns: list[Callable[[], Any]] = [
         _EnvFactory(
@@ -305,7 +305,7 @@ def _run_callbacks(
         spec = SmallEvalSpec(
             levels=config.eval_levels,
             subjects=config.eval_subjects,
-            twin=config.twin.replace(robustness=False),  # on the nominal twin
+            twin=config.twin.nominal(),
             residual=config.residual,
         )
         evaluator = PaperMetricsEvalCallback(
