@@ -498,10 +498,13 @@ def test_nominal_envs_share_the_training_envs_between_twins(tiny_run, tmp_path):
     from myoexo.policies.actor import save_actor
 
     npz, _ = save_actor(actor, tmp_path / "half")
+    checkpoint = ck.resolve_checkpoint(tmp_path / "r", "latest")
+    assert ck.read_state(checkpoint)["training_envs"] == {"n_envs": 2, "nominal_envs": 1}
+    model = f"{config.algorithm}:{checkpoint / ck.MODEL_FILE}"  # its checkpoint records it
     with warnings.catch_warnings():
         warnings.simplefilter("error", TwinMismatchWarning)
         for twin in (config.twin, config.twin.nominal()):
-            resolve_controllers([str(npz)], log=lambda _: None, twin=twin)
+            resolve_controllers([str(npz), model], log=lambda _: None, twin=twin)
     other = config.twin.replace(reflex="spindle")
     with pytest.warns(TwinMismatchWarning, match=r"trained on \[.*robustness=true and .*\]"):
         resolve_controllers([str(npz)], log=lambda _: None, twin=other)

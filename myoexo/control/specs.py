@@ -605,6 +605,17 @@ def twin_of_metadata(meta: Mapping[str, Any]) -> TwinOptions | None:
     return None
 
 
+#: Metadata key of a policy trained with some envs on the nominal twin (``--nominal-envs``):
+#: ``{"n_envs": N, "nominal_envs": K}``.
+TRAINING_ENVS_KEY = "training_envs"
+
+
+def trained_on_nominal_too(meta: Mapping[str, Any]) -> bool:
+    """Whether a policy of this metadata was trained on the nominal twin of its (perturbed)
+    twin too: some of its training envs were nominal (:data:`TRAINING_ENVS_KEY`)."""
+    return bool((meta.get(TRAINING_ENVS_KEY) or {}).get("nominal_envs"))
+
+
 def policy_twin(spec: ControllerSpec) -> TwinOptions | None:
     """The twin a policy was trained on, from its own files (``None`` for the PID, the
     oracle, and a model file that records none)."""

@@ -34,6 +34,7 @@ from myoexo.control.specs import (
     policy_metadata,
     policy_twin,
     spec_env_kwargs,
+    trained_on_nominal_too,
 )
 from myoexo.envs.options import TwinOptions, twin_mismatch
 from myoexo.evaluation.config import EvaluationConfig, subject_seed
@@ -317,10 +318,8 @@ def resolve_controllers(
         trained = policy_twin(spec) if twin is not None else None
         mismatch = None
         if trained is not None and twin is not None:
-            envs = policy_metadata(spec).get("training_envs") or {}
-            # another reflex, task or robustness (a policy trained with some envs on the
-            # nominal twin was trained on both)
-            options = twin_mismatch(trained, twin, nominal_too=bool(envs.get("nominal_envs")))
+            both = trained_on_nominal_too(policy_metadata(spec))
+            options = twin_mismatch(trained, twin, nominal_too=both)  # reflex, task, robustness
             found = (
                 options,
                 _version_mismatch(spec),

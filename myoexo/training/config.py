@@ -483,6 +483,11 @@ class TrainConfig:
         )
 
     # -- records ---------------------------------------------------------------------------
+    def training_envs(self) -> dict[str, int]:
+        """How the training envs are shared between the twins, as a policy records it
+        (:data:`~myoexo.control.specs.TRAINING_ENVS_KEY`): ``n_envs`` and ``nominal_envs``."""
+        return {"n_envs": self.n_envs, "nominal_envs": self.nominal_envs}
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready field -> value (the twin as :meth:`TwinOptions.to_dict`)."""
         d: dict[str, Any] = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

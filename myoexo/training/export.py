@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from myoexo.control.residual import RESIDUAL_KEY, ResidualConfig
+from myoexo.control.specs import TRAINING_ENVS_KEY
 from myoexo.envs.options import TwinOptions
 from myoexo.model import recorded_twin_version
 from myoexo.policies.actor import MLPActor, save_actor, sbx_actor_layers
@@ -194,11 +195,11 @@ def _checkpoint_parts(
     }
     if state.get(RESIDUAL_KEY):  # a residual policy: the classical controller it corrects
         meta[RESIDUAL_KEY] = dict(state[RESIDUAL_KEY])
-    if train_config is not None and train_config.nominal_envs:  # trained on both twins
-        meta["training_envs"] = {
-            "n_envs": train_config.n_envs,
-            "nominal_envs": train_config.nominal_envs,
-        }
+    # trained on both twins: the checkpoint's record (older checkpoints: the run's config)
+    if state.get(TRAINING_ENVS_KEY):
+        meta[TRAINING_ENVS_KEY] = dict(state[TRAINING_ENVS_KEY])
+    elif train_config is not None and train_config.nominal_envs:
+        meta[TRAINING_ENVS_KEY] = train_config.training_envs()
     return model, vn, meta
 
 

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from myoexo.control.residual import ResidualConfig
+from myoexo.control.specs import TRAINING_ENVS_KEY
 from myoexo.envs.options import TwinOptions
 from myoexo.model import TWIN_VERSION
 from myoexo.policies.algorithms import algorithm_class, get_algorithm
@@ -328,6 +329,7 @@ def _run_callbacks(
             "env_id": config.env_id,
             "algorithm": config.algorithm,
             **({"residual": config.residual.to_dict()} if config.residual else {}),
+            **({TRAINING_ENVS_KEY: config.training_envs()} if config.nominal_envs else {}),
         },
     )
     return evaluator, checkpointer
