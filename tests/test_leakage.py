@@ -117,13 +117,13 @@ def test_fitting_or_choosing_on_the_evaluation_root_is_refused_in_the_api(tmp_pa
     from myoexo.studies.distill import DistillConfig
     from myoexo.training.callbacks import SmallEvalSpec
     from myoexo.training.seeds import per_seed_table
-    from myoexo.training.select import select_checkpoint
+    from myoexo.training.select import SelectionConfig, select_checkpoint
 
     for call in (
         lambda: calibrate(subjects=2, verify_subjects=2, root_seed=0),
         lambda: fit_threshold_shift(2, 6.3, get_reflex("stretch"), 2, root_seed=0),
         lambda: select_checkpoint(tmp_path, root_seed=0),
-        lambda: per_seed_table(tmp_path, 1, 1, 1, root_seed=0),
+        lambda: per_seed_table(tmp_path, SelectionConfig(1, last=1, top=1, root_seed=0)),
         lambda: SmallEvalSpec(root_seed=0),
         lambda: DistillConfig(root_seed=0),
     ):

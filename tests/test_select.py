@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -262,12 +263,31 @@ def test_a_catastrophic_subject_outranks_any_shortfall():
         "gentle, one catastrophe": selection_key(gentle.assign(catastrophic=[0, 1])),
         "rough, none": selection_key(rough.assign(catastrophic=[0, 0])),
         "gentle, none": selection_key(gentle.assign(catastrophic=[0, 0])),
+        "gentle, one perturbed catastrophe": selection_key(
+            gentle.assign(catastrophic=[0, 0], catastrophic_perturbed=[0, 1])
+        ),
     }
-    assert sorted(keys, key=keys.__getitem__) == [
-        "gentle, none",
-        "rough, none",
-        "gentle, one catastrophe",
-    ]
+    assert sorted(keys, key=keys.__getitem__)[:2] == ["gentle, none", "rough, none"]
+    # a catastrophic subject on a perturbed twin counts as one on the nominal twin
+    assert keys["gentle, one perturbed catastrophe"] == keys["gentle, one catastrophe"]
+
+
+def test_perturbed_selection_subjects_count_their_catastrophic_subjects(crafted_run, capsys):
+    chosen, table = select_checkpoint(
+        crafted_run, subjects=1, last=1, top=1, levels=(0, 3), perturbed_subjects=1,
+        perturbed_levels=(3,),
+    )  # fmt: skip
+    assert chosen == crafted_run / ck.CHECKPOINTS_DIR / "step_0000000100"
+    assert table.catastrophic.tolist() == [0, 1]
+    assert table.catastrophic_perturbed.tolist() == [0, 1]  # level 0: not run
+    assert "step_0000000100: catastrophic 2," in capsys.readouterr().out  # both twins' count
+    # a perturbed twin is another twin: the hanging checkpoint ends elsewhere there
+    hanging = crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300"
+    perturbed = checkpoint_episodes(hanging, 1, (3,), robustness=True)
+    nominal = checkpoint_episodes(hanging, 1, (3,))
+    assert not np.allclose(perturbed.final_error_deg, nominal.final_error_deg)
+    pid = pid_episodes(1, (3,), robustness=True)
+    assert catastrophic_per_level(perturbed, pid).tolist() == [1]
 
 
 def test_select_cli_writes_the_chosen_checkpoint_and_its_table(crafted_run, tmp_path, capsys):
@@ -386,3 +406,19 @@ def test_selection_on_a_tiny_training_run(tmp_path, capsys):
     row = table.loc[3]
     assert row["pass"] == (row.final_error_ok and row.peak_ok and row.rms_ok)
     assert row.final_error_ok == (row.sac_abs_final_error_deg < 11.45)
+
+
+def test_seeds_selected_in_processes_are_the_seeds_selected_in_turn(crafted_run, tmp_path):
+    import shutil
+
+    from myoexo.training.seeds import per_seed_table
+    from myoexo.training.select import SelectionConfig
+
+    for seed in (0, 1):
+        shutil.copytree(crafted_run, tmp_path / f"seed_{seed}")
+    config = SelectionConfig(1, levels=(0,), last=1, top=1)
+    in_turn, chosen = per_seed_table(tmp_path, config)
+    in_processes, chosen_too = per_seed_table(tmp_path, replace(config, workers=2))
+    assert chosen == chosen_too
+    assert chosen[1] == str(tmp_path / "seed_1" / ck.CHECKPOINTS_DIR / "step_0000000100")
+    pd.testing.assert_frame_equal(in_turn, in_processes)

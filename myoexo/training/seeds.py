@@ -40,6 +40,7 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -211,24 +212,32 @@ def closest_seed(per_seed: Any, metrics: Sequence[str] = tuple(AGGREGATED)) -> i
     return min(distance, key=lambda s: (distance[s], s))
 
 
-def per_seed_table(
-    out: Path,
-    subjects: int,
-    last: int,
-    top: int,
-    root_seed: int = SELECTION_ROOT_SEED,
-    gentleness: float | None = None,
-) -> tuple[Any, dict[int, str]]:
-    """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`) and
-    its comparison with the PID, one row per seed and level (the evaluation root is refused:
-    the seed shipped from this table is chosen on these subjects). Seeds trained over the
-    gentleness range are selected at weight *gentleness*."""
-    import pandas as pd
-
-    root_seed = check_fit_root(root_seed, "seed selection")
-
+def _select_seed(run_dir: Path, config: SelectionConfig) -> tuple[Path, Any]:
+    """One seed's :func:`~myoexo.training.select.select_checkpoint` under *config* (a
+    worker's task)."""
     from myoexo.training.select import select_checkpoint
 
+    return select_checkpoint(
+        run_dir,
+        subjects=config.subjects,
+        last=config.last,
+        top=config.top,
+        root_seed=config.root_seed,
+        verbose=False,
+        gentleness=config.gentleness,
+        perturbed_subjects=config.perturbed_subjects,
+        perturbed_levels=config.perturbed_levels,
+    )
+
+
+def per_seed_table(out: Path, config: SelectionConfig) -> tuple[Any, dict[int, str]]:
+    """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`
+    under *config*) and its comparison with the PID, one row per seed and level (the
+    evaluation root is refused: the seed shipped from this table is chosen on these
+    subjects). ``config.workers`` seeds are selected at once, one process each."""
+    import pandas as pd
+
+    check_fit_root(config.root_seed, "seed selection")
     seeds = sorted(
         int(p.name.partition("_")[2])
         for p in Path(out).glob("seed_*")
@@ -236,18 +245,24 @@ def per_seed_table(
     )
     if not seeds:
         raise ValueError(f"{str(out)!r} holds no seed run folder (seed_<N>/config.json)")
+    run_dirs = [seed_dir(out, seed) for seed in seeds]
+    if config.workers > 1 and len(seeds) > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        from myoexo.evaluation.engine import init_worker
+
+        with ProcessPoolExecutor(
+            min(config.workers, len(seeds)),
+            mp_context=mp.get_context("spawn"),
+            initializer=init_worker,
+            initargs=(os.getpid(),),
+        ) as pool:
+            selected = list(pool.map(_select_seed, run_dirs, [config] * len(seeds)))
+    else:
+        selected = [_select_seed(run_dir, config) for run_dir in run_dirs]
     frames, chosen = [], {}
-    for seed in seeds:
-        run_dir = seed_dir(out, seed)
-        checkpoint, table = select_checkpoint(
-            run_dir,
-            subjects=subjects,
-            last=last,
-            top=top,
-            root_seed=root_seed,
-            verbose=False,
-            gentleness=gentleness,
-        )
+    for seed, (checkpoint, table) in zip(seeds, selected, strict=True):
         chosen[seed] = str(checkpoint)
         frame = table.reset_index()
         frame["seed"] = seed
@@ -323,9 +338,8 @@ def plot_spread(per_seed: Any, summary: Any) -> Any:
 def aggregate_seeds(args: argparse.Namespace) -> int:
     """``myoexo policy seeds aggregate``."""
     out = Path(args.out)
-    per_seed, chosen = per_seed_table(
-        out, args.subjects, args.last, args.top, gentleness=args.gentleness
-    )
+    config = from_options(SelectionConfig, args, levels=VALID_LEVELS)
+    per_seed, chosen = per_seed_table(out, config)
     summary = summarize_seeds(per_seed, AGGREGATED)
     ship = closest_seed(per_seed)
     per_seed.to_csv(out / "aggregate_seeds.csv", index=False)
@@ -338,7 +352,9 @@ def aggregate_seeds(args: argparse.Namespace) -> int:
             "training_seeds": sorted(chosen),
             "selected_checkpoints": {str(k): v for k, v in chosen.items()},
             "selection_root_seed": SELECTION_ROOT_SEED,
-            "selection_subjects_per_level": args.subjects,
+            "selection_subjects_per_level": config.subjects,
+            "perturbed_selection_subjects_per_level": config.perturbed_subjects,
+            "perturbed_selection_levels": list(config.perturbed_levels),
             "ship_rule": "the seed closest to the across-seed means (closest_seed)",
             "ship_seed": ship,
             "ship_checkpoint": chosen[ship],

@@ -1,10 +1,13 @@
 """Pick the checkpoint to ship: evaluate candidates against the PID with the evaluation
-harness on the selection subjects; the fewest catastrophic subjects first, then the
-acceptance criteria (:mod:`myoexo.evaluation.criteria`), then the peak reduction
+harness on the selection subjects; the fewest catastrophic subjects first (with
+``--perturbed-subjects N``, those of N perturbed selection subjects per level counted too),
+then the acceptance criteria (:mod:`myoexo.evaluation.criteria`), then the peak reduction
 (:func:`selection_key`).
 
     myoexo policy select runs/cpu_main --subjects 10 --last 2 --top 4
     myoexo policy select runs/res/seed_0 --subjects 50 --last 4 --top 4 --gentleness 0
+    myoexo policy select runs/res/seed_0 --subjects 20 --perturbed-subjects 100 \
+        --perturbed-levels 2 3 --gentleness 0
     myoexo policy select results/eval --table    # after `myoexo evaluate`
 """
 
@@ -55,9 +58,25 @@ class SelectionConfig:
         high=1.0,
         metavar="WEIGHT",
     )
+    perturbed_subjects: int = option(
+        0,
+        "perturbed selection subjects per level (robustness on) whose catastrophic subjects "
+        "count too, against the PID on the same perturbed subjects (0: none)",
+        low=0,
+    )
+    perturbed_levels: tuple[int, ...] = option(
+        VALID_LEVELS,
+        "levels of the perturbed selection subjects",
+        choices=VALID_LEVELS,
+        metavar="LEVEL",
+    )
+    workers: int = option(
+        1, "seeds selected at once, one process each (`policy seeds aggregate`)", low=1
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", tuple(sorted(set(self.levels))))
+        object.__setattr__(self, "perturbed_levels", tuple(sorted(set(self.perturbed_levels))))
         check_fields(self)
         if self.last + self.top < 1:
             raise FieldError(
@@ -67,30 +86,40 @@ class SelectionConfig:
 
 
 def _episodes(
-    controller: Any, label: str, subjects: int, levels: Sequence[int], root_seed: int
+    controller: Any,
+    label: str,
+    subjects: int,
+    levels: Sequence[int],
+    root_seed: int,
+    robustness: bool = False,
 ) -> Any:
     """Episode table of *controller* (column ``controller`` = *label*) on subjects
-    ``0..subjects-1`` of each level."""
+    ``0..subjects-1`` of each level (perturbed twins with *robustness*)."""
     import pandas as pd
 
     from myoexo.evaluation import evaluate_controller
 
+    kwargs = {"robustness": True} if robustness else None
     tables = [
-        evaluate_controller(controller, lv, subjects, root_seed, label=label)[0] for lv in levels
+        evaluate_controller(controller, lv, subjects, root_seed, label=label, env_kwargs=kwargs)[0]
+        for lv in levels
     ]
     return pd.concat(tables, ignore_index=True)
 
 
 def pid_episodes(
-    subjects: int, levels: Sequence[int] = VALID_LEVELS, root_seed: int = SELECTION_ROOT_SEED
+    subjects: int,
+    levels: Sequence[int] = VALID_LEVELS,
+    root_seed: int = SELECTION_ROOT_SEED,
+    robustness: bool = False,
 ) -> Any:
     """Episode table (controller ``"pid"``) of the paper's PID on subjects
-    ``0..subjects-1``."""
+    ``0..subjects-1`` (perturbed twins with *robustness*)."""
     from myoexo.control import PID
     from myoexo.envs import TaskParams
 
     pid = PID(dt_s=TaskParams().control_period_s)  # the paper's gains
-    return _episodes(pid, "pid", subjects, levels, root_seed)
+    return _episodes(pid, "pid", subjects, levels, root_seed, robustness)
 
 
 def evaluate_pid(
@@ -106,15 +135,16 @@ def checkpoint_episodes(
     levels: Sequence[int] = VALID_LEVELS,
     root_seed: int = SELECTION_ROOT_SEED,
     gentleness: float | None = None,
+    robustness: bool = False,
 ) -> Any:
     """Episode table (controller: the checkpoint's folder name) of a checkpoint's
-    deterministic actor on subjects ``0..subjects-1``; a policy trained over the gentleness
-    range runs at weight *gentleness*
+    deterministic actor on subjects ``0..subjects-1`` (perturbed twins with *robustness*); a
+    policy trained over the gentleness range runs at weight *gentleness*
     (:func:`~myoexo.training.export.load_checkpoint_controller`)."""
     from myoexo.training.export import load_checkpoint_controller
 
     controller = load_checkpoint_controller(checkpoint, gentleness)
-    return _episodes(controller, checkpoint.name, subjects, levels, root_seed)
+    return _episodes(controller, checkpoint.name, subjects, levels, root_seed, robustness)
 
 
 def evaluate_checkpoint(
@@ -143,10 +173,13 @@ def catastrophic_per_level(episodes: Any, pid: Any) -> Any:
 
 def selection_key(table: Any) -> tuple[int, float, float]:
     """The order of :func:`select_checkpoint` on a :func:`compare_with_pid` table with a
-    ``catastrophic`` column (smaller is better): catastrophic subjects summed over levels,
-    then :func:`shortfall`, then minus the mean peak torque reduction."""
+    ``catastrophic`` column and, if the perturbed subjects were run, a
+    ``catastrophic_perturbed`` one (smaller is better): catastrophic subjects summed over
+    levels (and over both twins), then :func:`shortfall`, then minus the mean peak torque
+    reduction."""
+    perturbed = table.get("catastrophic_perturbed")
     return (
-        int(table.catastrophic.sum()),
+        int(table.catastrophic.sum()) + (0 if perturbed is None else int(perturbed.sum())),
         shortfall(table),
         -float(table.peak_reduction_pct.mean()),
     )
@@ -161,13 +194,19 @@ def select_checkpoint(
     verbose: bool = True,
     levels: Sequence[int] = VALID_LEVELS,
     gentleness: float | None = None,
+    perturbed_subjects: int = 0,
+    perturbed_levels: Sequence[int] = VALID_LEVELS,
 ) -> tuple[Path, Any]:
     """Evaluate the ``last`` newest checkpoints and the ``top`` best by small-evaluation
     score (``eval.csv``) on ``subjects`` subjects per level of ``levels``, and return the one
     with the fewest catastrophic subjects (:func:`catastrophic_per_level`), then the smallest
     :func:`shortfall`, then the largest mean peak torque reduction, with its comparison
-    table (its ``catastrophic`` column: the count per level). A policy trained over the
-    gentleness range is selected at weight *gentleness*.
+    table (its ``catastrophic`` column: the count per level). With *perturbed_subjects*,
+    each candidate also runs on that many perturbed subjects per level of
+    *perturbed_levels* (the same root, robustness on), and their catastrophic subjects,
+    against the PID on the same perturbed subjects, count beside the nominal ones (column
+    ``catastrophic_perturbed``, 0 at a level not run). A policy trained over the gentleness
+    range is selected at weight *gentleness*.
 
     Raises:
         ValueError: *run_dir* holds no checkpoint, or *root_seed* is the evaluation root.
@@ -189,12 +228,21 @@ def select_checkpoint(
         candidates += [c for c in scored[:top] if c not in candidates]
     pid_runs = pid_episodes(subjects, levels, root_seed=root_seed)
     pid = level_means(pid_runs)
+    perturbed = perturbed_subjects > 0
+    if perturbed:
+        pid_perturbed = pid_episodes(perturbed_subjects, perturbed_levels, root_seed, True)
     results = []
     for c in candidates:
         episodes = checkpoint_episodes(c, subjects, levels, root_seed, gentleness)
         table = compare_with_pid(level_means(episodes), pid)
         per_level = catastrophic_per_level(episodes, pid_runs)
         table["catastrophic"] = per_level.reindex(table.index).fillna(0).astype(int)
+        if perturbed:
+            runs = checkpoint_episodes(
+                c, perturbed_subjects, perturbed_levels, root_seed, gentleness, True
+            )
+            per_level = catastrophic_per_level(runs, pid_perturbed)
+            table["catastrophic_perturbed"] = per_level.reindex(table.index).fillna(0).astype(int)
         key = selection_key(table)
         results.append((key, c, table))
         if verbose:
@@ -354,7 +402,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     :class:`SelectRun` and :class:`SelectionConfig`."""
     add_positional(parser, SelectRun, "run")
     add_options(parser, SelectRun, exclude=("out",))
-    add_options(parser, SelectionConfig)
+    add_options(parser, SelectionConfig, exclude=("workers",))
     add_options(parser, SelectRun, exclude=("table", "controller"))
 
 
@@ -379,6 +427,8 @@ def run(args: argparse.Namespace) -> int:
             config.root_seed,
             levels=config.levels,
             gentleness=config.gentleness,
+            perturbed_subjects=config.perturbed_subjects,
+            perturbed_levels=config.perturbed_levels,
         )
         print(f"chosen: {chosen}")
         print(table.round(2).to_string())
