@@ -17,8 +17,10 @@ import pytest
 from myoexo.cli import main
 from myoexo.envs.options import TwinOptions
 from myoexo.evaluation.criteria import Criteria, compare_with_pid, level_means, shortfall
+from myoexo.runtime.fields import FieldError
 from myoexo.training import checkpoints as ck
 from myoexo.training.select import (
+    SelectionConfig,
     catastrophic_per_level,
     checkpoint_episodes,
     compare_evaluation,
@@ -280,7 +282,12 @@ def test_perturbed_selection_subjects_count_their_catastrophic_subjects(crafted_
     assert chosen == crafted_run / ck.CHECKPOINTS_DIR / "step_0000000100"
     assert table.catastrophic.tolist() == [0, 1]
     assert table.catastrophic_perturbed.tolist() == [0, 1]  # level 0: not run
-    assert "step_0000000100: catastrophic 2," in capsys.readouterr().out  # both twins' count
+    printed = capsys.readouterr().out  # both twins' count
+    assert "step_0000000100: catastrophic 2 (1 on perturbed subjects)," in printed
+    with pytest.raises(ValueError, match=r"perturbed levels \[1, 2, 3\] are not among"):
+        select_checkpoint(crafted_run, 1, 1, 1, levels=(0,), perturbed_subjects=1)
+    with pytest.raises(FieldError, match="perturbed_levels"):
+        SelectionConfig(levels=(0,), perturbed_subjects=1, perturbed_levels=(3,))
     # a perturbed twin is another twin: the hanging checkpoint ends elsewhere there
     hanging = crafted_run / ck.CHECKPOINTS_DIR / "step_0000000300"
     perturbed = checkpoint_episodes(hanging, 1, (3,), robustness=True)
@@ -412,7 +419,6 @@ def test_seeds_selected_in_processes_are_the_seeds_selected_in_turn(crafted_run,
     import shutil
 
     from myoexo.training.seeds import per_seed_table
-    from myoexo.training.select import SelectionConfig
 
     for seed in (0, 1):
         shutil.copytree(crafted_run, tmp_path / f"seed_{seed}")

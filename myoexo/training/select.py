@@ -78,6 +78,12 @@ class SelectionConfig:
         object.__setattr__(self, "levels", tuple(sorted(set(self.levels))))
         object.__setattr__(self, "perturbed_levels", tuple(sorted(set(self.perturbed_levels))))
         check_fields(self)
+        outside = sorted(set(self.perturbed_levels) - set(self.levels))
+        if self.perturbed_subjects and outside:
+            raise FieldError(
+                "SelectionConfig", "perturbed_levels", self.perturbed_levels,
+                f"must be among the selection levels {list(self.levels)} (not {outside})",
+            )  # fmt: skip
         if self.last + self.top < 1:
             raise FieldError(
                 "SelectionConfig", "top", self.top, "names no candidate checkpoint (last = 0)"
@@ -209,11 +215,18 @@ def select_checkpoint(
     range is selected at weight *gentleness*.
 
     Raises:
-        ValueError: *run_dir* holds no checkpoint, or *root_seed* is the evaluation root.
+        ValueError: *run_dir* holds no checkpoint, *root_seed* is the evaluation root, or a
+            perturbed level is not one of *levels* (its count would have no row).
     """
     import csv
 
     root_seed = check_fit_root(root_seed, "checkpoint selection")
+    perturbed = perturbed_subjects > 0
+    outside = sorted(set(perturbed_levels) - set(levels)) if perturbed else []
+    if outside:
+        raise ValueError(
+            f"perturbed levels {outside} are not among the selection levels {list(levels)}"
+        )
     ckpts = ck.list_checkpoints(run_dir)
     if not ckpts:
         raise ValueError(f"{str(run_dir)!r} holds no checkpoint")
@@ -228,7 +241,6 @@ def select_checkpoint(
         candidates += [c for c in scored[:top] if c not in candidates]
     pid_runs = pid_episodes(subjects, levels, root_seed=root_seed)
     pid = level_means(pid_runs)
-    perturbed = perturbed_subjects > 0
     if perturbed:
         pid_perturbed = pid_episodes(perturbed_subjects, perturbed_levels, root_seed, True)
     results = []
@@ -246,8 +258,13 @@ def select_checkpoint(
         key = selection_key(table)
         results.append((key, c, table))
         if verbose:
+            on_perturbed = (
+                f" ({int(table.catastrophic_perturbed.sum())} on perturbed subjects)"
+                if perturbed
+                else ""
+            )
             print(
-                f"{c.name}: catastrophic {key[0]}, shortfall {key[1]:.3f}, mean peak "
+                f"{c.name}: catastrophic {key[0]}{on_perturbed}, shortfall {key[1]:.3f}, mean peak "
                 f"reduction {-key[2]:+.1f} %, |final err| "
                 + " ".join(f"{v:.2f}" for v in table.sac_abs_final_error_deg),
                 flush=True,
