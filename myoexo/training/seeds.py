@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -69,7 +70,7 @@ from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 from myoexo.training.cli import add_config_arguments
 from myoexo.training.config import TrainConfig, config_from_record
-from myoexo.training.select import SelectionConfig
+from myoexo.training.select import SelectionConfig, select_with
 
 #: Configuration file of a seeds folder.
 SEEDS_FILE = "seeds.json"
@@ -212,24 +213,6 @@ def closest_seed(per_seed: Any, metrics: Sequence[str] = tuple(AGGREGATED)) -> i
     return min(distance, key=lambda s: (distance[s], s))
 
 
-def _select_seed(run_dir: Path, config: SelectionConfig) -> tuple[Path, Any]:
-    """One seed's :func:`~myoexo.training.select.select_checkpoint` under *config* (a
-    worker's task)."""
-    from myoexo.training.select import select_checkpoint
-
-    return select_checkpoint(
-        run_dir,
-        subjects=config.subjects,
-        last=config.last,
-        top=config.top,
-        root_seed=config.root_seed,
-        verbose=False,
-        gentleness=config.gentleness,
-        perturbed_subjects=config.perturbed_subjects,
-        perturbed_levels=config.perturbed_levels,
-    )
-
-
 def per_seed_table(out: Path, config: SelectionConfig) -> tuple[Any, dict[int, str]]:
     """Each seed's selected checkpoint (:func:`~myoexo.training.select.select_checkpoint`
     under *config*) and its comparison with the PID, one row per seed and level (the
@@ -258,9 +241,10 @@ def per_seed_table(out: Path, config: SelectionConfig) -> tuple[Any, dict[int, s
             initializer=init_worker,
             initargs=(os.getpid(),),
         ) as pool:
-            selected = list(pool.map(_select_seed, run_dirs, [config] * len(seeds)))
+            quiet = functools.partial(select_with, verbose=False)
+            selected = list(pool.map(quiet, run_dirs, [config] * len(seeds)))
     else:
-        selected = [_select_seed(run_dir, config) for run_dir in run_dirs]
+        selected = [select_with(run_dir, config, verbose=False) for run_dir in run_dirs]
     frames, chosen = [], {}
     for seed, (checkpoint, table) in zip(seeds, selected, strict=True):
         chosen[seed] = str(checkpoint)

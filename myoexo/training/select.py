@@ -276,6 +276,23 @@ def select_checkpoint(
     return chosen, table
 
 
+def select_with(run_dir: Path, config: SelectionConfig, verbose: bool = True) -> tuple[Path, Any]:
+    """:func:`select_checkpoint` of *run_dir* with every option of *config* (but its
+    ``workers``)."""
+    return select_checkpoint(
+        run_dir,
+        config.subjects,
+        config.last,
+        config.top,
+        config.root_seed,
+        verbose=verbose,
+        levels=config.levels,
+        gentleness=config.gentleness,
+        perturbed_subjects=config.perturbed_subjects,
+        perturbed_levels=config.perturbed_levels,
+    )
+
+
 def compare_evaluation(out_dir: Path, sac: str = "sac", pid: str = "pid") -> Any:
     """:func:`compare` table of two controllers of a ``myoexo evaluate`` output folder, with
     the stricter reading of the paper's numbers added (:func:`paper_checks`)."""
@@ -436,17 +453,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         if config.last == 0 and not (options.run / ck.EVAL_FILE).is_file():
             raise ValueError(f"--top needs the run's {ck.EVAL_FILE}; {options.run} has none")
-        chosen, table = select_checkpoint(
-            options.run,
-            config.subjects,
-            config.last,
-            config.top,
-            config.root_seed,
-            levels=config.levels,
-            gentleness=config.gentleness,
-            perturbed_subjects=config.perturbed_subjects,
-            perturbed_levels=config.perturbed_levels,
-        )
+        chosen, table = select_with(options.run, config)
         print(f"chosen: {chosen}")
         print(table.round(2).to_string())
     if options.out is not None:
