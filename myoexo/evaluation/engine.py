@@ -32,9 +32,9 @@ from myoexo.control.specs import (
     load_shipped_policy,
     parse_controller_spec,
     policy_metadata,
-    policy_twin,
     spec_env_kwargs,
     trained_on_nominal_too,
+    twin_of_metadata,
 )
 from myoexo.envs.options import TwinOptions, twin_mismatch
 from myoexo.evaluation.config import EvaluationConfig, subject_seed
@@ -252,10 +252,11 @@ class TwinMismatchWarning(UserWarning):
     """A policy is evaluated on another twin than the one it was trained on."""
 
 
-def _parameter_mismatch(spec: ControllerSpec, twin: TwinOptions) -> str | None:
-    """A warning if the policy's twin recorded its reflex model's parameters and they differ
-    from that model's now (e.g. a re-fitted calibration), else ``None``."""
-    recorded = (policy_metadata(spec).get("twin") or {}).get("reflex_parameters")
+def _parameter_mismatch(meta: Mapping[str, Any], twin: TwinOptions) -> str | None:
+    """A warning if the policy's twin (in its metadata *meta*) recorded its reflex model's
+    parameters and they differ from that model's now (e.g. a re-fitted calibration), else
+    ``None``."""
+    recorded = (meta.get("twin") or {}).get("reflex_parameters")
     if not recorded:
         return None
     changes = reflex_parameter_changes(recorded, twin.reflex)
@@ -267,13 +268,13 @@ def _parameter_mismatch(spec: ControllerSpec, twin: TwinOptions) -> str | None:
     )
 
 
-def _version_mismatch(spec: ControllerSpec) -> str | None:
-    """A warning if the policy was trained on another twin version than today's
-    (:data:`~myoexo.model.TWIN_VERSION`; a policy that records none was trained on version 1),
-    else ``None``."""
+def _version_mismatch(meta: Mapping[str, Any]) -> str | None:
+    """A warning if the policy of metadata *meta* was trained on another twin version than
+    today's (:data:`~myoexo.model.TWIN_VERSION`; a policy that records none was trained on
+    version 1), else ``None``."""
     from myoexo.model import TWIN_VERSION, recorded_twin_version
 
-    version = recorded_twin_version(policy_metadata(spec))
+    version = recorded_twin_version(meta)
     if version == TWIN_VERSION:
         return None
     return (
@@ -315,15 +316,16 @@ def resolve_controllers(
                 continue
         if root_seed is not None:
             check_no_selection_leak(spec, root_seed)
-        trained = policy_twin(spec) if twin is not None else None
+        meta = policy_metadata(spec) if twin is not None else {}  # the policy's files, read once
+        trained = twin_of_metadata(meta)
         mismatch = None
         if trained is not None and twin is not None:
-            both = trained_on_nominal_too(policy_metadata(spec))
+            both = trained_on_nominal_too(meta)
             options = twin_mismatch(trained, twin, nominal_too=both)  # reflex, task, robustness
             found = (
                 options,
-                _version_mismatch(spec),
-                None if options else _parameter_mismatch(spec, twin),
+                _version_mismatch(meta),
+                None if options else _parameter_mismatch(meta, twin),
             )
             mismatch = "; and ".join(m for m in found if m) or None
         if mismatch:
