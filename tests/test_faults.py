@@ -643,3 +643,12 @@ def test_kill9_training_at_random_points_then_resume_continues_from_the_newest_c
     assert not _temporaries(run_dir)
     # the killed sessions' logs are kept: one progress file per session
     assert len(list(run_dir.glob("progress_*.csv"))) >= 2
+
+
+def test_process_map_keeps_the_order_in_processes_and_in_this_one():
+    from myoexo.runtime.lifecycle import process_map
+
+    items = [-3, 2, -1, 4]
+    assert list(process_map(abs, items, 1)) == [3, 2, 1, 4]  # in this process
+    assert list(process_map(abs, items, 2)) == [3, 2, 1, 4]  # two spawned workers
+    assert list(process_map(abs, [], 2)) == []

@@ -17,6 +17,7 @@ processes that end with their parent.
 * :func:`die_with_parent`: called in a worker process, makes it end when the process that
   started it ends, even by kill -9 (Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``; every
   platform: a daemon thread that polls ``os.getppid()``).
+* :func:`process_map`: ``map`` over a few spawned worker processes, in order.
 
 Exit statuses of a run stopped by a signal follow the shell's convention, 128 + the signal
 number (:func:`signal_exit_status`): 130 for SIGINT, 143 for SIGTERM.
@@ -34,7 +35,7 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType, TracebackType
@@ -306,3 +307,27 @@ def die_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
         target=_watch_parent, args=(parent_pid, poll_s), name="myoexo-parent-watch", daemon=True
     )
     watchdog.start()
+
+
+def process_map(
+    fn: Callable[[Any], Any],
+    items: Sequence[Any],
+    workers: int,
+    initializer: Callable[..., None] | None = None,
+    initargs: tuple[Any, ...] = (),
+) -> Iterator[Any]:
+    """``fn`` of each of *items*, in their order, each as it is ready: on up to *workers*
+    spawned processes (each started with ``initializer(*initargs)``), or in this process
+    when one would do (one worker, or one item). *fn* and the items must pickle."""
+    n = min(workers, len(items))
+    if n <= 1:
+        yield from map(fn, items)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = mp.get_context("spawn")
+    with ProcessPoolExecutor(
+        n, mp_context=context, initializer=initializer, initargs=initargs
+    ) as pool:
+        yield from pool.map(fn, items)

@@ -228,24 +228,16 @@ def _search(job: tuple[SettlingBoundSettings, int, int]) -> dict[str, Any]:
 def settling_bound(settings: SettlingBoundSettings, log: Any = None) -> Any:
     """One row per subject (:func:`search_subject`), every level, on ``settings.workers``
     processes."""
-    import contextlib
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     import pandas as pd
+
+    from myoexo.runtime.lifecycle import process_map
 
     jobs = [(settings, lv, i) for lv in settings.levels for i in range(settings.subjects)]
     rows = []
-    with contextlib.ExitStack() as stack:
-        mapper: Any = map
-        if settings.workers > 1:
-            ctx = mp.get_context("spawn")
-            pool = ProcessPoolExecutor(max_workers=settings.workers, mp_context=ctx)
-            mapper = stack.enter_context(pool).map
-        for row in mapper(_search, jobs):
-            rows.append(row)
-            if log is not None:
-                log(_line(row))
+    for row in process_map(_search, jobs, settings.workers):
+        rows.append(row)
+        if log is not None:
+            log(_line(row))
     return pd.DataFrame(rows)
 
 

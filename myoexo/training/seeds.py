@@ -65,7 +65,7 @@ from myoexo.runtime.fields import (
     option,
 )
 from myoexo.runtime.files import write_json_atomic, write_text_atomic
-from myoexo.runtime.lifecycle import FolderLock, StopSignals, signal_exit_status
+from myoexo.runtime.lifecycle import FolderLock, StopSignals, process_map, signal_exit_status
 from myoexo.spasticity.levels import VALID_LEVELS
 from myoexo.training import checkpoints as ck
 from myoexo.training.cli import add_config_arguments
@@ -228,23 +228,11 @@ def per_seed_table(out: Path, config: SelectionConfig) -> tuple[Any, dict[int, s
     )
     if not seeds:
         raise ValueError(f"{str(out)!r} holds no seed run folder (seed_<N>/config.json)")
+    from myoexo.evaluation.engine import init_worker
+
     run_dirs = [seed_dir(out, seed) for seed in seeds]
-    if config.workers > 1 and len(seeds) > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        from myoexo.evaluation.engine import init_worker
-
-        with ProcessPoolExecutor(
-            min(config.workers, len(seeds)),
-            mp_context=mp.get_context("spawn"),
-            initializer=init_worker,
-            initargs=(os.getpid(),),
-        ) as pool:
-            quiet = functools.partial(select_with, verbose=False)
-            selected = list(pool.map(quiet, run_dirs, [config] * len(seeds)))
-    else:
-        selected = [select_with(run_dir, config, verbose=False) for run_dir in run_dirs]
+    select = functools.partial(select_with, config=config, verbose=False)
+    selected = process_map(select, run_dirs, config.workers, init_worker, (os.getpid(),))
     frames, chosen = [], {}
     for seed, (checkpoint, table) in zip(seeds, selected, strict=True):
         chosen[seed] = str(checkpoint)
